@@ -1,0 +1,56 @@
+//! The library's error type. Every variant names the offending thing and the reason, so that
+//! the CLI can print it as one line without further context.
+
+use thiserror::Error;
+
+/// Result alias used across the library.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[derive(Debug, Error)]
+pub enum Error {
+    /// A parameter or input value that cannot be used (`what` names it, e.g. `integrator.dt`).
+    #[error("{what}: {reason}")]
+    InvalidInput { what: String, reason: String },
+
+    /// A numerical operation failed (e.g. a matrix that should be SPD is not).
+    #[error("{what}: {reason}")]
+    Numerical { what: String, reason: String },
+
+    /// A simulation that produced non-finite values or exceeded a limit.
+    #[error("diverged at step {step} (t = {time:.6} s): {reason}")]
+    Diverged { step: usize, time: f64, reason: String },
+
+    /// A file could not be read or parsed.
+    #[error("{path}: {reason}")]
+    File { path: String, reason: String },
+}
+
+impl Error {
+    pub fn invalid(what: impl Into<String>, reason: impl Into<String>) -> Self {
+        Error::InvalidInput { what: what.into(), reason: reason.into() }
+    }
+    pub fn numerical(what: impl Into<String>, reason: impl Into<String>) -> Self {
+        Error::Numerical { what: what.into(), reason: reason.into() }
+    }
+    pub fn file(path: impl Into<String>, reason: impl Into<String>) -> Self {
+        Error::File { path: path.into(), reason: reason.into() }
+    }
+}
+
+/// Check that a scalar parameter is finite and strictly positive.
+pub fn require_positive(what: &str, value: f64) -> Result<f64> {
+    if value.is_finite() && value > 0.0 {
+        Ok(value)
+    } else {
+        Err(Error::invalid(what, format!("must be a finite number > 0, got {value}")))
+    }
+}
+
+/// Check that a scalar parameter is finite and not negative.
+pub fn require_non_negative(what: &str, value: f64) -> Result<f64> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(value)
+    } else {
+        Err(Error::invalid(what, format!("must be a finite number >= 0, got {value}")))
+    }
+}

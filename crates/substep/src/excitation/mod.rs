@@ -1,0 +1,1 @@
+//! Ground motions: readers, generators, resampling.

@@ -1,0 +1,170 @@
+//! Four-point schemes: HHT-α (spec §2.3) and operator splitting α-OS (spec §2.4).
+//! Both are written in acceleration form with the matrix
+//! `M + (1+α)γΔt C + (1+α)βΔt² K`, `γ = ½ − α`, `β = (1 − α)²/4`, factorised once.
+
+use super::{Integrator, Kinematics, check_hilber_alpha};
+use crate::error::{Error, Result};
+use crate::model::StructuralModel;
+use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
+
+struct FourPoint {
+    dt: f64,
+    alpha: f64,
+    beta: f64,
+    gamma: f64,
+    damping: DMatrix<f64>,
+    stiffness: DMatrix<f64>,
+    lhs: Cholesky<f64, Dyn>,
+    state: Kinematics,
+    next: Kinematics,
+    /// `f*_i`, the load of the previous step (HHT uses it, not `f*_{i+1}` twice).
+    load_prev: DVector<f64>,
+    work: DVector<f64>,
+}
+
+impl FourPoint {
+    fn new(model: &StructuralModel, dt: f64, alpha: f64, load0: &DVector<f64>) -> Result<Self> {
+        check_hilber_alpha(alpha)?;
+        crate::error::require_positive("integrator.dt", dt)?;
+        let gamma = 0.5 - alpha;
+        let beta = (1.0 - alpha).powi(2) / 4.0;
+        let lhs = (&model.mass
+            + &model.damping * ((1.0 + alpha) * gamma * dt)
+            + &model.stiffness * ((1.0 + alpha) * beta * dt * dt))
+            .cholesky()
+            .ok_or_else(|| Error::numerical("HHT effective mass matrix", "is not positive definite"))?;
+        let state = Kinematics::at_rest(model, load0)?;
+        Ok(Self {
+            dt,
+            alpha,
+            beta,
+            gamma,
+            damping: model.damping.clone(),
+            stiffness: model.stiffness.clone(),
+            lhs,
+            next: state.clone(),
+            state,
+            load_prev: load0.clone(),
+            work: DVector::zeros(model.n_dofs()),
+        })
+    }
+
+    /// Predictors `ũ`, `ṽ` into `next.u`, `next.v`.
+    fn predict(&mut self) {
+        let (dt, s, n) = (self.dt, &self.state, &mut self.next);
+        n.u.copy_from(&s.u);
+        n.u.axpy(dt, &s.v, 1.0);
+        n.u.axpy(dt * dt * (0.5 - self.beta), &s.a, 1.0);
+        n.v.copy_from(&s.v);
+        n.v.axpy((1.0 - self.gamma) * dt, &s.a, 1.0);
+    }
+
+    /// Solve for `a_{i+1}` (right-hand side in `next.a`), correct, and roll the state.
+    fn correct(&mut self, load_next: &DVector<f64>) {
+        let (dt, n) = (self.dt, &mut self.next);
+        self.lhs.solve_mut(&mut n.a);
+        n.u.axpy(self.beta * dt * dt, &n.a, 1.0);
+        n.v.axpy(self.gamma * dt, &n.a, 1.0);
+        self.load_prev.copy_from(load_next);
+        std::mem::swap(&mut self.state, &mut self.next);
+    }
+}
+
+/// Hilber–Hughes–Taylor α-method.
+pub struct Hht(FourPoint);
+
+impl Hht {
+    pub fn new(model: &StructuralModel, dt: f64, alpha: f64, load0: &DVector<f64>) -> Result<Self> {
+        Ok(Self(FourPoint::new(model, dt, alpha, load0)?))
+    }
+}
+
+impl Integrator for Hht {
+    fn name(&self) -> &'static str {
+        "hht"
+    }
+    fn dt(&self) -> f64 {
+        self.0.dt
+    }
+    fn state(&self) -> &Kinematics {
+        &self.0.state
+    }
+    fn step(&mut self, load_next: &DVector<f64>) {
+        let p = &mut self.0;
+        let al = p.alpha;
+        p.predict();
+        // rhs = (1+α) f_{i+1} − α f_i − (1+α) C ṽ + α C v_i − (1+α) K ũ + α K u_i
+        let (s, n) = (&p.state, &mut p.next);
+        n.a.copy_from(load_next);
+        n.a.scale_mut(1.0 + al);
+        n.a.axpy(-al, &p.load_prev, 1.0);
+        p.work.copy_from(&n.v);
+        p.work.scale_mut(-(1.0 + al));
+        p.work.axpy(al, &s.v, 1.0);
+        n.a.gemv(1.0, &p.damping, &p.work, 1.0);
+        p.work.copy_from(&n.u);
+        p.work.scale_mut(-(1.0 + al));
+        p.work.axpy(al, &s.u, 1.0);
+        n.a.gemv(1.0, &p.stiffness, &p.work, 1.0);
+        p.correct(load_next);
+    }
+}
+
+/// α-OS: the restoring force is evaluated at the displacement predictor `ũ` (explicitly, as
+/// a specimen would be measured) and the linear part is implicit with the initial stiffness.
+/// For a linear model it coincides with HHT; it is kept separate because the restoring-force
+/// path is where a measured specimen force enters.
+pub struct AlphaOs {
+    p: FourPoint,
+    /// `r̃_i = K ũ_i` and `ṽ_i` of the previous step.
+    restoring_prev: DVector<f64>,
+    v_pred_prev: DVector<f64>,
+    restoring: DVector<f64>,
+}
+
+impl AlphaOs {
+    pub fn new(model: &StructuralModel, dt: f64, alpha: f64, load0: &DVector<f64>) -> Result<Self> {
+        let p = FourPoint::new(model, dt, alpha, load0)?;
+        // Consistent start: ũ_0 = u_0 − βΔt² a_0, ṽ_0 = v_0 − γΔt a_0.
+        let u_pred0 = &p.state.u - &p.state.a * (p.beta * dt * dt);
+        let v_pred_prev = &p.state.v - &p.state.a * (p.gamma * dt);
+        let restoring_prev = &p.stiffness * u_pred0;
+        let n = model.n_dofs();
+        Ok(Self { p, restoring_prev, v_pred_prev, restoring: DVector::zeros(n) })
+    }
+}
+
+impl Integrator for AlphaOs {
+    fn name(&self) -> &'static str {
+        "alpha_os"
+    }
+    fn dt(&self) -> f64 {
+        self.p.dt
+    }
+    fn state(&self) -> &Kinematics {
+        &self.p.state
+    }
+    fn step(&mut self, load_next: &DVector<f64>) {
+        let p = &mut self.p;
+        let (al, dt) = (p.alpha, p.dt);
+        p.predict();
+        self.restoring.gemv(1.0, &p.stiffness, &p.next.u, 0.0);
+        let (s, n) = (&p.state, &mut p.next);
+        // rhs = (1+α) f_{i+1} − α f_i − (1+α) r̃_{i+1} + α r̃_i
+        //       − (1+α) C ṽ_{i+1} + α C ṽ_i + αγΔt C a_i + αβΔt² K a_i
+        n.a.copy_from(load_next);
+        n.a.scale_mut(1.0 + al);
+        n.a.axpy(-al, &p.load_prev, 1.0);
+        n.a.axpy(-(1.0 + al), &self.restoring, 1.0);
+        n.a.axpy(al, &self.restoring_prev, 1.0);
+        p.work.copy_from(&n.v);
+        p.work.scale_mut(-(1.0 + al));
+        p.work.axpy(al, &self.v_pred_prev, 1.0);
+        p.work.axpy(al * p.gamma * dt, &s.a, 1.0);
+        n.a.gemv(1.0, &p.damping, &p.work, 1.0);
+        n.a.gemv(al * p.beta * dt * dt, &p.stiffness, &s.a, 1.0);
+        self.v_pred_prev.copy_from(&n.v);
+        std::mem::swap(&mut self.restoring_prev, &mut self.restoring);
+        p.correct(load_next);
+    }
+}

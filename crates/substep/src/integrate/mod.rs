@@ -1,0 +1,118 @@
+//! Time integration of the (monolithic) numerical substructure behind one trait.
+//!
+//! Every scheme advances `M ü + C u̇ + K u = f*(t)` from `t_i` to `t_{i+1} = t_i + Δt` given the
+//! total load `f*_{i+1}`; each keeps whatever history it needs (previous load, predictor).
+//! Steps never allocate: all work vectors are created in the constructors.
+
+mod exact;
+mod hht;
+mod newmark;
+
+pub use exact::ExactFoh;
+pub use hht::{AlphaOs, Hht};
+pub use newmark::{ExplicitNewmark, Newmark, NewmarkConstants, NewmarkCore};
+
+use crate::error::{Error, Result, require_positive};
+use crate::model::StructuralModel;
+use nalgebra::DVector;
+
+/// Displacement, velocity and acceleration of all DOFs at one time level.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Kinematics {
+    pub u: DVector<f64>,
+    pub v: DVector<f64>,
+    pub a: DVector<f64>,
+}
+
+impl Kinematics {
+    pub fn zeros(n: usize) -> Self {
+        Self { u: DVector::zeros(n), v: DVector::zeros(n), a: DVector::zeros(n) }
+    }
+    /// Rest (`u₀ = v₀ = 0`) with the consistent initial acceleration `a₀ = M⁻¹ f*(0)`.
+    pub fn at_rest(model: &StructuralModel, load0: &DVector<f64>) -> Result<Self> {
+        let mut k = Self::zeros(model.n_dofs());
+        let chol = model
+            .mass
+            .clone()
+            .cholesky()
+            .ok_or_else(|| Error::invalid("structure.mass", "is not positive definite"))?;
+        k.a.copy_from(load0);
+        chol.solve_mut(&mut k.a);
+        Ok(k)
+    }
+    pub fn is_finite(&self) -> bool {
+        self.u.iter().chain(self.v.iter()).chain(self.a.iter()).all(|x| x.is_finite())
+    }
+}
+
+/// One time-integration scheme for a linear model.
+pub trait Integrator: Send {
+    /// Scheme name as used in configs.
+    fn name(&self) -> &'static str;
+    fn dt(&self) -> f64;
+    fn state(&self) -> &Kinematics;
+    /// Advance one step with the total load `f*_{i+1}` at the end of the step.
+    fn step(&mut self, load_next: &DVector<f64>);
+}
+
+/// The integration schemes offered by name.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scheme {
+    /// Newmark(β, γ); `β = 0` selects the explicit form.
+    Newmark { beta: f64, gamma: f64 },
+    /// Hilber–Hughes–Taylor with Hilber's `α ∈ [−⅓, 0]`.
+    Hht { alpha: f64 },
+    /// Operator splitting α-OS (linear restoring force with the initial stiffness).
+    AlphaOs { alpha: f64 },
+    /// Exact first-order-hold discretisation (reference).
+    Exact,
+}
+
+impl Scheme {
+    /// Resolve a scheme name of the config (`newmark` uses the given β, γ).
+    pub fn from_name(name: &str, beta: f64, gamma: f64, alpha: f64) -> Result<Self> {
+        let nm = |beta, gamma| Ok(Scheme::Newmark { beta, gamma });
+        match name {
+            "newmark" => nm(beta, gamma),
+            "central_difference" | "cdm" => nm(0.0, 0.5),
+            "fox_goodwin" => nm(1.0 / 12.0, 0.5),
+            "linear_acceleration" => nm(1.0 / 6.0, 0.5),
+            "average_acceleration" | "trapezoidal" => nm(0.25, 0.5),
+            "galerkin" => nm(0.8, 1.5),
+            "backward_difference" => nm(1.0, 1.5),
+            "hht" => Ok(Scheme::Hht { alpha }),
+            "alpha_os" => Ok(Scheme::AlphaOs { alpha }),
+            "exact" => Ok(Scheme::Exact),
+            other => Err(Error::invalid(
+                "integrator.scheme",
+                format!(
+                    "unknown scheme '{other}' (expected one of newmark, central_difference, fox_goodwin, \
+                     linear_acceleration, average_acceleration, galerkin, backward_difference, hht, alpha_os, exact)"
+                ),
+            )),
+        }
+    }
+
+    /// Build the integrator for `model`, time step `dt` and initial load `f*(0)`; starts at rest.
+    pub fn build(&self, model: &StructuralModel, dt: f64, load0: &DVector<f64>) -> Result<Box<dyn Integrator>> {
+        require_positive("integrator.dt", dt)?;
+        Ok(match *self {
+            Scheme::Newmark { beta, gamma } if beta == 0.0 => Box::new(ExplicitNewmark::new(model, dt, gamma, load0)?),
+            Scheme::Newmark { beta, gamma } => Box::new(Newmark::new(model, dt, beta, gamma, load0)?),
+            Scheme::Hht { alpha } => Box::new(Hht::new(model, dt, alpha, load0)?),
+            Scheme::AlphaOs { alpha } => Box::new(AlphaOs::new(model, dt, alpha, load0)?),
+            Scheme::Exact => Box::new(ExactFoh::new(model, dt, load0)?),
+        })
+    }
+}
+
+/// Check Hilber's α.
+pub(crate) fn check_hilber_alpha(alpha: f64) -> Result<()> {
+    if !(alpha.is_finite() && (-1.0 / 3.0 - 1e-12..=0.0).contains(&alpha)) {
+        return Err(Error::invalid(
+            "integrator.alpha",
+            format!("Hilber's alpha must lie in [-1/3, 0], got {alpha} (OpenSees' alpha = 1 + this)"),
+        ));
+    }
+    Ok(())
+}

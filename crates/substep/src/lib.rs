@@ -1,0 +1,16 @@
+//! # substep
+//!
+//! Real-time substructure testing (hybrid simulation) with Dorka's sub-step control:
+//! Newmark-type implicit integration of a linear numerical substructure, the sub-step
+//! controller that drives the coupling DOFs of an experimental substructure, error-force and
+//! phase-lag compensation, and the accuracy/stability analysis of the whole algorithm.
+//!
+//! Equations and sign conventions follow `shared/spec/algorithm.md`; units are SI throughout.
+//! The numerical core does no I/O; readers for ground-motion files live in [`excitation`].
+
+pub mod error;
+pub mod excitation;
+pub mod integrate;
+pub mod model;
+
+pub use error::{Error, Result};

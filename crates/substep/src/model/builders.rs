@@ -1,0 +1,120 @@
+//! Model builders: SDOF, primary structure + TMD (2 DOF), uniform shear building.
+
+use super::StructuralModel;
+use crate::error::{Result, require_non_negative, require_positive};
+use nalgebra::{DMatrix, DVector, dmatrix};
+use std::f64::consts::PI;
+
+/// Single-DOF oscillator.
+pub fn sdof(mass: f64, damping: f64, stiffness: f64) -> Result<StructuralModel> {
+    require_positive("mass", mass)?;
+    require_non_negative("damping", damping)?;
+    require_non_negative("stiffness", stiffness)?;
+    StructuralModel::new(dmatrix![mass], dmatrix![damping], dmatrix![stiffness], None)
+}
+
+/// Primary structure with a tuned mass damper (spec §7.1 parameters).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TmdSystem {
+    /// Primary mass `m` [kg].
+    pub mass: f64,
+    /// Primary natural frequency `f` [Hz].
+    pub frequency: f64,
+    /// Primary damping ratio `ζ`.
+    pub zeta: f64,
+    /// Mass ratio `η_m = m_s / m`.
+    pub eta_m: f64,
+    /// Frequency ratio `η_f = ω_s / ω`.
+    pub eta_f: f64,
+    /// TMD damping ratio `ζ_s`.
+    pub zeta_s: f64,
+}
+
+impl TmdSystem {
+    /// The dissertation's "typical TMD system" with a 1000 kg, 1 Hz primary structure.
+    pub fn typical() -> Self {
+        Self { mass: 1000.0, frequency: 1.0, zeta: 0.05, eta_m: 0.05, eta_f: 1.0, zeta_s: 0.10 }
+    }
+    /// "Coupled system with large mass ratio".
+    pub fn large_mass_ratio() -> Self {
+        Self { eta_m: 0.5, zeta_s: 0.05, ..Self::typical() }
+    }
+    pub fn omega(&self) -> f64 {
+        2.0 * PI * self.frequency
+    }
+    /// Primary stiffness and damping `(k, c)`.
+    pub fn primary(&self) -> (f64, f64) {
+        let w = self.omega();
+        (self.mass * w * w, 2.0 * self.zeta * self.mass * w)
+    }
+    /// TMD mass, stiffness, damping `(m_s, k_s, c_s)`.
+    pub fn absorber(&self) -> (f64, f64, f64) {
+        let ms = self.eta_m * self.mass;
+        let ws = self.eta_f * self.omega();
+        (ms, ms * ws * ws, 2.0 * self.zeta_s * ms * ws)
+    }
+    fn validate(&self) -> Result<()> {
+        require_positive("tmd.mass", self.mass)?;
+        require_positive("tmd.frequency", self.frequency)?;
+        require_non_negative("tmd.zeta", self.zeta)?;
+        require_positive("tmd.eta_m", self.eta_m)?;
+        require_positive("tmd.eta_f", self.eta_f)?;
+        require_non_negative("tmd.zeta_s", self.zeta_s)?;
+        Ok(())
+    }
+}
+
+/// Assembled 2-DOF model: DOF 1 the primary mass, DOF 2 the TMD.
+pub fn tmd_two_dof(p: &TmdSystem) -> Result<StructuralModel> {
+    p.validate()?;
+    let (k, c) = p.primary();
+    let (ms, ks, cs) = p.absorber();
+    StructuralModel::new(
+        dmatrix![p.mass, 0.0; 0.0, ms],
+        dmatrix![c + cs, -cs; -cs, cs],
+        dmatrix![k + ks, -ks; -ks, ks],
+        None,
+    )
+}
+
+/// Uniform shear building: `stories` floors of equal mass, equal story stiffness chosen so that
+/// the first natural period equals `first_period`. DOF 1 is the first floor, DOF N the roof.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShearBuilding {
+    pub stories: usize,
+    /// Floor mass [kg].
+    pub story_mass: f64,
+    /// Target first natural period [s].
+    pub first_period: f64,
+}
+
+impl ShearBuilding {
+    /// Story stiffness [N/m] that gives the target first period. Uses the closed form
+    /// `ω_j = 2 √(k/m) sin((2j−1)π / (2(2N+1)))` of the uniform shear beam.
+    pub fn story_stiffness(&self) -> f64 {
+        let w1 = 2.0 * PI / self.first_period;
+        let s = (PI / (2.0 * (2 * self.stories + 1) as f64)).sin();
+        self.story_mass * (w1 / (2.0 * s)).powi(2)
+    }
+}
+
+/// Undamped shear building; add damping with [`StructuralModel::with_damping`].
+pub fn shear_building(b: &ShearBuilding) -> Result<StructuralModel> {
+    if b.stories == 0 {
+        return Err(crate::error::Error::invalid("structure.shear_building.stories", "must be at least 1"));
+    }
+    require_positive("structure.shear_building.story_mass", b.story_mass)?;
+    require_positive("structure.shear_building.first_period", b.first_period)?;
+    let n = b.stories;
+    let k = b.story_stiffness();
+    let mut kk = DMatrix::zeros(n, n);
+    for i in 0..n {
+        kk[(i, i)] = if i + 1 < n { 2.0 * k } else { k };
+        if i + 1 < n {
+            kk[(i, i + 1)] = -k;
+            kk[(i + 1, i)] = -k;
+        }
+    }
+    let mm = DMatrix::from_diagonal(&DVector::from_element(n, b.story_mass));
+    StructuralModel::new(mm, DMatrix::zeros(n, n), kk, None)
+}

@@ -1,0 +1,66 @@
+//! Generalised symmetric eigenproblem `K φ = ω² M φ` by Cholesky reduction
+//! (`M = L Lᵀ`, `L⁻¹ K L⁻ᵀ y = λ y`, `φ = L⁻ᵀ y`), which keeps symmetry and gives
+//! mass-normalised modes (`Φᵀ M Φ = I`).
+
+use crate::error::{Error, Result};
+use nalgebra::{DMatrix, DVector};
+
+/// Modes sorted by increasing frequency.
+#[derive(Debug, Clone)]
+pub struct Modes {
+    /// Circular frequencies `ω` [rad/s] (0 for rigid-body modes).
+    pub omega: DVector<f64>,
+    /// Mass-normalised mode shapes, one per column.
+    pub shapes: DMatrix<f64>,
+}
+
+impl Modes {
+    /// Natural frequencies in Hz.
+    pub fn frequencies_hz(&self) -> Vec<f64> {
+        self.omega.iter().map(|w| w / (2.0 * std::f64::consts::PI)).collect()
+    }
+}
+
+pub fn modes(mass: &DMatrix<f64>, stiffness: &DMatrix<f64>) -> Result<Modes> {
+    let n = mass.nrows();
+    let chol = mass
+        .clone()
+        .cholesky()
+        .ok_or_else(|| Error::invalid("structure.mass", "is not positive definite"))?;
+    let l = chol.l();
+    // X = L⁻¹ K, then A = L⁻¹ Xᵀ = L⁻¹ K L⁻ᵀ (K symmetric).
+    let x = l
+        .solve_lower_triangular(stiffness)
+        .ok_or_else(|| Error::numerical("modal analysis", "singular mass factor"))?;
+    let mut a = l
+        .solve_lower_triangular(&x.transpose())
+        .ok_or_else(|| Error::numerical("modal analysis", "singular mass factor"))?;
+    a = (&a + a.transpose()) * 0.5;
+    let eig = nalgebra::SymmetricEigen::new(a);
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
+    let scale = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);
+    let mut omega = DVector::zeros(n);
+    let mut y = DMatrix::zeros(n, n);
+    for (k, &i) in order.iter().enumerate() {
+        let lambda = eig.eigenvalues[i];
+        if lambda < -1e-9 * scale {
+            return Err(Error::invalid(
+                "structure.stiffness",
+                format!("is not positive semi-definite (eigenvalue {lambda:.3e})"),
+            ));
+        }
+        omega[k] = lambda.max(0.0).sqrt();
+        let mut col = eig.eigenvectors.column(i).into_owned();
+        // Deterministic sign: largest-magnitude component positive.
+        if col[col.iamax()] < 0.0 {
+            col = -col;
+        }
+        y.set_column(k, &col);
+    }
+    let shapes = l
+        .transpose()
+        .solve_upper_triangular(&y)
+        .ok_or_else(|| Error::numerical("modal analysis", "singular mass factor"))?;
+    Ok(Modes { omega, shapes })
+}
