@@ -27,13 +27,22 @@ pub enum Error {
 
 impl Error {
     pub fn invalid(what: impl Into<String>, reason: impl Into<String>) -> Self {
-        Error::InvalidInput { what: what.into(), reason: reason.into() }
+        Error::InvalidInput {
+            what: what.into(),
+            reason: reason.into(),
+        }
     }
     pub fn numerical(what: impl Into<String>, reason: impl Into<String>) -> Self {
-        Error::Numerical { what: what.into(), reason: reason.into() }
+        Error::Numerical {
+            what: what.into(),
+            reason: reason.into(),
+        }
     }
     pub fn file(path: impl Into<String>, reason: impl Into<String>) -> Self {
-        Error::File { path: path.into(), reason: reason.into() }
+        Error::File {
+            path: path.into(),
+            reason: reason.into(),
+        }
     }
 }
 
@@ -42,7 +51,10 @@ pub fn require_positive(what: &str, value: f64) -> Result<f64> {
     if value.is_finite() && value > 0.0 {
         Ok(value)
     } else {
-        Err(Error::invalid(what, format!("must be a finite number > 0, got {value}")))
+        Err(Error::invalid(
+            what,
+            format!("must be a finite number > 0, got {value}"),
+        ))
     }
 }
 
@@ -51,6 +63,9 @@ pub fn require_non_negative(what: &str, value: f64) -> Result<f64> {
     if value.is_finite() && value >= 0.0 {
         Ok(value)
     } else {
-        Err(Error::invalid(what, format!("must be a finite number >= 0, got {value}")))
+        Err(Error::invalid(
+            what,
+            format!("must be a finite number >= 0, got {value}"),
+        ))
     }
 }

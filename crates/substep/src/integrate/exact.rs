@@ -20,12 +20,20 @@ pub struct FohMap {
 }
 
 impl FohMap {
-    /// Discretise `ż = A z + B f` (A: s×s, B: s×m) over `dt`.
+    /// Discretise `ż = A z + B w` (A: s×s, B: s×m) over `dt` for `w` linear in time.
     pub fn new(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> Self {
+        Self::with_rate(a, b, &DMatrix::zeros(a.nrows(), b.ncols()), dt)
+    }
+
+    /// Discretise `ż = A z + B w + D ẇ` over `dt` for `w` linear in time (so `ẇ = Δw/Δt` is
+    /// constant): the augmented matrix is `[[A Δt, B Δt, D], [0, 0, I], [0, 0, 0]]` acting on
+    /// `[z; w_i; Δw]`. The rate term is how a dashpot sees a linearly moving support.
+    pub fn with_rate(a: &DMatrix<f64>, b: &DMatrix<f64>, d: &DMatrix<f64>, dt: f64) -> Self {
         let (s, m) = (a.nrows(), b.ncols());
         let mut aug = DMatrix::zeros(s + 2 * m, s + 2 * m);
         aug.view_mut((0, 0), (s, s)).copy_from(&(a * dt));
         aug.view_mut((0, s), (s, m)).copy_from(&(b * dt));
+        aug.view_mut((0, s + m), (s, m)).copy_from(d);
         for i in 0..m {
             aug[(s + i, s + m + i)] = 1.0;
         }
@@ -35,6 +43,22 @@ impl FohMap {
             gamma0: e.view((0, s), (s, m)).into_owned(),
             gamma1: e.view((0, s + m), (s, m)).into_owned(),
         }
+    }
+
+    /// `z_next = Φ z + Γ₀ w_start + Γ₁ (w_end − w_start)`; `dw` is scratch of the input size.
+    pub fn apply(
+        &self,
+        z: &DVector<f64>,
+        w_start: &DVector<f64>,
+        w_end: &DVector<f64>,
+        dw: &mut DVector<f64>,
+        z_next: &mut DVector<f64>,
+    ) {
+        dw.copy_from(w_end);
+        dw.axpy(-1.0, w_start, 1.0);
+        z_next.gemv(1.0, &self.phi, z, 0.0);
+        z_next.gemv(1.0, &self.gamma0, w_start, 1.0);
+        z_next.gemv(1.0, &self.gamma1, dw, 1.0);
     }
 }
 
@@ -101,11 +125,13 @@ impl Integrator for ExactFoh {
         let n = self.state.u.len();
         self.z.rows_mut(0, n).copy_from(&self.state.u);
         self.z.rows_mut(n, n).copy_from(&self.state.v);
-        self.load_delta.copy_from(load_next);
-        self.load_delta.axpy(-1.0, &self.load_prev, 1.0);
-        self.z_next.gemv(1.0, &self.map.phi, &self.z, 0.0);
-        self.z_next.gemv(1.0, &self.map.gamma0, &self.load_prev, 1.0);
-        self.z_next.gemv(1.0, &self.map.gamma1, &self.load_delta, 1.0);
+        self.map.apply(
+            &self.z,
+            &self.load_prev,
+            load_next,
+            &mut self.load_delta,
+            &mut self.z_next,
+        );
         self.state.u.copy_from(&self.z_next.rows(0, n));
         self.state.v.copy_from(&self.z_next.rows(n, n));
         // a = M⁻¹ (f − C v − K u)

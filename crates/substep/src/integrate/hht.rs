@@ -130,7 +130,12 @@ impl AlphaOs {
         let v_pred_prev = &p.state.v - &p.state.a * (p.gamma * dt);
         let restoring_prev = &p.stiffness * u_pred0;
         let n = model.n_dofs();
-        Ok(Self { p, restoring_prev, v_pred_prev, restoring: DVector::zeros(n) })
+        Ok(Self {
+            p,
+            restoring_prev,
+            v_pred_prev,
+            restoring: DVector::zeros(n),
+        })
     }
 }
 

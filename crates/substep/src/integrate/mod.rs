@@ -8,7 +8,7 @@ mod exact;
 mod hht;
 mod newmark;
 
-pub use exact::ExactFoh;
+pub use exact::{ExactFoh, FohMap};
 pub use hht::{AlphaOs, Hht};
 pub use newmark::{ExplicitNewmark, Newmark, NewmarkConstants, NewmarkCore};
 
@@ -26,7 +26,11 @@ pub struct Kinematics {
 
 impl Kinematics {
     pub fn zeros(n: usize) -> Self {
-        Self { u: DVector::zeros(n), v: DVector::zeros(n), a: DVector::zeros(n) }
+        Self {
+            u: DVector::zeros(n),
+            v: DVector::zeros(n),
+            a: DVector::zeros(n),
+        }
     }
     /// Rest (`u₀ = v₀ = 0`) with the consistent initial acceleration `a₀ = M⁻¹ f*(0)`.
     pub fn at_rest(model: &StructuralModel, load0: &DVector<f64>) -> Result<Self> {
@@ -41,7 +45,11 @@ impl Kinematics {
         Ok(k)
     }
     pub fn is_finite(&self) -> bool {
-        self.u.iter().chain(self.v.iter()).chain(self.a.iter()).all(|x| x.is_finite())
+        self.u
+            .iter()
+            .chain(self.v.iter())
+            .chain(self.a.iter())
+            .all(|x| x.is_finite())
     }
 }
 
@@ -97,7 +105,7 @@ impl Scheme {
     pub fn build(&self, model: &StructuralModel, dt: f64, load0: &DVector<f64>) -> Result<Box<dyn Integrator>> {
         require_positive("integrator.dt", dt)?;
         Ok(match *self {
-            Scheme::Newmark { beta, gamma } if beta == 0.0 => Box::new(ExplicitNewmark::new(model, dt, gamma, load0)?),
+            Scheme::Newmark { beta: 0.0, gamma } => Box::new(ExplicitNewmark::new(model, dt, gamma, load0)?),
             Scheme::Newmark { beta, gamma } => Box::new(Newmark::new(model, dt, beta, gamma, load0)?),
             Scheme::Hht { alpha } => Box::new(Hht::new(model, dt, alpha, load0)?),
             Scheme::AlphaOs { alpha } => Box::new(AlphaOs::new(model, dt, alpha, load0)?),

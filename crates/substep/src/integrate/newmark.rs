@@ -23,7 +23,10 @@ impl NewmarkConstants {
             ));
         }
         if !(gamma.is_finite() && gamma >= 0.0) {
-            return Err(Error::invalid("integrator.gamma", format!("must be a finite number >= 0, got {gamma}")));
+            return Err(Error::invalid(
+                "integrator.gamma",
+                format!("must be a finite number >= 0, got {gamma}"),
+            ));
         }
         crate::error::require_positive("integrator.dt", dt)?;
         let a = [
@@ -58,7 +61,10 @@ impl NewmarkCore {
         let c = NewmarkConstants::new(beta, gamma, dt)?;
         let k_eff = &model.stiffness + &model.mass * c.a[0] + &model.damping * c.a[1];
         let k_hat = k_eff.cholesky().ok_or_else(|| {
-            Error::numerical("effective stiffness K + a0 M + a1 C", "is not positive definite (check K, C and dt)")
+            Error::numerical(
+                "effective stiffness K + a0 M + a1 C",
+                "is not positive definite (check K, C and dt)",
+            )
         })?;
         let n = model.n_dofs();
         Ok(Self {

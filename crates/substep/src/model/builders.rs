@@ -33,11 +33,22 @@ pub struct TmdSystem {
 impl TmdSystem {
     /// The dissertation's "typical TMD system" with a 1000 kg, 1 Hz primary structure.
     pub fn typical() -> Self {
-        Self { mass: 1000.0, frequency: 1.0, zeta: 0.05, eta_m: 0.05, eta_f: 1.0, zeta_s: 0.10 }
+        Self {
+            mass: 1000.0,
+            frequency: 1.0,
+            zeta: 0.05,
+            eta_m: 0.05,
+            eta_f: 1.0,
+            zeta_s: 0.10,
+        }
     }
     /// "Coupled system with large mass ratio".
     pub fn large_mass_ratio() -> Self {
-        Self { eta_m: 0.5, zeta_s: 0.05, ..Self::typical() }
+        Self {
+            eta_m: 0.5,
+            zeta_s: 0.05,
+            ..Self::typical()
+        }
     }
     pub fn omega(&self) -> f64 {
         2.0 * PI * self.frequency
@@ -101,7 +112,10 @@ impl ShearBuilding {
 /// Undamped shear building; add damping with [`StructuralModel::with_damping`].
 pub fn shear_building(b: &ShearBuilding) -> Result<StructuralModel> {
     if b.stories == 0 {
-        return Err(crate::error::Error::invalid("structure.shear_building.stories", "must be at least 1"));
+        return Err(crate::error::Error::invalid(
+            "structure.shear_building.stories",
+            "must be at least 1",
+        ));
     }
     require_positive("structure.shear_building.story_mass", b.story_mass)?;
     require_positive("structure.shear_building.first_period", b.first_period)?;

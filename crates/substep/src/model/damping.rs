@@ -9,11 +9,19 @@ use nalgebra::{DMatrix, DVector};
 pub enum DampingSpec {
     Matrix(DMatrix<f64>),
     /// `C = alpha M + beta K`.
-    Rayleigh { alpha: f64, beta: f64 },
+    Rayleigh {
+        alpha: f64,
+        beta: f64,
+    },
     /// Rayleigh damping with ratio `zeta` at modes `modes.0` and `modes.1` (1-based).
-    RayleighRatio { zeta: f64, modes: (usize, usize) },
+    RayleighRatio {
+        zeta: f64,
+        modes: (usize, usize),
+    },
     /// Modal damping; one ratio for all modes, or one per mode.
-    Modal { zeta: Vec<f64> },
+    Modal {
+        zeta: Vec<f64>,
+    },
 }
 
 impl DampingSpec {

@@ -8,8 +8,8 @@ mod builders;
 mod damping;
 mod modal;
 
-pub use builders::{sdof, shear_building, tmd_two_dof, ShearBuilding, TmdSystem};
-pub use damping::{modal_damping, rayleigh_coefficients, DampingSpec};
+pub use builders::{ShearBuilding, TmdSystem, sdof, shear_building, tmd_two_dof};
+pub use damping::{DampingSpec, modal_damping, rayleigh_coefficients};
 pub use modal::{Modes, modes};
 
 use crate::error::{Error, Result};
@@ -38,7 +38,11 @@ impl StructuralModel {
         if n == 0 {
             return Err(Error::invalid("structure.mass", "matrix is empty"));
         }
-        for (name, m) in [("structure.mass", &mass), ("structure.damping", &damping), ("structure.stiffness", &stiffness)] {
+        for (name, m) in [
+            ("structure.mass", &mass),
+            ("structure.damping", &damping),
+            ("structure.stiffness", &stiffness),
+        ] {
             check_square_symmetric(name, m, n)?;
         }
         let influence = influence.unwrap_or_else(|| DVector::from_element(n, 1.0));
@@ -54,7 +58,12 @@ impl StructuralModel {
         if mass.clone().cholesky().is_none() {
             return Err(Error::invalid("structure.mass", "is not positive definite"));
         }
-        Ok(Self { mass, damping, stiffness, influence })
+        Ok(Self {
+            mass,
+            damping,
+            stiffness,
+            influence,
+        })
     }
 
     pub fn n_dofs(&self) -> usize {
@@ -83,7 +92,11 @@ fn check_square_symmetric(name: &str, m: &DMatrix<f64>, n: usize) -> Result<()> 
     if m.nrows() != n || m.ncols() != n {
         return Err(Error::invalid(
             name,
-            format!("is {}x{} but the model has {n} DOFs (the mass matrix is {n}x{n})", m.nrows(), m.ncols()),
+            format!(
+                "is {}x{} but the model has {n} DOFs (the mass matrix is {n}x{n})",
+                m.nrows(),
+                m.ncols()
+            ),
         ));
     }
     if let Some(pos) = m.iter().position(|x| !x.is_finite()) {
@@ -98,7 +111,15 @@ fn check_square_symmetric(name: &str, m: &DMatrix<f64>, n: usize) -> Result<()> 
             if (m[(i, j)] - m[(j, i)]).abs() > 1e-9 * scale {
                 return Err(Error::invalid(
                     name,
-                    format!("is not symmetric: entry ({}, {}) = {} but ({}, {}) = {}", i + 1, j + 1, m[(i, j)], j + 1, i + 1, m[(j, i)]),
+                    format!(
+                        "is not symmetric: entry ({}, {}) = {} but ({}, {}) = {}",
+                        i + 1,
+                        j + 1,
+                        m[(i, j)],
+                        j + 1,
+                        i + 1,
+                        m[(j, i)]
+                    ),
                 ));
             }
         }

@@ -1,0 +1,96 @@
+//! Error-force compensation (spec §4): from the error force `e_{i+1} = f^{(k)} − f^{(k−1)}`
+//! (per coupling DOF) compute the compensation force `f_u,i+1` that enters the next predictor.
+
+use crate::error::{Error, Result};
+
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum ErrorForceSpec {
+    #[default]
+    None,
+    /// `f_u,i+1 = P e_{i+1} + I Δt Σ e + D (e_{i+1} − e_i)/Δt`.
+    Pid { p: f64, i: f64, d: f64 },
+    /// OpenHySL's variant: residual `r_{i+1} = e_{i+1} − f_u,i`, `f_u,i+1 = P r_{i+1}`
+    /// (recursion `r_{i+1} + P r_i = e_{i+1}`, pole at `−P`). Only to reproduce OpenHySL runs.
+    PidResidual { p: f64 },
+}
+
+impl ErrorForceSpec {
+    pub fn validate(&self) -> Result<()> {
+        let check = |name: &str, v: f64| {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(Error::invalid(
+                    format!("substructure.error_force.{name}"),
+                    "must be finite",
+                ))
+            }
+        };
+        match *self {
+            ErrorForceSpec::None => Ok(()),
+            ErrorForceSpec::Pid { p, i, d } => {
+                check("p", p)?;
+                check("i", i)?;
+                check("d", d)
+            }
+            ErrorForceSpec::PidResidual { p } => check("p", p),
+        }
+    }
+}
+
+/// Compensation state for `n_c` coupling DOFs.
+#[derive(Debug, Clone)]
+pub struct ErrorForceCompensation {
+    pub spec: ErrorForceSpec,
+    /// `Σ e_l` (PID) — per coupling DOF.
+    integral: Vec<f64>,
+    /// `e_i` (PID derivative) or `r_i` (residual variant).
+    previous: Vec<f64>,
+}
+
+impl ErrorForceCompensation {
+    pub fn new(spec: ErrorForceSpec, n_c: usize) -> Result<Self> {
+        spec.validate()?;
+        Ok(Self {
+            spec,
+            integral: vec![0.0; n_c],
+            previous: vec![0.0; n_c],
+        })
+    }
+
+    /// Given the error force `e` and the current compensation `f_u` (both per coupling DOF),
+    /// overwrite `f_u` with the compensation for the next step.
+    pub fn update(&mut self, e: &[f64], dt: f64, f_u: &mut [f64]) {
+        match self.spec {
+            ErrorForceSpec::None => f_u.iter_mut().for_each(|f| *f = 0.0),
+            ErrorForceSpec::Pid { p, i, d } => {
+                for k in 0..e.len() {
+                    self.integral[k] += e[k];
+                    f_u[k] = p * e[k] + i * dt * self.integral[k] + d * (e[k] - self.previous[k]) / dt;
+                    self.previous[k] = e[k];
+                }
+            }
+            ErrorForceSpec::PidResidual { p } => {
+                for k in 0..e.len() {
+                    let r = e[k] - f_u[k];
+                    f_u[k] = p * r;
+                    self.previous[k] = r;
+                }
+            }
+        }
+    }
+
+    pub fn state_len(&self) -> usize {
+        2 * self.integral.len()
+    }
+    pub fn write_state(&self, out: &mut [f64]) {
+        let n = self.integral.len();
+        out[..n].copy_from_slice(&self.integral);
+        out[n..2 * n].copy_from_slice(&self.previous);
+    }
+    pub fn read_state(&mut self, s: &[f64]) {
+        let n = self.integral.len();
+        self.integral.copy_from_slice(&s[..n]);
+        self.previous.copy_from_slice(&s[n..2 * n]);
+    }
+}

@@ -1,0 +1,257 @@
+//! The sub-step controller (spec §3).
+//!
+//! One step `i → i+1` runs in phases so that a real-time loop can call the sub-steps at its
+//! own rate: [`SubstepController::begin_step`] (predictor), then `k_sub` times
+//! [`SubstepController::next_command`] / [`SubstepController::feedback`], then
+//! [`SubstepController::finish_step`]. None of them allocates.
+
+use super::compensation::{ErrorForceCompensation, ErrorForceSpec};
+use crate::error::{Error, Result};
+use crate::integrate::{Kinematics, NewmarkCore};
+use crate::model::StructuralModel;
+use nalgebra::{DMatrix, DVector};
+
+/// Parameters of the sub-step algorithm.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubstepSettings {
+    /// Time step Δt [s].
+    pub dt: f64,
+    /// Newmark β, γ (average acceleration ¼, ½ by default).
+    pub beta: f64,
+    pub gamma: f64,
+    /// Sub-steps per step `k_sub ≥ 1`.
+    pub substeps: usize,
+    /// Coupling DOFs, 0-based, distinct.
+    pub coupling_dofs: Vec<usize>,
+    pub error_force: ErrorForceSpec,
+}
+
+pub struct SubstepController {
+    core: NewmarkCore,
+    k_sub: usize,
+    coupling: Vec<usize>,
+    /// `G_{:,c} = K̂⁻¹ Sᵀ` (n × n_c) and its coupling rows `G_cc`.
+    gain_columns: DMatrix<f64>,
+    gain_cc: DMatrix<f64>,
+    state: Kinematics,
+    next: Kinematics,
+    /// Predictor `x̂` of the current step, its coupling part, and that of the previous step.
+    predictor: DVector<f64>,
+    predictor_c: DVector<f64>,
+    predictor_c_prev: DVector<f64>,
+    /// `f_c,i` = `f^{(k)}` of the last step (the measured coupling force).
+    force: DVector<f64>,
+    /// `f^{(j)}` (latest measured in this step) and `f^{(j−1)}`.
+    force_last: DVector<f64>,
+    force_before: DVector<f64>,
+    /// Compensation force `f_u` per coupling DOF and the last error force `e`.
+    compensation_force: Vec<f64>,
+    error_force: Vec<f64>,
+    compensation: ErrorForceCompensation,
+    command: DVector<f64>,
+    /// Sub-steps done in the current step.
+    substep: usize,
+}
+
+impl SubstepController {
+    /// Set up for `model` at rest with initial load `load0 = f_l(0)` (initial coupling force 0).
+    pub fn new(model: &StructuralModel, settings: &SubstepSettings, load0: &DVector<f64>) -> Result<Self> {
+        let n = model.n_dofs();
+        if settings.substeps == 0 {
+            return Err(Error::invalid("substructure.substeps", "must be at least 1"));
+        }
+        let n_c = settings.coupling_dofs.len();
+        if n_c == 0 {
+            return Err(Error::invalid(
+                "substructure.coupling_dofs",
+                "must list at least one DOF",
+            ));
+        }
+        for (k, &c) in settings.coupling_dofs.iter().enumerate() {
+            if c >= n {
+                return Err(Error::invalid(
+                    "substructure.coupling_dofs",
+                    format!("DOF {} is out of range (the model has DOFs 1..={n})", c + 1),
+                ));
+            }
+            if settings.coupling_dofs[..k].contains(&c) {
+                return Err(Error::invalid(
+                    "substructure.coupling_dofs",
+                    format!("DOF {} is listed twice", c + 1),
+                ));
+            }
+        }
+        let core = NewmarkCore::new(model, settings.dt, settings.beta, settings.gamma)?;
+        // Gain columns by n_c solves with the factorised K̂ (never the full inverse).
+        let mut gain_columns = DMatrix::zeros(n, n_c);
+        for (k, &c) in settings.coupling_dofs.iter().enumerate() {
+            gain_columns[(c, k)] = 1.0;
+        }
+        core.k_hat.solve_mut(&mut gain_columns);
+        let gain_cc = DMatrix::from_fn(n_c, n_c, |r, k| gain_columns[(settings.coupling_dofs[r], k)]);
+        let state = Kinematics::at_rest(model, load0)?;
+        Ok(Self {
+            core,
+            k_sub: settings.substeps,
+            coupling: settings.coupling_dofs.clone(),
+            gain_columns,
+            gain_cc,
+            next: state.clone(),
+            state,
+            predictor: DVector::zeros(n),
+            predictor_c: DVector::zeros(n_c),
+            predictor_c_prev: DVector::zeros(n_c),
+            force: DVector::zeros(n_c),
+            force_last: DVector::zeros(n_c),
+            force_before: DVector::zeros(n_c),
+            compensation_force: vec![0.0; n_c],
+            error_force: vec![0.0; n_c],
+            compensation: ErrorForceCompensation::new(settings.error_force, n_c)?,
+            command: DVector::zeros(n_c),
+            substep: 0,
+        })
+    }
+
+    pub fn dt(&self) -> f64 {
+        self.core.c.dt
+    }
+    pub fn substeps(&self) -> usize {
+        self.k_sub
+    }
+    pub fn n_coupling(&self) -> usize {
+        self.coupling.len()
+    }
+    pub fn coupling_dofs(&self) -> &[usize] {
+        &self.coupling
+    }
+    pub fn state(&self) -> &Kinematics {
+        &self.state
+    }
+    /// `G_cc`, the gain between coupling force and coupling displacement [m/N].
+    pub fn gain_cc(&self) -> &DMatrix<f64> {
+        &self.gain_cc
+    }
+    /// `G_{:,c}`.
+    pub fn gain_columns(&self) -> &DMatrix<f64> {
+        &self.gain_columns
+    }
+    /// Measured coupling force `f_c,i` of the last completed step [N].
+    pub fn coupling_force(&self) -> &[f64] {
+        self.force.as_slice()
+    }
+    /// Error force `e = f^{(k)} − f^{(k−1)}` of the last completed step [N].
+    pub fn error_force(&self) -> &[f64] {
+        &self.error_force
+    }
+    /// Compensation force `f_u` that enters the next predictor [N].
+    pub fn compensation_force(&self) -> &[f64] {
+        &self.compensation_force
+    }
+    /// The last command `d^{(j)}` [m].
+    pub fn command(&self) -> &[f64] {
+        self.command.as_slice()
+    }
+    /// Coupling part of the current predictor `x̂_c` [m].
+    pub fn predictor_c(&self) -> &[f64] {
+        self.predictor_c.as_slice()
+    }
+
+    /// Step 1: predictor `x̂ = K̂⁻¹ (F̂_i + f_l,i+1 + Sᵀ f_u,i)`.
+    pub fn begin_step(&mut self, load_next: &DVector<f64>) {
+        self.core.effective_load(&self.state, &mut self.predictor);
+        self.predictor += load_next;
+        for (k, &c) in self.coupling.iter().enumerate() {
+            self.predictor[c] += self.compensation_force[k];
+        }
+        self.core.k_hat.solve_mut(&mut self.predictor);
+        for (k, &c) in self.coupling.iter().enumerate() {
+            self.predictor_c[k] = self.predictor[c];
+        }
+        self.force_last.copy_from(&self.force);
+        self.force_before.copy_from(&self.force);
+        self.substep = 0;
+    }
+
+    /// Step 2: the command `d^{(j)} = (1 − r_j) x̂_c^{(i)} + r_j x̂_c + G_cc f^{(j−1)}` of the next
+    /// sub-step `j`, `r_j = j/k`.
+    pub fn next_command(&mut self) -> &[f64] {
+        debug_assert!(self.substep < self.k_sub, "next_command called after the last sub-step");
+        let r = (self.substep + 1) as f64 / self.k_sub as f64;
+        self.command.copy_from(&self.predictor_c_prev);
+        self.command.scale_mut(1.0 - r);
+        self.command.axpy(r, &self.predictor_c, 1.0);
+        self.command.gemv(1.0, &self.gain_cc, &self.force_last, 1.0);
+        self.command.as_slice()
+    }
+
+    /// The force `f^{(j)}` measured at the end of sub-step `j`.
+    pub fn feedback(&mut self, measured_force: &[f64]) {
+        std::mem::swap(&mut self.force_before, &mut self.force_last);
+        self.force_last.copy_from_slice(measured_force);
+        self.substep += 1;
+    }
+
+    /// Steps 3–5: close the step with `f^{(k−1)}`, Newmark kinematics, error force and the
+    /// compensation for the next step.
+    pub fn finish_step(&mut self) {
+        debug_assert_eq!(self.substep, self.k_sub, "finish_step before all sub-steps");
+        // u_{i+1} = x̂ + G_{:,c} f^{(k−1)}; on the coupling DOFs this is d^{(k)}.
+        self.next.u.copy_from(&self.predictor);
+        self.next.u.gemv(1.0, &self.gain_columns, &self.force_before, 1.0);
+        for (k, &c) in self.coupling.iter().enumerate() {
+            self.next.u[c] = self.command[k];
+        }
+        self.core.update_kinematics(&self.state, &mut self.next);
+        std::mem::swap(&mut self.state, &mut self.next);
+        for k in 0..self.coupling.len() {
+            self.error_force[k] = self.force_last[k] - self.force_before[k];
+        }
+        self.force.copy_from(&self.force_last);
+        self.predictor_c_prev.copy_from(&self.predictor_c);
+        self.compensation
+            .update(&self.error_force, self.core.c.dt, &mut self.compensation_force);
+    }
+
+    /// Residual of the equation of motion with the last measured force,
+    /// `f_l + Sᵀ f_u,i + Sᵀ f_c,i+1 − (M a + C v + K u)`, for the state after `finish_step`;
+    /// `compensation_used` is the `f_u` that entered this step's predictor. (A check of spec
+    /// §3 step 5; allocates, not for the hot path.)
+    pub fn equilibrium_residual(&self, load: &DVector<f64>, compensation_used: &[f64]) -> DVector<f64> {
+        let s = &self.state;
+        let mut r = load.clone();
+        for (k, &c) in self.coupling.iter().enumerate() {
+            r[c] += compensation_used[k] + self.force[k];
+        }
+        r -= &self.core.mass * &s.a + &self.core.damping * &s.v + &self.core.stiffness * &s.u;
+        r
+    }
+
+    /// Length of the algorithm state (for the amplification-matrix analysis and checkpoints):
+    /// `[u, v, a, x̂_c^{(i)}, f_c, f_u, compensator]`.
+    pub fn state_len(&self) -> usize {
+        3 * self.state.u.len() + 3 * self.coupling.len() + self.compensation.state_len()
+    }
+    pub fn write_state(&self, out: &mut [f64]) {
+        let (n, n_c) = (self.state.u.len(), self.coupling.len());
+        out[..n].copy_from_slice(self.state.u.as_slice());
+        out[n..2 * n].copy_from_slice(self.state.v.as_slice());
+        out[2 * n..3 * n].copy_from_slice(self.state.a.as_slice());
+        let at = 3 * n;
+        out[at..at + n_c].copy_from_slice(self.predictor_c_prev.as_slice());
+        out[at + n_c..at + 2 * n_c].copy_from_slice(self.force.as_slice());
+        out[at + 2 * n_c..at + 3 * n_c].copy_from_slice(&self.compensation_force);
+        self.compensation.write_state(&mut out[at + 3 * n_c..]);
+    }
+    pub fn read_state(&mut self, s: &[f64]) {
+        let (n, n_c) = (self.state.u.len(), self.coupling.len());
+        self.state.u.copy_from_slice(&s[..n]);
+        self.state.v.copy_from_slice(&s[n..2 * n]);
+        self.state.a.copy_from_slice(&s[2 * n..3 * n]);
+        let at = 3 * n;
+        self.predictor_c_prev.copy_from_slice(&s[at..at + n_c]);
+        self.force.copy_from_slice(&s[at + n_c..at + 2 * n_c]);
+        self.compensation_force.copy_from_slice(&s[at + 2 * n_c..at + 3 * n_c]);
+        self.compensation.read_state(&s[at + 3 * n_c..]);
+        self.substep = 0;
+    }
+}

@@ -1,0 +1,42 @@
+//! The substructure algorithm with sub-step control (spec §3) and error-force compensation
+//! (spec §4).
+//!
+//! [`SubstepController`] is the numerical side: it integrates the numerical substructure with
+//! Newmark in effective-stiffness form and drives the coupling DOFs through `k_sub` sub-steps
+//! per step. The experimental side is anything implementing [`ExperimentalSubstructure`]: the
+//! virtual lab of [`crate::transfer`], or a remote site. [`SubstructureTest`] couples the two
+//! for offline runs; a real-time runner calls the controller's step phases itself.
+
+mod compensation;
+mod controller;
+mod test_run;
+
+pub use compensation::{ErrorForceCompensation, ErrorForceSpec};
+pub use controller::{SubstepController, SubstepSettings};
+pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
+
+use crate::error::Result;
+
+/// The experimental side as seen by the controller.
+pub trait ExperimentalSubstructure: Send {
+    /// Number of coupling DOFs (actuators / load cells).
+    fn n_coupling(&self) -> usize;
+    /// Execute one sub-step of length `dtau` [s]: the actuators move towards `command` [m]
+    /// (one value per coupling DOF) while the ground acceleration ramps from `ag.0` to `ag.1`
+    /// [m/s²]. On return, `force` holds the measured force on the numerical substructure [N]
+    /// and `displacement` the measured coupling displacement [m].
+    fn substep(
+        &mut self,
+        command: &[f64],
+        ag: (f64, f64),
+        dtau: f64,
+        force: &mut [f64],
+        displacement: &mut [f64],
+    ) -> Result<()>;
+    /// `Ok` if the experimental side is a linear map of its state and inputs (for the
+    /// amplification-matrix analysis); otherwise an error naming the nonlinear part.
+    fn is_linear(&self) -> Result<()>;
+    fn state_len(&self) -> usize;
+    fn write_state(&self, out: &mut [f64]);
+    fn read_state(&mut self, state: &[f64]);
+}

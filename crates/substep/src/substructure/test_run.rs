@@ -1,0 +1,125 @@
+//! Offline coupling of the controller with an experimental substructure: one call per step.
+
+use super::{ExperimentalSubstructure, SubstepController};
+use crate::error::{Error, Result};
+use crate::model::StructuralModel;
+use nalgebra::DVector;
+
+/// Receives every sub-step (for `substeps.csv` or live plots). The default does nothing.
+pub trait SubstepObserver {
+    fn substep(&mut self, _step: usize, _j: usize, _command: &[f64], _force: &[f64], _displacement: &[f64]) {}
+}
+
+impl SubstepObserver for () {}
+
+/// What a step produced, borrowed from the test (no copies).
+pub struct StepRecord<'a> {
+    pub step: usize,
+    pub time: f64,
+    pub u: &'a [f64],
+    pub v: &'a [f64],
+    pub a: &'a [f64],
+    pub coupling_force: &'a [f64],
+    pub error_force: &'a [f64],
+    pub compensation_force: &'a [f64],
+    pub measured_displacement: &'a [f64],
+}
+
+/// A substructure test: controller + experimental side + ground motion load.
+pub struct SubstructureTest {
+    pub controller: SubstepController,
+    pub site: Box<dyn ExperimentalSubstructure>,
+    /// `M ι`: the load is `−M ι a_g`.
+    mass_influence: DVector<f64>,
+    load: DVector<f64>,
+    step: usize,
+    measured_force: Vec<f64>,
+    measured_displacement: Vec<f64>,
+}
+
+impl SubstructureTest {
+    pub fn new(
+        model: &StructuralModel,
+        controller: SubstepController,
+        site: Box<dyn ExperimentalSubstructure>,
+    ) -> Result<Self> {
+        let n_c = controller.n_coupling();
+        if site.n_coupling() != n_c {
+            return Err(Error::invalid(
+                "substructure",
+                format!(
+                    "the experimental side has {} coupling DOFs but the controller {n_c}",
+                    site.n_coupling()
+                ),
+            ));
+        }
+        Ok(Self {
+            controller,
+            site,
+            mass_influence: model.effective_mass_vector(),
+            load: DVector::zeros(model.n_dofs()),
+            step: 0,
+            measured_force: vec![0.0; n_c],
+            measured_displacement: vec![0.0; n_c],
+        })
+    }
+
+    /// Advance from `t_i` (ground acceleration `ag_i`) to `t_{i+1}` (`ag_next`).
+    pub fn step(&mut self, ag_i: f64, ag_next: f64, observer: &mut impl SubstepObserver) -> Result<()> {
+        // f_l,i+1 = −M ι a_g(t_{i+1})
+        self.load.copy_from(&self.mass_influence);
+        self.load.scale_mut(-ag_next);
+        self.controller.begin_step(&self.load);
+        let k = self.controller.substeps();
+        let dtau = self.controller.dt() / k as f64;
+        for j in 1..=k {
+            let (r0, r1) = ((j - 1) as f64 / k as f64, j as f64 / k as f64);
+            let ag = (ag_i + r0 * (ag_next - ag_i), ag_i + r1 * (ag_next - ag_i));
+            let command = self.controller.next_command();
+            self.site.substep(
+                command,
+                ag,
+                dtau,
+                &mut self.measured_force,
+                &mut self.measured_displacement,
+            )?;
+            observer.substep(
+                self.step + 1,
+                j,
+                self.controller.command(),
+                &self.measured_force,
+                &self.measured_displacement,
+            );
+            self.controller.feedback(&self.measured_force);
+        }
+        self.controller.finish_step();
+        self.step += 1;
+        if !self.controller.state().is_finite() || self.measured_force.iter().any(|f| !f.is_finite()) {
+            return Err(Error::Diverged {
+                step: self.step,
+                time: self.step as f64 * self.controller.dt(),
+                reason: "the response is no longer finite (NaN or overflow)".into(),
+            });
+        }
+        Ok(())
+    }
+
+    pub fn steps_done(&self) -> usize {
+        self.step
+    }
+
+    pub fn record(&self) -> StepRecord<'_> {
+        let s = self.controller.state();
+        StepRecord {
+            step: self.step,
+            time: self.step as f64 * self.controller.dt(),
+            u: s.u.as_slice(),
+            v: s.v.as_slice(),
+            a: s.a.as_slice(),
+            coupling_force: self.controller.coupling_force(),
+            error_force: self.controller.error_force(),
+            compensation_force: self.controller.compensation_force(),
+            measured_displacement: &self.measured_displacement,
+        }
+    }
+}

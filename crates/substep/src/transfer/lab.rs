@@ -1,0 +1,251 @@
+//! The virtual lab: actuators on the coupling DOFs, specimens attached to them, force and
+//! displacement sensors. It is the simulated counterpart of a real test rig and implements
+//! [`ExperimentalSubstructure`] like a remote site would.
+
+use super::{Actuator, ActuatorSpec, Sensor, SensorSpec};
+use crate::error::{Error, Result, require_positive};
+use crate::specimen::{Motion, Specimen};
+use crate::substructure::ExperimentalSubstructure;
+
+/// A specimen with the coupling-DOF indices (0-based positions in the coupling set) it is
+/// attached to, in the specimen's own DOF order.
+pub struct AttachedSpecimen {
+    pub specimen: Box<dyn Specimen>,
+    pub coupling_index: Vec<usize>,
+}
+
+pub struct VirtualLab {
+    actuators: Vec<Actuator>,
+    specimens: Vec<AttachedSpecimen>,
+    force_sensors: Vec<Sensor>,
+    disp_sensors: Vec<Sensor>,
+    inner_steps: usize,
+    /// Command at the end of the previous sub-step (start of the command ramp).
+    command_prev: Vec<f64>,
+    /// Achieved displacements at the start / end of the current inner interval.
+    achieved_start: Vec<f64>,
+    achieved_end: Vec<f64>,
+    command_inner: Vec<f64>,
+    true_force: Vec<f64>,
+    scratch_start: Vec<f64>,
+    scratch_end: Vec<f64>,
+    scratch_force: Vec<f64>,
+}
+
+impl VirtualLab {
+    /// `actuators[i]`, `force_sensors[i]`, `disp_sensors[i]` belong to coupling DOF `i`.
+    /// `dt_substep` is the nominal sub-step length; `inner_steps` the number of inner intervals
+    /// per sub-step on which actuators and specimens are advanced (≥ 1).
+    pub fn new(
+        actuators: &[ActuatorSpec],
+        specimens: Vec<AttachedSpecimen>,
+        force_sensors: &[SensorSpec],
+        disp_sensors: &[SensorSpec],
+        dt_substep: f64,
+        inner_steps: usize,
+    ) -> Result<Self> {
+        let n_c = actuators.len();
+        require_positive("sub-step length", dt_substep)?;
+        if inner_steps == 0 {
+            return Err(Error::invalid("substructure.inner_steps", "must be at least 1"));
+        }
+        if force_sensors.len() != n_c || disp_sensors.len() != n_c {
+            return Err(Error::invalid(
+                "sensors",
+                format!("need one force and one displacement sensor per coupling DOF ({n_c})"),
+            ));
+        }
+        let mut attached_count = vec![0usize; n_c];
+        let mut max_dofs = 0;
+        for (k, s) in specimens.iter().enumerate() {
+            if s.coupling_index.len() != s.specimen.n_dofs() {
+                return Err(Error::invalid(
+                    format!("substructure.specimen[{}]", k + 1),
+                    format!(
+                        "is attached to {} DOFs but the {} specimen has {}",
+                        s.coupling_index.len(),
+                        s.specimen.kind(),
+                        s.specimen.n_dofs()
+                    ),
+                ));
+            }
+            for &i in &s.coupling_index {
+                if i >= n_c {
+                    return Err(Error::invalid(
+                        format!("substructure.specimen[{}].dof", k + 1),
+                        "is not one of substructure.coupling_dofs",
+                    ));
+                }
+                attached_count[i] += 1;
+            }
+            max_dofs = max_dofs.max(s.coupling_index.len());
+        }
+        let dt_inner = dt_substep / inner_steps as f64;
+        let actuators = actuators
+            .iter()
+            .map(|a| a.build(dt_inner))
+            .collect::<Result<Vec<_>>>()?;
+        let force_sensors = force_sensors
+            .iter()
+            .map(|s| s.build("sensors.force"))
+            .collect::<Result<Vec<_>>>()?;
+        let disp_sensors = disp_sensors
+            .iter()
+            .map(|s| s.build("sensors.displacement"))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            actuators,
+            specimens,
+            force_sensors,
+            disp_sensors,
+            inner_steps,
+            command_prev: vec![0.0; n_c],
+            achieved_start: vec![0.0; n_c],
+            achieved_end: vec![0.0; n_c],
+            command_inner: vec![0.0; n_c],
+            true_force: vec![0.0; n_c],
+            scratch_start: vec![0.0; max_dofs],
+            scratch_end: vec![0.0; max_dofs],
+            scratch_force: vec![0.0; max_dofs],
+        })
+    }
+
+    /// Force on the structure before noise and quantisation, at the end of the last sub-step.
+    pub fn true_force(&self) -> &[f64] {
+        &self.true_force
+    }
+    /// Displacement achieved by each actuator at the end of the last sub-step.
+    pub fn achieved(&self) -> &[f64] {
+        &self.achieved_start
+    }
+    pub fn specimens(&self) -> &[AttachedSpecimen] {
+        &self.specimens
+    }
+}
+
+impl ExperimentalSubstructure for VirtualLab {
+    fn n_coupling(&self) -> usize {
+        self.actuators.len()
+    }
+
+    fn substep(
+        &mut self,
+        command: &[f64],
+        ag: (f64, f64),
+        dtau: f64,
+        force: &mut [f64],
+        displacement: &mut [f64],
+    ) -> Result<()> {
+        let h = dtau / self.inner_steps as f64;
+        for s in 0..self.inner_steps {
+            let r0 = s as f64 / self.inner_steps as f64;
+            let r1 = (s + 1) as f64 / self.inner_steps as f64;
+            for (i, actuator) in self.actuators.iter_mut().enumerate() {
+                self.command_inner[i] = self.command_prev[i] + r1 * (command[i] - self.command_prev[i]);
+                self.achieved_end[i] = actuator.advance(self.command_inner[i], h);
+            }
+            let ag_start = ag.0 + r0 * (ag.1 - ag.0);
+            let ag_end = ag.0 + r1 * (ag.1 - ag.0);
+            self.true_force.iter_mut().for_each(|f| *f = 0.0);
+            for att in &mut self.specimens {
+                let m = att.coupling_index.len();
+                for (k, &i) in att.coupling_index.iter().enumerate() {
+                    self.scratch_start[k] = self.achieved_start[i];
+                    self.scratch_end[k] = self.achieved_end[i];
+                }
+                let motion = Motion {
+                    d_start: &self.scratch_start[..m],
+                    d_end: &self.scratch_end[..m],
+                    ag_start,
+                    ag_end,
+                    dt: h,
+                };
+                att.specimen.advance(&motion, &mut self.scratch_force[..m]);
+                att.specimen.commit();
+                for (k, &i) in att.coupling_index.iter().enumerate() {
+                    self.true_force[i] += self.scratch_force[k];
+                }
+            }
+            std::mem::swap(&mut self.achieved_start, &mut self.achieved_end);
+        }
+        self.command_prev.copy_from_slice(command);
+        for i in 0..self.actuators.len() {
+            force[i] = self.force_sensors[i].measure(self.true_force[i], dtau);
+            displacement[i] = self.disp_sensors[i].measure(self.achieved_start[i], dtau);
+        }
+        Ok(())
+    }
+
+    fn is_linear(&self) -> Result<()> {
+        for (k, s) in self.specimens.iter().enumerate() {
+            if !s.specimen.is_linear() {
+                return Err(Error::invalid(
+                    format!("substructure.specimen[{}]", k + 1),
+                    format!(
+                        "the {} specimen is nonlinear; the linear analysis needs linear specimens",
+                        s.specimen.kind()
+                    ),
+                ));
+            }
+        }
+        if self
+            .force_sensors
+            .iter()
+            .chain(&self.disp_sensors)
+            .any(|s| !s.is_linear())
+        {
+            return Err(Error::invalid(
+                "sensors",
+                "noise and quantisation must be off for the linear analysis",
+            ));
+        }
+        Ok(())
+    }
+
+    fn state_len(&self) -> usize {
+        let n_c = self.actuators.len();
+        3 * n_c
+            + self.actuators.iter().map(Actuator::state_len).sum::<usize>()
+            + self.specimens.iter().map(|s| s.specimen.state_len()).sum::<usize>()
+    }
+
+    fn write_state(&self, out: &mut [f64]) {
+        let n_c = self.actuators.len();
+        out[0..n_c].copy_from_slice(&self.command_prev);
+        out[n_c..2 * n_c].copy_from_slice(&self.achieved_start);
+        for (i, f) in self.force_sensors.iter().enumerate() {
+            out[2 * n_c + i] = f.filter_state();
+        }
+        let mut at = 3 * n_c;
+        for a in &self.actuators {
+            let l = a.state_len();
+            a.write_state(&mut out[at..at + l]);
+            at += l;
+        }
+        for s in &self.specimens {
+            let l = s.specimen.state_len();
+            s.specimen.write_state(&mut out[at..at + l]);
+            at += l;
+        }
+    }
+
+    fn read_state(&mut self, s: &[f64]) {
+        let n_c = self.actuators.len();
+        self.command_prev.copy_from_slice(&s[0..n_c]);
+        self.achieved_start.copy_from_slice(&s[n_c..2 * n_c]);
+        for (i, f) in self.force_sensors.iter_mut().enumerate() {
+            f.set_filter_state(s[2 * n_c + i]);
+        }
+        let mut at = 3 * n_c;
+        for a in &mut self.actuators {
+            let l = a.state_len();
+            a.read_state(&s[at..at + l]);
+            at += l;
+        }
+        for sp in &mut self.specimens {
+            let l = sp.specimen.state_len();
+            sp.specimen.read_state(&s[at..at + l]);
+            at += l;
+        }
+    }
+}

@@ -1,0 +1,17 @@
+//! Transfer systems (spec §5): what happens between the command `d^{(j)}` computed by the
+//! sub-step controller and the force measured on the specimen — actuator dynamics, delays,
+//! sensors with noise, quantisation and filtering — and the [`VirtualLab`] that composes them
+//! with virtual specimens.
+//!
+//! Convention: the command to an actuator is a continuous signal, linear between the
+//! sub-step commands (an ideal actuator therefore moves the specimen linearly over a sub-step).
+//! Delays and dynamics act on that signal and are integrated exactly (first-order hold) on an
+//! inner grid of `inner_steps` intervals per sub-step.
+
+mod actuator;
+mod lab;
+mod sensor;
+
+pub use actuator::{Actuator, ActuatorSpec, DelayLine, Dynamics};
+pub use lab::{AttachedSpecimen, VirtualLab};
+pub use sensor::{Sensor, SensorSpec};
