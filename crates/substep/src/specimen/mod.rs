@@ -7,8 +7,10 @@
 //! relative to the ground; the ground acceleration is given as well, for specimens with mass.
 
 mod linear;
+mod spec;
 
 pub use linear::LinearSpecimen;
+pub use spec::{LinearMatrices, SpecimenSpec, assemble_monolithic};
 
 /// The motion imposed on a specimen over one interval: coupling displacements move linearly
 /// from `d_start` to `d_end` [m] while the ground acceleration moves linearly from `ag_start`

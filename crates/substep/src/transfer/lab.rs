@@ -4,7 +4,7 @@
 
 use super::{Actuator, ActuatorSpec, Sensor, SensorSpec};
 use crate::error::{Error, Result, require_positive};
-use crate::specimen::{Motion, Specimen};
+use crate::specimen::{Motion, Specimen, SpecimenSpec};
 use crate::substructure::ExperimentalSubstructure;
 
 /// A specimen with the coupling-DOF indices (0-based positions in the coupling set) it is
@@ -108,6 +108,55 @@ impl VirtualLab {
             scratch_end: vec![0.0; max_dofs],
             scratch_force: vec![0.0; max_dofs],
         })
+    }
+
+    /// Build from specimen descriptions attached to model DOFs; `coupling_dofs` (0-based model
+    /// DOFs) fixes the order of actuators and sensors.
+    pub fn from_specs(
+        coupling_dofs: &[usize],
+        specimens: &[SpecimenSpec],
+        actuators: &[ActuatorSpec],
+        force_sensors: &[SensorSpec],
+        disp_sensors: &[SensorSpec],
+        dt_substep: f64,
+        inner_steps: usize,
+    ) -> Result<Self> {
+        let mut attached = Vec::with_capacity(specimens.len());
+        for (k, spec) in specimens.iter().enumerate() {
+            let mut coupling_index = Vec::new();
+            for dof in spec.dofs() {
+                let i = coupling_dofs.iter().position(|&c| c == dof).ok_or_else(|| {
+                    Error::invalid(
+                        format!("substructure.specimen[{}].dof", k + 1),
+                        format!("DOF {} is not one of substructure.coupling_dofs", dof + 1),
+                    )
+                })?;
+                coupling_index.push(i);
+            }
+            let specimen = spec.build().map_err(|e| match e {
+                Error::InvalidInput { what, reason } => Error::invalid(
+                    format!(
+                        "substructure.specimen[{}].{}",
+                        k + 1,
+                        what.trim_start_matches("specimen.")
+                    ),
+                    reason,
+                ),
+                other => other,
+            })?;
+            attached.push(AttachedSpecimen {
+                specimen,
+                coupling_index,
+            });
+        }
+        Self::new(
+            actuators,
+            attached,
+            force_sensors,
+            disp_sensors,
+            dt_substep,
+            inner_steps,
+        )
     }
 
     /// Force on the structure before noise and quantisation, at the end of the last sub-step.

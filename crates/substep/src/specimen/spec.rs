@@ -1,0 +1,168 @@
+//! Specimens as described in a test definition (what a config file or a Python script gives),
+//! attached to DOFs of the numerical model.
+
+use super::{LinearSpecimen, Specimen};
+use crate::error::{Error, Result};
+use crate::model::StructuralModel;
+use nalgebra::{DMatrix, DVector, dmatrix};
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum SpecimenSpec {
+    /// TMD (mass on spring and dashpot) on model DOF `dof` (0-based); `mass = None` is a spring
+    /// and dashpot to ground.
+    LinearSdof {
+        dof: usize,
+        mass: Option<f64>,
+        stiffness: f64,
+        damping: f64,
+    },
+    /// Linear MDOF specimen: matrices over `[attached DOFs; internal DOFs]`, the first
+    /// `dofs.len()` attached to model DOFs `dofs` (0-based).
+    LinearMdof {
+        dofs: Vec<usize>,
+        mass: DMatrix<f64>,
+        damping: DMatrix<f64>,
+        stiffness: DMatrix<f64>,
+        influence: Option<DVector<f64>>,
+    },
+}
+
+/// Matrices of a linear specimen over `[attached; internal]` DOFs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearMatrices {
+    pub dofs: Vec<usize>,
+    pub mass: DMatrix<f64>,
+    pub damping: DMatrix<f64>,
+    pub stiffness: DMatrix<f64>,
+    pub influence: DVector<f64>,
+}
+
+impl SpecimenSpec {
+    pub fn kind(&self) -> &'static str {
+        match self {
+            SpecimenSpec::LinearSdof { .. } => "linear_sdof",
+            SpecimenSpec::LinearMdof { .. } => "linear_mdof",
+        }
+    }
+
+    /// Model DOFs (0-based) the specimen is attached to, in the specimen's order.
+    pub fn dofs(&self) -> Vec<usize> {
+        match self {
+            SpecimenSpec::LinearSdof { dof, .. } => vec![*dof],
+            SpecimenSpec::LinearMdof { dofs, .. } => dofs.clone(),
+        }
+    }
+
+    pub fn build(&self) -> Result<Box<dyn Specimen>> {
+        Ok(match self {
+            SpecimenSpec::LinearSdof {
+                mass,
+                stiffness,
+                damping,
+                ..
+            } => Box::new(LinearSpecimen::sdof(*mass, *stiffness, *damping)?),
+            SpecimenSpec::LinearMdof {
+                dofs,
+                mass,
+                damping,
+                stiffness,
+                influence,
+            } => Box::new(LinearSpecimen::from_matrices(
+                dofs.len(),
+                mass.clone(),
+                damping.clone(),
+                stiffness.clone(),
+                influence.clone(),
+            )?),
+        })
+    }
+
+    /// The matrices of a linear specimen (for the monolithic reference); `None` if nonlinear.
+    pub fn linear_matrices(&self) -> Option<LinearMatrices> {
+        match self {
+            SpecimenSpec::LinearSdof {
+                dof,
+                mass: None,
+                stiffness,
+                damping,
+            } => Some(LinearMatrices {
+                dofs: vec![*dof],
+                mass: dmatrix![0.0],
+                damping: dmatrix![*damping],
+                stiffness: dmatrix![*stiffness],
+                influence: DVector::from_element(1, 1.0),
+            }),
+            SpecimenSpec::LinearSdof {
+                dof,
+                mass: Some(m),
+                stiffness: k,
+                damping: c,
+            } => Some(LinearMatrices {
+                dofs: vec![*dof],
+                mass: dmatrix![0.0, 0.0; 0.0, *m],
+                damping: dmatrix![*c, -*c; -*c, *c],
+                stiffness: dmatrix![*k, -*k; -*k, *k],
+                influence: DVector::from_element(2, 1.0),
+            }),
+            SpecimenSpec::LinearMdof {
+                dofs,
+                mass,
+                damping,
+                stiffness,
+                influence,
+            } => Some(LinearMatrices {
+                dofs: dofs.clone(),
+                mass: mass.clone(),
+                damping: damping.clone(),
+                stiffness: stiffness.clone(),
+                influence: influence
+                    .clone()
+                    .unwrap_or_else(|| DVector::from_element(stiffness.nrows(), 1.0)),
+            }),
+        }
+    }
+}
+
+/// The monolithic model of the numerical substructure plus all (linear) specimens: internal
+/// specimen DOFs are appended after the model's DOFs, in specimen order. Errors name the first
+/// nonlinear specimen.
+pub fn assemble_monolithic(model: &StructuralModel, specimens: &[SpecimenSpec]) -> Result<StructuralModel> {
+    let n = model.n_dofs();
+    let mut parts = Vec::with_capacity(specimens.len());
+    for (k, s) in specimens.iter().enumerate() {
+        let m = s.linear_matrices().ok_or_else(|| {
+            Error::invalid(
+                format!("substructure.specimen[{}]", k + 1),
+                format!("the {} specimen is not linear", s.kind()),
+            )
+        })?;
+        parts.push(m);
+    }
+    let total = n + parts.iter().map(|p| p.stiffness.nrows() - p.dofs.len()).sum::<usize>();
+    let grow = |a: &DMatrix<f64>| {
+        let mut b = DMatrix::zeros(total, total);
+        b.view_mut((0, 0), (n, n)).copy_from(a);
+        b
+    };
+    let (mut mm, mut cc, mut kk) = (grow(&model.mass), grow(&model.damping), grow(&model.stiffness));
+    let mut iota = DVector::zeros(total);
+    iota.rows_mut(0, n).copy_from(&model.influence);
+    let mut next = n;
+    for p in &parts {
+        let n_a = p.dofs.len();
+        let n_p = p.stiffness.nrows();
+        let global: Vec<usize> = p.dofs.iter().copied().chain(next..next + n_p - n_a).collect();
+        for (li, &gi) in global.iter().enumerate() {
+            if li >= n_a {
+                iota[gi] = p.influence[li];
+            }
+            for (lj, &gj) in global.iter().enumerate() {
+                mm[(gi, gj)] += p.mass[(li, lj)];
+                cc[(gi, gj)] += p.damping[(li, lj)];
+                kk[(gi, gj)] += p.stiffness[(li, lj)];
+            }
+        }
+        next += n_p - n_a;
+    }
+    StructuralModel::new(mm, cc, kk, Some(iota))
+}
