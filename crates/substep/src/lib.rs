@@ -14,6 +14,7 @@ pub mod integrate;
 pub mod model;
 
 pub use error::{Error, Result};
+pub mod analysis;
 pub mod linalg;
 pub mod specimen;
 pub mod substructure;
