@@ -223,3 +223,47 @@ fn frequency_peaks_approach_exact_as_dt_shrinks() {
     assert_eq!(peaks.len(), 2);
     assert!(peaks[0].freq_ratio < 1.0 && peaks[1].freq_ratio > 1.0);
 }
+
+/// Steady-state harmonic runs in the time domain give the discrete frequency response.
+#[test]
+fn harmonic_runs_equal_discrete_frequency_response() {
+    use substep::analysis::frequency::DiscreteResponse;
+    use substep::analysis::verify::harmonic_amplification;
+    let case = AnalysisCase {
+        omega_dt: 0.1,
+        k_sub: 3,
+        eta_p: 0.3,
+        ..AnalysisCase::typical_tmd()
+    };
+    let resp = DiscreteResponse::new(&case).unwrap();
+    for r in [0.5, 0.89, 1.0, 1.11, 1.6] {
+        let td = harmonic_amplification(&case, r, 6000, 2000).unwrap();
+        let fd = resp.amplification(r);
+        println!("r {r}: time domain {td:.8}, frequency domain {fd:.8}");
+        assert!((td - fd).abs() < 1e-3 * fd, "r {r}: {td} vs {fd}");
+    }
+}
+
+/// Peaks of a stepped-sine sweep in the time domain agree with the frequency-domain peaks
+/// within the sweep's resolution.
+#[test]
+fn sine_sweep_peaks_agree_with_frequency_domain() {
+    use substep::analysis::frequency::{DiscreteResponse, find_peaks};
+    use substep::analysis::verify::stepped_sine_sweep;
+    let case = AnalysisCase {
+        omega_dt: 0.2,
+        k_sub: 2,
+        ..AnalysisCase::typical_tmd()
+    };
+    let resp = DiscreteResponse::new(&case).unwrap();
+    let fd = find_peaks(|r| resp.amplification(r), 0.05, 3.0, 1500);
+    let step = 0.01;
+    let ratios: Vec<f64> = (0..=60).map(|i| 0.7 + step * i as f64).collect();
+    let (_, td) = stepped_sine_sweep(&case, &ratios, 3000, 1000).unwrap();
+    assert_eq!(td.len(), 2);
+    for (t, f) in td.iter().zip(&fd) {
+        println!("time domain {t:?}, frequency domain {f:?}");
+        assert!((t.freq_ratio - f.freq_ratio).abs() <= step, "{t:?} vs {f:?}");
+        assert!(t.h <= f.h * (1.0 + 1e-3) && t.h >= resp.amplification(t.freq_ratio) * (1.0 - 1e-3));
+    }
+}

@@ -9,6 +9,7 @@ pub mod amplification;
 pub mod frequency;
 pub mod stability;
 pub mod tmd_case;
+pub mod verify;
 
 pub use amplification::{Stability, StepMap};
 pub use tmd_case::{AnalysisCase, Parameter};
