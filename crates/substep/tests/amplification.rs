@@ -92,10 +92,7 @@ fn three_point_schemes_match_characteristic_polynomial() {
                 let [a, b, c] = char_poly(beta, gamma, w, zeta);
                 let (t_ref, d_ref) = (-b / a, c / a);
                 let e = (t - t_ref).abs().max((d - d_ref).abs());
-                assert!(
-                    e < 1e-11,
-                    "{name} Ω={w} ζ={zeta}: T {t} vs {t_ref}, D {d} vs {d_ref}"
-                );
+                assert!(e < 1e-11, "{name} Ω={w} ζ={zeta}: T {t} vs {t_ref}, D {d} vs {d_ref}");
                 e_coef = e_coef.max(e);
 
                 let id = quadratic_roots(1.0, -t, d);
@@ -106,10 +103,7 @@ fn three_point_schemes_match_characteristic_polynomial() {
                     n_complex += 1;
                     let (r1, xi1, el1) = damping_and_elongation(id[0], w);
                     let (r2, xi2, el2) = damping_and_elongation(cf[0], w);
-                    let e = (r1 - r2)
-                        .abs()
-                        .max((xi1 - xi2).abs())
-                        .max((el1 - el2).abs());
+                    let e = (r1 - r2).abs().max((xi1 - xi2).abs()).max((el1 - el2).abs());
                     assert!(
                         e < 1e-9,
                         "{name} Ω={w} ζ={zeta}: |ρ| {r1} vs {r2}, ξ {xi1} vs {xi2}, elong {el1} vs {el2}"
@@ -130,18 +124,12 @@ fn three_point_schemes_match_characteristic_polynomial() {
                     // No numerical damping: |ρ| = 1 and cos(arg ρ) = (1 − (½−β)Ω²)/(1 + βΩ²).
                     assert!((d - 1.0).abs() < 1e-12, "{name} Ω={w}: |ρ|² = {d}");
                     let cos_ref = (1.0 - (0.5 - beta) * w * w) / (1.0 + beta * w * w);
-                    assert!(
-                        (id[0].arg().cos() - cos_ref).abs() < 1e-10,
-                        "{name} Ω={w}: phase"
-                    );
+                    assert!((id[0].arg().cos() - cos_ref).abs() < 1e-10, "{name} Ω={w}: phase");
                 }
                 if beta == 0.25 && gamma == 0.5 && zeta == 0.0 {
                     // Trapezoidal rule: arg ρ = 2 atan(Ω/2).
                     let th = id[0].arg().abs();
-                    assert!(
-                        (th - 2.0 * (w / 2.0).atan()).abs() < 1e-10,
-                        "Ω={w}: arg ρ {th}"
-                    );
+                    assert!((th - 2.0 * (w / 2.0).atan()).abs() < 1e-10, "Ω={w}: arg ρ {th}");
                 }
             }
         }
@@ -306,10 +294,7 @@ fn hht_cubic_reduces_to_newmark_quadratic() {
         let [a, b, c] = char_poly(0.25, 0.5, w, 0.05);
         let mut expected = quadratic_roots(a, b, c).to_vec();
         expected.push(Complex::new(0.0, 0.0));
-        assert!(
-            same_roots(&roots, &expected, 1e-12),
-            "Ω={w}: {roots:?} vs {expected:?}"
-        );
+        assert!(same_roots(&roots, &expected, 1e-12), "Ω={w}: {roots:?} vs {expected:?}");
     }
 }
 
@@ -329,10 +314,7 @@ fn hht_spectral_radius_bounded_and_limit() {
             // Numerical damping sets in like Ω⁴ (1 − ρ ≈ 1e-6 at Ω = 0.1 for α = −0.1) and
             // grows monotonically with Ω.
             if w >= 0.1 {
-                assert!(
-                    rho < 1.0 - 1e-7,
-                    "α={alpha} Ω={w}: not dissipative, ρ = {rho}"
-                );
+                assert!(rho < 1.0 - 1e-7, "α={alpha} Ω={w}: not dissipative, ρ = {rho}");
             }
             assert!(
                 rho <= rho_prev + 1e-13,
@@ -344,35 +326,24 @@ fn hht_spectral_radius_bounded_and_limit() {
         let limit = (1.0 + alpha) / (1.0 - alpha);
         let roots = cubic_roots(&hht_cubic(alpha, 1e6, 0.0));
         let rho_inf = spectral_radius(&roots);
-        println!(
-            "HHT α={alpha:.4}: max ρ on (0, 100] {rho_max:.12}, ρ(Ω=1e6) {rho_inf:.8}, closed form {limit:.8}"
-        );
+        println!("HHT α={alpha:.4}: max ρ on (0, 100] {rho_max:.12}, ρ(Ω=1e6) {rho_inf:.8}, closed form {limit:.8}");
         // At α = −⅓ all three limit roots coincide at −½, so the O(1/Ω²) coefficient
         // perturbation moves them by its cube root.
         let tol = if alpha > -0.33 { 1e-4 } else { 1e-3 };
-        assert!(
-            (rho_inf - limit).abs() < tol,
-            "α={alpha}: ρ∞ {rho_inf} vs {limit}"
-        );
+        assert!((rho_inf - limit).abs() < tol, "α={alpha}: ρ∞ {rho_inf} vs {limit}");
         let expected = [
             Complex::new(-limit, 0.0),
             Complex::new(-limit, 0.0),
             Complex::new(alpha / (1.0 + alpha), 0.0),
         ];
-        assert!(
-            same_roots(&roots, &expected, tol),
-            "α={alpha}: roots {roots:?}"
-        );
+        assert!(same_roots(&roots, &expected, tol), "α={alpha}: roots {roots:?}");
         // And at a large but finite Ω the simulated state map agrees with the matrix.
         let a_hat = hht_amplification(alpha, 100.0, 0.0);
         let eig = nalgebra::Schur::try_new(a_hat, f64::EPSILON, 1000)
             .unwrap()
             .complex_eigenvalues();
         let rho100 = spectral_radius(eig.as_slice());
-        assert!(
-            rho100 < 1.0 && rho100 > limit - 0.05,
-            "α={alpha}: ρ(100) = {rho100}"
-        );
+        assert!(rho100 < 1.0 && rho100 > limit - 0.05, "α={alpha}: ρ(100) = {rho100}");
     }
 }
 
@@ -406,9 +377,7 @@ fn conditionally_stable_schemes_have_their_stability_limit() {
         let rho = spectral_radius(&quadratic_roots(a, b, c));
         let (t, d) = identify_recurrence(&u, 3, 20);
         let rho_id = spectral_radius(&quadratic_roots(1.0, -t, d));
-        println!(
-            "{name} Ω={over:.4}: growth over 500 steps {growth:.2e}, ρ {rho:.6} (identified {rho_id:.6})"
-        );
+        println!("{name} Ω={over:.4}: growth over 500 steps {growth:.2e}, ρ {rho:.6} (identified {rho_id:.6})");
         assert!(growth > 1e3, "{name} Ω={over}: growth {growth}");
         assert!(
             rho > 1.0 && (rho - rho_id).abs() < 1e-9 * rho,
@@ -418,10 +387,7 @@ fn conditionally_stable_schemes_have_their_stability_limit() {
         let u = displacements(&kicked(scheme, under, 0.0, 5000));
         let (early, late) = (peak(&u, 1..200), peak(&u, 200..5001));
         println!("{name} Ω={under:.4}: peak steps 1..200 {early:.3e}, steps 200..5000 {late:.3e}");
-        assert!(
-            late <= 1.01 * early,
-            "{name} Ω={under}: grows ({early} → {late})"
-        );
+        assert!(late <= 1.01 * early, "{name} Ω={under}: grows ({early} → {late})");
         let (_, d) = identify_recurrence(&u, 3, 200);
         assert!((d - 1.0).abs() < 1e-12, "{name} Ω={under}: |ρ|² = {d}");
     }
@@ -432,10 +398,7 @@ fn conditionally_stable_schemes_have_their_stability_limit() {
 /// conserved (the trapezoidal rule is a Cayley transform) and `|u| ≤ √(2E)/ω`.
 #[test]
 fn average_acceleration_is_unconditionally_stable() {
-    let scheme = Scheme::Newmark {
-        beta: 0.25,
-        gamma: 0.5,
-    };
+    let scheme = Scheme::Newmark { beta: 0.25, gamma: 0.5 };
     for w in [10.0, 100.0, 1000.0] {
         let n = 2000;
         let states = kicked(scheme, w, 0.0, n);
@@ -456,10 +419,7 @@ fn average_acceleration_is_unconditionally_stable() {
         );
         assert!((d - 1.0).abs() < 1e-12, "Ω={w}: |ρ|² = {d}");
         assert!(drift < 1e-12, "Ω={w}: energy drift {drift:.3e}");
-        assert!(
-            late <= bound * (1.0 + 1e-12),
-            "Ω={w}: |u| {late} > bound {bound}"
-        );
+        assert!(late <= bound * (1.0 + 1e-12), "Ω={w}: |u| {late} > bound {bound}");
         // With damping it decays.
         let u = displacements(&kicked(scheme, w, 0.05, 100));
         let (_, d) = identify_recurrence(&u, 3, 100);

@@ -5,15 +5,11 @@
 
 mod common;
 
-use common::{
-    FAMILY, ground_loads, rel_error, rel_errors, shear_chain_modes, simulate, sine_sweep,
-};
+use common::{FAMILY, ground_loads, rel_error, rel_errors, shear_chain_modes, simulate, sine_sweep};
 use nalgebra::{DMatrix, DVector, dvector};
 use std::f64::consts::PI;
 use substep::integrate::{Kinematics, Scheme};
-use substep::model::{
-    DampingSpec, ShearBuilding, StructuralModel, TmdSystem, sdof, shear_building, tmd_two_dof,
-};
+use substep::model::{DampingSpec, ShearBuilding, StructuralModel, TmdSystem, sdof, shear_building, tmd_two_dof};
 
 /// Newmark(β, γ) in acceleration form, solved with LU:
 /// `(M + γΔt C + βΔt² K) a_{i+1} = f_{i+1} − C ṽ − K ũ`. Valid for β = 0 too.
@@ -36,9 +32,7 @@ fn newmark_acceleration_form(
     for f in &loads[1..] {
         let u_pred = &s.u + &s.v * dt + &s.a * ((0.5 - beta) * dt * dt);
         let v_pred = &s.v + &s.a * ((1.0 - gamma) * dt);
-        let a = lhs
-            .solve(&(f - c * &v_pred - k * &u_pred))
-            .expect("regular");
+        let a = lhs.solve(&(f - c * &v_pred - k * &u_pred)).expect("regular");
         s = Kinematics {
             u: u_pred + &a * (beta * dt * dt),
             v: v_pred + &a * (gamma * dt),
@@ -67,9 +61,7 @@ fn three_point_displacements(
     let cc = m - c * ((1.0 - gamma) * dt) + k * (w[2] * dt2);
     let mut u = vec![DVector::zeros(model.n_dofs()), u1.clone()];
     for i in 1..loads.len() - 1 {
-        let rhs = (&loads[i + 1] * w[0] + &loads[i] * w[1] + &loads[i - 1] * w[2]) * dt2
-            - &b * &u[i]
-            - &cc * &u[i - 1];
+        let rhs = (&loads[i + 1] * w[0] + &loads[i] * w[1] + &loads[i - 1] * w[2]) * dt2 - &b * &u[i] - &cc * &u[i - 1];
         u.push(lhs.solve(&rhs).expect("regular"));
     }
     u
@@ -78,12 +70,7 @@ fn three_point_displacements(
 /// HHT-α (spec §2.3) as one monolithic linear system per step in the unknowns
 /// `[u_{i+1}; v_{i+1}; a_{i+1}]` (3n × 3n, LU): the two Newmark relations and the HHT
 /// equilibrium `M a' + (1+α)(C v' + K u') − α(C v + K u) = (1+α) f' − α f`.
-fn hht_block_reference(
-    model: &StructuralModel,
-    dt: f64,
-    alpha: f64,
-    loads: &[DVector<f64>],
-) -> Vec<Kinematics> {
+fn hht_block_reference(model: &StructuralModel, dt: f64, alpha: f64, loads: &[DVector<f64>]) -> Vec<Kinematics> {
     let (m, c, k) = (&model.mass, &model.damping, &model.stiffness);
     let n = model.n_dofs();
     let gamma = 0.5 - alpha;
@@ -91,15 +78,11 @@ fn hht_block_reference(
     let eye = DMatrix::<f64>::identity(n, n);
     let mut big = DMatrix::zeros(3 * n, 3 * n);
     big.view_mut((0, 0), (n, n)).copy_from(&eye);
-    big.view_mut((0, 2 * n), (n, n))
-        .copy_from(&(&eye * (-beta * dt * dt)));
+    big.view_mut((0, 2 * n), (n, n)).copy_from(&(&eye * (-beta * dt * dt)));
     big.view_mut((n, n), (n, n)).copy_from(&eye);
-    big.view_mut((n, 2 * n), (n, n))
-        .copy_from(&(&eye * (-gamma * dt)));
-    big.view_mut((2 * n, 0), (n, n))
-        .copy_from(&(k * (1.0 + alpha)));
-    big.view_mut((2 * n, n), (n, n))
-        .copy_from(&(c * (1.0 + alpha)));
+    big.view_mut((n, 2 * n), (n, n)).copy_from(&(&eye * (-gamma * dt)));
+    big.view_mut((2 * n, 0), (n, n)).copy_from(&(k * (1.0 + alpha)));
+    big.view_mut((2 * n, n), (n, n)).copy_from(&(c * (1.0 + alpha)));
     big.view_mut((2 * n, 2 * n), (n, n)).copy_from(m);
     let lu = big.lu();
     let mut s = Kinematics {
@@ -112,11 +95,9 @@ fn hht_block_reference(
         let mut rhs = DVector::zeros(3 * n);
         rhs.rows_mut(0, n)
             .copy_from(&(&s.u + &s.v * dt + &s.a * ((0.5 - beta) * dt * dt)));
-        rhs.rows_mut(n, n)
-            .copy_from(&(&s.v + &s.a * ((1.0 - gamma) * dt)));
-        rhs.rows_mut(2 * n, n).copy_from(
-            &(&loads[i + 1] * (1.0 + alpha) - &loads[i] * alpha + (c * &s.v + k * &s.u) * alpha),
-        );
+        rhs.rows_mut(n, n).copy_from(&(&s.v + &s.a * ((1.0 - gamma) * dt)));
+        rhs.rows_mut(2 * n, n)
+            .copy_from(&(&loads[i + 1] * (1.0 + alpha) - &loads[i] * alpha + (c * &s.v + k * &s.u) * alpha));
         let x = lu.solve(&rhs).expect("regular");
         s = Kinematics {
             u: x.rows(0, n).into_owned(),
@@ -130,13 +111,7 @@ fn hht_block_reference(
 
 /// Typical TMD system under a 1 m/s² sine sweep plus a constant `offset` [m/s²] (a non-zero
 /// offset makes `f_0 ≠ 0`, which exercises the consistent initial acceleration).
-fn tmd_sweep(
-    f0: f64,
-    f1: f64,
-    duration: f64,
-    dt: f64,
-    offset: f64,
-) -> (StructuralModel, Vec<DVector<f64>>) {
+fn tmd_sweep(f0: f64, f1: f64, duration: f64, dt: f64, offset: f64) -> (StructuralModel, Vec<DVector<f64>>) {
     let model = tmd_two_dof(&TmdSystem::typical()).unwrap();
     let ag: Vec<f64> = sine_sweep(f0, f1, duration, dt, 1.0)
         .iter()
@@ -154,15 +129,7 @@ fn average_acceleration_matches_independent_forms_on_tmd() {
     let dt = 0.01;
     let (model, loads) = tmd_sweep(0.1, 5.0, 20.0, dt, 0.0);
     assert_eq!(loads.len(), 2001);
-    let sim = simulate(
-        Scheme::Newmark {
-            beta: 0.25,
-            gamma: 0.5,
-        },
-        &model,
-        dt,
-        &loads,
-    );
+    let sim = simulate(Scheme::Newmark { beta: 0.25, gamma: 0.5 }, &model, dt, &loads);
     let reference = newmark_acceleration_form(&model, dt, 0.25, 0.5, &loads);
     let [eu, ev, ea] = rel_errors(&sim, &reference);
     println!("TMD average acceleration vs acceleration form: u {eu:.2e}, v {ev:.2e}, a {ea:.2e}");
@@ -217,15 +184,7 @@ fn average_acceleration_matches_modal_solution_on_1000_story_building() {
     .unwrap();
     let ag = sine_sweep(0.5, 5.0, steps as f64 * dt, dt, 1.0);
     let loads = ground_loads(&model, &ag);
-    let sim = simulate(
-        Scheme::Newmark {
-            beta: 0.25,
-            gamma: 0.5,
-        },
-        &model,
-        dt,
-        &loads,
-    );
+    let sim = simulate(Scheme::Newmark { beta: 0.25, gamma: 0.5 }, &model, dt, &loads);
 
     // Closed-form modes of the uniform fixed-free shear chain.
     let (k_story, omega, phi) = shear_chain_modes(n, mass, period);
@@ -248,8 +207,8 @@ fn average_acceleration_matches_modal_solution_on_1000_story_building() {
             let (w, c) = (omega[j], 2.0 * zeta * omega[j]);
             let u_pred = q[j] + dt * qd[j] + 0.25 * dt * dt * qdd[j];
             let v_pred = qd[j] + 0.5 * dt * qdd[j];
-            let acc = (gamma_j[j] * a_next - c * v_pred - w * w * u_pred)
-                / (1.0 + 0.5 * dt * c + 0.25 * dt * dt * w * w);
+            let acc =
+                (gamma_j[j] * a_next - c * v_pred - w * w * u_pred) / (1.0 + 0.5 * dt * c + 0.25 * dt * dt * w * w);
             q[j] = u_pred + 0.25 * dt * dt * acc;
             qd[j] = v_pred + 0.5 * dt * acc;
             qdd[j] = acc;
@@ -301,9 +260,7 @@ fn hht_matches_block_reference_on_tmd() {
 fn hht_uses_previous_load_for_step_load() {
     let model = sdof(2.0, 0.3, 50.0).unwrap();
     let dt = 0.05;
-    let loads: Vec<DVector<f64>> = (0..200)
-        .map(|i| dvector![if i >= 10 { 7.0 } else { 0.0 }])
-        .collect();
+    let loads: Vec<DVector<f64>> = (0..200).map(|i| dvector![if i >= 10 { 7.0 } else { 0.0 }]).collect();
     for alpha in [-0.1, -0.3] {
         let sim = simulate(Scheme::Hht { alpha }, &model, dt, &loads);
         let reference = hht_block_reference(&model, dt, alpha, &loads);
@@ -320,15 +277,7 @@ fn hht_alpha_zero_is_average_acceleration() {
     let dt = 0.01;
     let (model, loads) = tmd_sweep(0.1, 5.0, 10.0, dt, 0.3);
     let hht = simulate(Scheme::Hht { alpha: 0.0 }, &model, dt, &loads);
-    let nm = simulate(
-        Scheme::Newmark {
-            beta: 0.25,
-            gamma: 0.5,
-        },
-        &model,
-        dt,
-        &loads,
-    );
+    let nm = simulate(Scheme::Newmark { beta: 0.25, gamma: 0.5 }, &model, dt, &loads);
     let [eu, ev, ea] = rel_errors(&hht, &nm);
     println!("HHT(0) vs average acceleration: u {eu:.2e}, v {ev:.2e}, a {ea:.2e}");
     for (what, e) in [("u", eu), ("v", ev), ("a", ea)] {
@@ -359,15 +308,7 @@ fn alpha_os_equals_hht_for_linear_model() {
 fn average_acceleration_peaks_within_one_percent_of_exact() {
     let dt = 0.01;
     let (model, loads) = tmd_sweep(0.2, 3.0, 60.0, dt, 0.0);
-    let nm = simulate(
-        Scheme::Newmark {
-            beta: 0.25,
-            gamma: 0.5,
-        },
-        &model,
-        dt,
-        &loads,
-    );
+    let nm = simulate(Scheme::Newmark { beta: 0.25, gamma: 0.5 }, &model, dt, &loads);
     let ex = simulate(Scheme::Exact, &model, dt, &loads);
     for dof in 0..2 {
         let peak = |h: &[Kinematics]| h.iter().map(|s| s.u[dof].abs()).fold(0.0, f64::max);
@@ -394,8 +335,7 @@ fn ramp_response(k: f64, w: f64, zeta: f64, t: f64) -> (f64, f64) {
     let wd = w * (1.0 - zeta * zeta).sqrt();
     let e = (-zeta * w * t).exp();
     let (s, c) = (wd * t).sin_cos();
-    let u =
-        (t - 2.0 * zeta / w + e * (2.0 * zeta / w * c + (2.0 * zeta * zeta - 1.0) / wd * s)) / k;
+    let u = (t - 2.0 * zeta / w + e * (2.0 * zeta / w * c + (2.0 * zeta * zeta - 1.0) / wd * s)) / k;
     let v = (1.0 - e * (c + zeta * w / wd * s)) / k;
     (u, v)
 }
@@ -411,9 +351,7 @@ fn exact_foh_matches_closed_form_ramp_and_pulse() {
 
     // Undamped ramp.
     let model = sdof(m, 0.0, k).unwrap();
-    let loads: Vec<DVector<f64>> = (0..=n_steps)
-        .map(|i| dvector![f0 * i as f64 * dt])
-        .collect();
+    let loads: Vec<DVector<f64>> = (0..=n_steps).map(|i| dvector![f0 * i as f64 * dt]).collect();
     let sim = simulate(Scheme::Exact, &model, dt, &loads);
     let u_ref: Vec<DVector<f64>> = (0..=n_steps)
         .map(|i| {
@@ -476,12 +414,8 @@ fn exact_foh_matches_closed_form_ramp_and_pulse() {
     let u_ref: Vec<DVector<f64>> = (0..=n_steps)
         .map(|i| dvector![f0 / k * (1.0 - (w * t(i)).cos())])
         .collect();
-    let v_ref: Vec<DVector<f64>> = (0..=n_steps)
-        .map(|i| dvector![f0 / k * w * (w * t(i)).sin()])
-        .collect();
-    let a_ref: Vec<DVector<f64>> = (0..=n_steps)
-        .map(|i| dvector![f0 / m * (w * t(i)).cos()])
-        .collect();
+    let v_ref: Vec<DVector<f64>> = (0..=n_steps).map(|i| dvector![f0 / k * w * (w * t(i)).sin()]).collect();
+    let a_ref: Vec<DVector<f64>> = (0..=n_steps).map(|i| dvector![f0 / m * (w * t(i)).cos()]).collect();
     let [eu, ev, ea] = [
         rel_error(sim.iter().map(|s| &s.u), &u_ref),
         rel_error(sim.iter().map(|s| &s.v), &v_ref),

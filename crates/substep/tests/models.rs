@@ -6,12 +6,10 @@ mod common;
 use common::shear_chain_modes;
 use nalgebra::{DMatrix, DVector, dmatrix, dvector};
 use std::f64::consts::PI;
-use substep::integrate::{
-    AlphaOs, ExactFoh, ExplicitNewmark, Hht, Newmark, NewmarkConstants, NewmarkCore, Scheme,
-};
+use substep::integrate::{AlphaOs, ExactFoh, ExplicitNewmark, Hht, Newmark, NewmarkConstants, NewmarkCore, Scheme};
 use substep::model::{
-    DampingSpec, ShearBuilding, StructuralModel, TmdSystem, modal_damping, modes,
-    rayleigh_coefficients, sdof, shear_building, tmd_two_dof,
+    DampingSpec, ShearBuilding, StructuralModel, TmdSystem, modal_damping, modes, rayleigh_coefficients, sdof,
+    shear_building, tmd_two_dof,
 };
 
 /// `max |a − b|`.
@@ -21,12 +19,7 @@ fn max_diff(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
 
 #[test]
 fn shear_building_matches_closed_form() {
-    for (n, mass, period) in [
-        (1usize, 2e4, 0.5),
-        (5, 1e5, 1.0),
-        (50, 1e5, 5.0),
-        (200, 3e5, 20.0),
-    ] {
+    for (n, mass, period) in [(1usize, 2e4, 0.5), (5, 1e5, 1.0), (50, 1e5, 5.0), (200, 3e5, 20.0)] {
         let spec = ShearBuilding {
             stories: n,
             story_mass: mass,
@@ -52,11 +45,7 @@ fn shear_building_matches_closed_form() {
 
         let md = model.modes().unwrap();
         let e1 = (md.omega[0] - w1).abs() / w1;
-        assert!(
-            e1 < 1e-10,
-            "N={n}: ω1 {} vs target {w1} ({e1:.2e})",
-            md.omega[0]
-        );
+        assert!(e1 < 1e-10, "N={n}: ω1 {} vs target {w1} ({e1:.2e})", md.omega[0]);
         assert!((md.frequencies_hz()[0] - 1.0 / period).abs() < 1e-10 / period);
         let mut e_freq = 0.0f64;
         let mut e_shape = 0.0f64;
@@ -66,9 +55,7 @@ fn shear_building_matches_closed_form() {
             let sign = a.dot(&b).signum();
             e_shape = e_shape.max((a - b * sign).amax() / b.amax());
         }
-        println!(
-            "shear building N={n}: ω1 error {e1:.1e}, max ω_j error {e_freq:.1e}, max shape error {e_shape:.1e}"
-        );
+        println!("shear building N={n}: ω1 error {e1:.1e}, max ω_j error {e_freq:.1e}, max shape error {e_shape:.1e}");
         assert!(e_freq < 1e-10, "N={n}: frequencies {e_freq:.2e}");
         assert!(e_shape < 1e-9, "N={n}: mode shapes {e_shape:.2e}");
     }
@@ -77,8 +64,7 @@ fn shear_building_matches_closed_form() {
 /// A deterministic non-diagonal SPD mass and stiffness (exercises the Cholesky reduction).
 fn coupled_model(n: usize) -> StructuralModel {
     let r = DMatrix::from_fn(n, n, |i, j| (((i * 7 + j * 3) % 11) as f64 - 5.0) / 10.0);
-    let mass = &r * r.transpose() * 0.1
-        + DMatrix::from_fn(n, n, |i, j| if i == j { 2.0 + i as f64 } else { 0.0 });
+    let mass = &r * r.transpose() * 0.1 + DMatrix::from_fn(n, n, |i, j| if i == j { 2.0 + i as f64 } else { 0.0 });
     let s = DMatrix::from_fn(n, n, |i, j| (((i * 5 + j * 2) % 13) as f64 - 6.0) / 6.0);
     let stiffness = (&s * s.transpose() + DMatrix::identity(n, n)) * 1e4;
     StructuralModel::new(mass, DMatrix::zeros(n, n), stiffness, None).unwrap()
@@ -103,16 +89,12 @@ fn modes_are_mass_normalised_and_diagonalise_stiffness() {
         let md = model.modes().unwrap();
         let n = model.n_dofs();
         let phi = &md.shapes;
-        let ortho = max_diff(
-            &(phi.transpose() * &model.mass * phi),
-            &DMatrix::identity(n, n),
-        );
+        let ortho = max_diff(&(phi.transpose() * &model.mass * phi), &DMatrix::identity(n, n));
         let w2 = DVector::from_iterator(n, md.omega.iter().map(|w| w * w));
         let kk = phi.transpose() * &model.stiffness * phi;
         let stiff = max_diff(&kk, &DMatrix::from_diagonal(&w2)) / w2.max();
         // Each mode solves K φ = ω² M φ.
-        let resid = (&model.stiffness * phi - &model.mass * phi * DMatrix::from_diagonal(&w2))
-            .amax()
+        let resid = (&model.stiffness * phi - &model.mass * phi * DMatrix::from_diagonal(&w2)).amax()
             / (model.stiffness.amax() * phi.amax());
         println!("{name}: ΦᵀMΦ − I {ortho:.1e}, ΦᵀKΦ − diag(ω²) {stiff:.1e}, residual {resid:.1e}");
         assert!(ortho < 1e-10, "{name}: ΦᵀMΦ − I = {ortho:.2e}");
@@ -169,10 +151,7 @@ fn modal_damping_is_diagonal_in_modal_coordinates() {
         let target = DVector::from_fn(n, |j, _| 2.0 * z(j) * md.omega[j]);
         let cc = md.shapes.transpose() * &c * &md.shapes;
         let e = max_diff(&cc, &DMatrix::from_diagonal(&target)) / target.max();
-        println!(
-            "modal damping ({} ratios): ΦᵀCΦ − diag(2ζω) {e:.1e}",
-            zeta.len()
-        );
+        println!("modal damping ({} ratios): ΦᵀCΦ − diag(2ζω) {e:.1e}", zeta.len());
         assert!(e < 1e-10, "ΦᵀCΦ − diag(2ζω) = {e:.2e}");
         assert!(max_diff(&c, &c.transpose()) == 0.0, "C not symmetric");
         // The free function gives the same matrix.
@@ -194,10 +173,7 @@ fn rayleigh_damping_hits_the_two_chosen_modes() {
     let zeta = 0.05;
     let c = model
         .clone()
-        .with_damping(&DampingSpec::RayleighRatio {
-            zeta,
-            modes: (1, 3),
-        })
+        .with_damping(&DampingSpec::RayleighRatio { zeta, modes: (1, 3) })
         .unwrap()
         .damping;
     let cc = md.shapes.transpose() * &c * &md.shapes;
@@ -229,10 +205,7 @@ fn rayleigh_damping_hits_the_two_chosen_modes() {
     // Explicit Rayleigh coefficients and an explicit matrix are taken as given.
     let c = model
         .clone()
-        .with_damping(&DampingSpec::Rayleigh {
-            alpha: 0.3,
-            beta: 2e-3,
-        })
+        .with_damping(&DampingSpec::Rayleigh { alpha: 0.3, beta: 2e-3 })
         .unwrap()
         .damping;
     assert_eq!(c, &model.mass * 0.3 + &model.stiffness * 2e-3);
@@ -257,11 +230,7 @@ fn tmd_builder_gives_the_contract_matrices() {
     let kk = dmatrix![k + ks, -ks; -ks, ks];
     let cc = dmatrix![c + cs, -cs; -cs, cs];
     assert_eq!(model.mass, mm);
-    assert!(
-        max_diff(&model.stiffness, &kk) < 1e-4,
-        "{}",
-        model.stiffness
-    );
+    assert!(max_diff(&model.stiffness, &kk) < 1e-4, "{}", model.stiffness);
     assert!(max_diff(&model.damping, &cc) < 1e-4, "{}", model.damping);
     assert_eq!(model.influence, dvector![1.0, 1.0]);
     // Exact values from the definitions (ω = 2π f, k = m ω², c = 2ζ m ω; η_m, η_f, ζ_s).
@@ -278,12 +247,7 @@ fn tmd_builder_gives_the_contract_matrices() {
     let (ms, ks, cs) = (500.0, 500.0 * w * w, 2.0 * 0.05 * 500.0 * w);
     assert_eq!(model.mass, dmatrix![m, 0.0; 0.0, ms]);
     assert!(max_diff(&model.stiffness, &dmatrix![m * w * w + ks, -ks; -ks, ks]) <= 1e-12 * 6e4);
-    assert!(
-        max_diff(
-            &model.damping,
-            &dmatrix![2.0 * 0.05 * m * w + cs, -cs; -cs, cs]
-        ) <= 1e-12 * 1e3
-    );
+    assert!(max_diff(&model.damping, &dmatrix![2.0 * 0.05 * m * w + cs, -cs; -cs, cs]) <= 1e-12 * 1e3);
     // A detuned absorber: ω_s = η_f ω.
     let p = TmdSystem {
         eta_f: 0.9,
@@ -313,31 +277,20 @@ fn message<T>(r: substep::Result<T>) -> String {
 
 fn expect_key<T>(r: substep::Result<T>, key: &str, case: &str) {
     let msg = message(r);
-    assert!(
-        msg.contains(key),
-        "{case}: message {msg:?} does not name {key:?}"
-    );
+    assert!(msg.contains(key), "{case}: message {msg:?} does not name {key:?}");
 }
 
 #[test]
 fn bad_model_input_names_the_key() {
     let eye = DMatrix::<f64>::identity(2, 2);
     let k = dmatrix![2.0, -1.0; -1.0, 1.0];
-    let new =
-        |m: DMatrix<f64>, c: DMatrix<f64>, k: DMatrix<f64>| StructuralModel::new(m, c, k, None);
+    let new = |m: DMatrix<f64>, c: DMatrix<f64>, k: DMatrix<f64>| StructuralModel::new(m, c, k, None);
     expect_key(
         new(eye.clone(), eye.clone(), dmatrix![2.0, -1.0; -1.1, 1.0]),
         "structure.stiffness",
         "non-symmetric K",
     );
-    assert!(
-        message(new(
-            eye.clone(),
-            eye.clone(),
-            dmatrix![2.0, -1.0; -1.1, 1.0]
-        ))
-        .contains("symmetric")
-    );
+    assert!(message(new(eye.clone(), eye.clone(), dmatrix![2.0, -1.0; -1.1, 1.0])).contains("symmetric"));
     expect_key(
         new(eye.clone(), dmatrix![1.0, 2.0; 3.0, 1.0], k.clone()),
         "structure.damping",
@@ -358,16 +311,9 @@ fn bad_model_input_names_the_key() {
         "structure.mass",
         "non-SPD mass",
     );
-    assert!(
-        message(new(dmatrix![1.0, 2.0; 2.0, 1.0], eye.clone(), k.clone()))
-            .contains("positive definite")
-    );
+    assert!(message(new(dmatrix![1.0, 2.0; 2.0, 1.0], eye.clone(), k.clone())).contains("positive definite"));
     expect_key(
-        new(
-            DMatrix::zeros(0, 0),
-            DMatrix::zeros(0, 0),
-            DMatrix::zeros(0, 0),
-        ),
+        new(DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), DMatrix::zeros(0, 0)),
         "structure.mass",
         "empty",
     );
@@ -377,12 +323,7 @@ fn bad_model_input_names_the_key() {
         "NaN in K",
     );
     expect_key(
-        StructuralModel::new(
-            eye.clone(),
-            eye.clone(),
-            k.clone(),
-            Some(dvector![1.0, 1.0, 1.0]),
-        ),
+        StructuralModel::new(eye.clone(), eye.clone(), k.clone(), Some(dvector![1.0, 1.0, 1.0])),
         "structure.influence",
         "influence length",
     );
@@ -402,9 +343,7 @@ fn bad_model_input_names_the_key() {
     .unwrap();
     let with = |spec: DampingSpec| model.clone().with_damping(&spec);
     expect_key(
-        with(DampingSpec::Modal {
-            zeta: vec![0.05, 0.05],
-        }),
+        with(DampingSpec::Modal { zeta: vec![0.05, 0.05] }),
         "structure.modal.zeta",
         "zeta count",
     );
@@ -446,10 +385,7 @@ fn bad_model_input_names_the_key() {
         "negative zeta",
     );
     expect_key(
-        with(DampingSpec::Rayleigh {
-            alpha: -1.0,
-            beta: 0.0,
-        }),
+        with(DampingSpec::Rayleigh { alpha: -1.0, beta: 0.0 }),
         "structure.rayleigh.alpha",
         "negative alpha",
     );
@@ -486,16 +422,8 @@ fn bad_model_input_names_the_key() {
             first_period,
         })
     };
-    expect_key(
-        sb(0, 1.0, 1.0),
-        "structure.shear_building.stories",
-        "0 stories",
-    );
-    expect_key(
-        sb(3, 0.0, 1.0),
-        "structure.shear_building.story_mass",
-        "zero mass",
-    );
+    expect_key(sb(0, 1.0, 1.0), "structure.shear_building.stories", "0 stories");
+    expect_key(sb(3, 0.0, 1.0), "structure.shear_building.story_mass", "zero mass");
     expect_key(
         sb(3, 1.0, -1.0),
         "structure.shear_building.first_period",
@@ -503,10 +431,7 @@ fn bad_model_input_names_the_key() {
     );
     let typical = TmdSystem::typical();
     expect_key(
-        tmd_two_dof(&TmdSystem {
-            eta_m: 0.0,
-            ..typical
-        }),
+        tmd_two_dof(&TmdSystem { eta_m: 0.0, ..typical }),
         "tmd.eta_m",
         "eta_m = 0",
     );
@@ -535,14 +460,8 @@ fn bad_integrator_input_names_the_key() {
     let model = sdof(1.0, 0.1, 100.0).unwrap();
     let f0 = dvector![0.0];
     let schemes = [
-        Scheme::Newmark {
-            beta: 0.25,
-            gamma: 0.5,
-        },
-        Scheme::Newmark {
-            beta: 0.0,
-            gamma: 0.5,
-        },
+        Scheme::Newmark { beta: 0.25, gamma: 0.5 },
+        Scheme::Newmark { beta: 0.0, gamma: 0.5 },
         Scheme::Hht { alpha: -0.1 },
         Scheme::AlphaOs { alpha: -0.1 },
         Scheme::Exact,
@@ -567,21 +486,9 @@ fn bad_integrator_input_names_the_key() {
         "integrator.dt",
         "ExplicitNewmark::new",
     );
-    expect_key(
-        Hht::new(&model, 0.0, -0.1, &f0),
-        "integrator.dt",
-        "Hht::new",
-    );
-    expect_key(
-        AlphaOs::new(&model, 0.0, -0.1, &f0),
-        "integrator.dt",
-        "AlphaOs::new",
-    );
-    expect_key(
-        ExactFoh::new(&model, 0.0, &f0),
-        "integrator.dt",
-        "ExactFoh::new",
-    );
+    expect_key(Hht::new(&model, 0.0, -0.1, &f0), "integrator.dt", "Hht::new");
+    expect_key(AlphaOs::new(&model, 0.0, -0.1, &f0), "integrator.dt", "AlphaOs::new");
+    expect_key(ExactFoh::new(&model, 0.0, &f0), "integrator.dt", "ExactFoh::new");
     expect_key(
         NewmarkCore::new(&model, 0.0, 0.25, 0.5),
         "integrator.dt",
@@ -603,19 +510,11 @@ fn bad_integrator_input_names_the_key() {
             );
         }
     }
-    assert!(
-        Scheme::Hht { alpha: -1.0 / 3.0 }
-            .build(&model, 0.01, &f0)
-            .is_ok()
-    );
+    assert!(Scheme::Hht { alpha: -1.0 / 3.0 }.build(&model, 0.01, &f0).is_ok());
     assert!(Scheme::Hht { alpha: 0.0 }.build(&model, 0.01, &f0).is_ok());
     // Newmark parameters.
     expect_key(
-        Scheme::Newmark {
-            beta: -0.1,
-            gamma: 0.5,
-        }
-        .build(&model, 0.01, &f0),
+        Scheme::Newmark { beta: -0.1, gamma: 0.5 }.build(&model, 0.01, &f0),
         "integrator.beta",
         "beta < 0",
     );
@@ -629,11 +528,7 @@ fn bad_integrator_input_names_the_key() {
         "gamma < 0",
     );
     expect_key(
-        Scheme::Newmark {
-            beta: 0.0,
-            gamma: -0.5,
-        }
-        .build(&model, 0.01, &f0),
+        Scheme::Newmark { beta: 0.0, gamma: -0.5 }.build(&model, 0.01, &f0),
         "integrator.gamma",
         "explicit gamma < 0",
     );
@@ -645,27 +540,9 @@ fn bad_integrator_input_names_the_key() {
         "{msg}"
     );
     for (name, expected) in [
-        (
-            "newmark",
-            Scheme::Newmark {
-                beta: 0.3,
-                gamma: 0.6,
-            },
-        ),
-        (
-            "central_difference",
-            Scheme::Newmark {
-                beta: 0.0,
-                gamma: 0.5,
-            },
-        ),
-        (
-            "cdm",
-            Scheme::Newmark {
-                beta: 0.0,
-                gamma: 0.5,
-            },
-        ),
+        ("newmark", Scheme::Newmark { beta: 0.3, gamma: 0.6 }),
+        ("central_difference", Scheme::Newmark { beta: 0.0, gamma: 0.5 }),
+        ("cdm", Scheme::Newmark { beta: 0.0, gamma: 0.5 }),
         (
             "fox_goodwin",
             Scheme::Newmark {
@@ -680,42 +557,14 @@ fn bad_integrator_input_names_the_key() {
                 gamma: 0.5,
             },
         ),
-        (
-            "average_acceleration",
-            Scheme::Newmark {
-                beta: 0.25,
-                gamma: 0.5,
-            },
-        ),
-        (
-            "trapezoidal",
-            Scheme::Newmark {
-                beta: 0.25,
-                gamma: 0.5,
-            },
-        ),
-        (
-            "galerkin",
-            Scheme::Newmark {
-                beta: 0.8,
-                gamma: 1.5,
-            },
-        ),
-        (
-            "backward_difference",
-            Scheme::Newmark {
-                beta: 1.0,
-                gamma: 1.5,
-            },
-        ),
+        ("average_acceleration", Scheme::Newmark { beta: 0.25, gamma: 0.5 }),
+        ("trapezoidal", Scheme::Newmark { beta: 0.25, gamma: 0.5 }),
+        ("galerkin", Scheme::Newmark { beta: 0.8, gamma: 1.5 }),
+        ("backward_difference", Scheme::Newmark { beta: 1.0, gamma: 1.5 }),
         ("hht", Scheme::Hht { alpha: -0.2 }),
         ("alpha_os", Scheme::AlphaOs { alpha: -0.2 }),
         ("exact", Scheme::Exact),
     ] {
-        assert_eq!(
-            Scheme::from_name(name, 0.3, 0.6, -0.2).unwrap(),
-            expected,
-            "{name}"
-        );
+        assert_eq!(Scheme::from_name(name, 0.3, 0.6, -0.2).unwrap(), expected, "{name}");
     }
 }

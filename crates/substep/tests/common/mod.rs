@@ -39,15 +39,8 @@ pub fn ground_loads(model: &StructuralModel, ag: &[f64]) -> Vec<DVector<f64>> {
 }
 
 /// Run `scheme` from rest through the loads; returns the states at steps `0..loads.len()`.
-pub fn simulate(
-    scheme: Scheme,
-    model: &StructuralModel,
-    dt: f64,
-    loads: &[DVector<f64>],
-) -> Vec<Kinematics> {
-    let mut integrator = scheme
-        .build(model, dt, &loads[0])
-        .expect("build integrator");
+pub fn simulate(scheme: Scheme, model: &StructuralModel, dt: f64, loads: &[DVector<f64>]) -> Vec<Kinematics> {
+    let mut integrator = scheme.build(model, dt, &loads[0]).expect("build integrator");
     let mut out = Vec::with_capacity(loads.len());
     out.push(integrator.state().clone());
     for f in &loads[1..] {
@@ -89,13 +82,8 @@ pub fn rel_errors(x: &[Kinematics], r: &[Kinematics]) -> [f64; 3] {
 pub fn shear_chain_modes(n: usize, m: f64, period: f64) -> (f64, Vec<f64>, DMatrix<f64>) {
     let w1 = 2.0 * PI / period;
     let k = m * (w1 / (2.0 * (PI / (2.0 * (2 * n + 1) as f64)).sin())).powi(2);
-    let theta: Vec<f64> = (1..=n)
-        .map(|j| (2 * j - 1) as f64 * PI / (2 * n + 1) as f64)
-        .collect();
-    let omega = theta
-        .iter()
-        .map(|t| 2.0 * (k / m).sqrt() * (t / 2.0).sin())
-        .collect();
+    let theta: Vec<f64> = (1..=n).map(|j| (2 * j - 1) as f64 * PI / (2 * n + 1) as f64).collect();
+    let omega = theta.iter().map(|t| 2.0 * (k / m).sqrt() * (t / 2.0).sin()).collect();
     let norm = 2.0 / (m * (2 * n + 1) as f64).sqrt();
     let phi = DMatrix::from_fn(n, n, |r, j| norm * ((r + 1) as f64 * theta[j]).sin());
     (k, omega, phi)
