@@ -6,10 +6,16 @@
 //! a load cell is wired to give, spec §1). `commit` accepts the trial state. Displacements are
 //! relative to the ground; the ground acceleration is given as well, for specimens with mass.
 
+mod bouc_wen;
+mod friction;
 mod linear;
+mod replay;
 mod spec;
 
+pub use bouc_wen::{BoucWen, BoucWenParams, Pinching};
+pub use friction::{Friction, FrictionModel};
 pub use linear::LinearSpecimen;
+pub use replay::Replay;
 pub use spec::{LinearMatrices, SpecimenSpec, assemble_monolithic};
 
 /// The motion imposed on a specimen over one interval: coupling displacements move linearly

@@ -1,7 +1,7 @@
 //! Specimens as described in a test definition (what a config file or a Python script gives),
 //! attached to DOFs of the numerical model.
 
-use super::{LinearSpecimen, Specimen};
+use super::{BoucWen, BoucWenParams, Friction, FrictionModel, LinearSpecimen, Replay, Specimen};
 use crate::error::{Error, Result};
 use crate::model::StructuralModel;
 use nalgebra::{DMatrix, DVector, dmatrix};
@@ -25,6 +25,20 @@ pub enum SpecimenSpec {
         stiffness: DMatrix<f64>,
         influence: Option<DVector<f64>>,
     },
+    /// Bouc–Wen hysteretic spring to ground on model DOF `dof` (0-based); see
+    /// [`BoucWenParams`] for the parameters and their defaults.
+    BoucWen { dof: usize, params: BoucWenParams },
+    /// Friction damper on model DOF `dof` (0-based): slip force `slip_force` [N], the friction
+    /// law `model` (configs default to `stick_slip`), linear viscous part `damping` [N s/m].
+    Friction {
+        dof: usize,
+        slip_force: f64,
+        model: FrictionModel,
+        damping: f64,
+    },
+    /// Replay of a measured force record on model DOF `dof` (0-based): samples `values` [N] of
+    /// the force on the structure at `t = j dt` [s], independent of the motion.
+    Replay { dof: usize, dt: f64, values: Vec<f64> },
 }
 
 /// Matrices of a linear specimen over `[attached; internal]` DOFs.
@@ -42,6 +56,9 @@ impl SpecimenSpec {
         match self {
             SpecimenSpec::LinearSdof { .. } => "linear_sdof",
             SpecimenSpec::LinearMdof { .. } => "linear_mdof",
+            SpecimenSpec::BoucWen { .. } => "bouc_wen",
+            SpecimenSpec::Friction { .. } => "friction",
+            SpecimenSpec::Replay { .. } => "replay",
         }
     }
 
@@ -50,6 +67,11 @@ impl SpecimenSpec {
         match self {
             SpecimenSpec::LinearSdof { dof, .. } => vec![*dof],
             SpecimenSpec::LinearMdof { dofs, .. } => dofs.clone(),
+            SpecimenSpec::BoucWen { dof, .. }
+            | SpecimenSpec::Friction { dof, .. }
+            | SpecimenSpec::Replay { dof, .. } => {
+                vec![*dof]
+            }
         }
     }
 
@@ -74,6 +96,14 @@ impl SpecimenSpec {
                 stiffness.clone(),
                 influence.clone(),
             )?),
+            SpecimenSpec::BoucWen { params, .. } => Box::new(BoucWen::new(params)?),
+            SpecimenSpec::Friction {
+                slip_force,
+                model,
+                damping,
+                ..
+            } => Box::new(Friction::new(*slip_force, *model, *damping)?),
+            SpecimenSpec::Replay { dt, values, .. } => Box::new(Replay::new(*dt, values.as_slice())?),
         })
     }
 
@@ -119,6 +149,7 @@ impl SpecimenSpec {
                     .clone()
                     .unwrap_or_else(|| DVector::from_element(stiffness.nrows(), 1.0)),
             }),
+            SpecimenSpec::BoucWen { .. } | SpecimenSpec::Friction { .. } | SpecimenSpec::Replay { .. } => None,
         }
     }
 }
