@@ -133,15 +133,17 @@ impl VirtualLab {
                 })?;
                 coupling_index.push(i);
             }
+            // `specimen.mass` → `substructure.specimen[k].mass`; a bare `specimen` (e.g. unstable
+            // internal dynamics) → `substructure.specimen[k]`.
+            let prefix = |what: String| match what.strip_prefix("specimen") {
+                Some(rest) if rest.is_empty() || rest.starts_with('.') => {
+                    format!("substructure.specimen[{}]{rest}", k + 1)
+                }
+                _ => format!("substructure.specimen[{}].{what}", k + 1),
+            };
             let specimen = spec.build().map_err(|e| match e {
-                Error::InvalidInput { what, reason } => Error::invalid(
-                    format!(
-                        "substructure.specimen[{}].{}",
-                        k + 1,
-                        what.trim_start_matches("specimen.")
-                    ),
-                    reason,
-                ),
+                Error::InvalidInput { what, reason } => Error::invalid(prefix(what), reason),
+                Error::Numerical { what, reason } => Error::numerical(prefix(what), reason),
                 other => other,
             })?;
             attached.push(AttachedSpecimen {
