@@ -5,8 +5,12 @@
 //!
 //! Convention: the command to an actuator is a continuous signal, linear between the
 //! sub-step commands (an ideal actuator therefore moves the specimen linearly over a sub-step).
-//! Delays and dynamics act on that signal and are integrated exactly (first-order hold) on an
-//! inner grid of `inner_steps` intervals per sub-step.
+//! Delays and dynamics act on that signal on an inner grid of `inner_steps` intervals per
+//! sub-step: the dynamics are integrated exactly (first-order hold) for an input that is linear
+//! over each inner interval. A fractional delay moves the corners of the command signal off
+//! that grid, which costs an `O(h²)` interpolation error (bounded; see `tests/transfer.rs`).
+//! Displacement-sensor filter states and noise generators are not part of the saved state
+//! (they never feed back into the algorithm).
 
 mod actuator;
 mod lab;
