@@ -11,6 +11,7 @@
 pub mod error;
 pub mod excitation;
 pub mod integrate;
+pub mod io;
 pub mod model;
 
 pub use error::{Error, Result};
