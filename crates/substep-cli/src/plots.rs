@@ -52,7 +52,7 @@ fn tick(v: f64, scale: f64) -> String {
     if v.abs() <= 1e-9 * scale {
         "0".into()
     } else if (1e-2..1e5).contains(&scale) {
-        let digits = (2.0 - scale.log10().floor()).clamp(0.0, 4.0) as usize;
+        let digits = (1.0 - scale.log10().floor()).clamp(0.0, 4.0) as usize;
         format!("{v:.digits$}")
     } else {
         format!("{v:.1e}")
@@ -122,7 +122,9 @@ mod tests {
     fn ticks_and_ranges() {
         assert_eq!(tick(0.0, 1.0), "0");
         assert_eq!(tick(-1e-17, 0.1), "0");
-        assert_eq!(tick(0.5, 1.0), "0.50");
+        assert_eq!(tick(0.5, 1.0), "0.5");
+        assert_eq!(tick(0.06, 0.07), "0.060");
+        assert_eq!(tick(400.0, 750.0), "400");
         assert_eq!(tick(2.0e-4, 3.0e-4), "2.0e-4");
         assert_eq!(range([0.0, 0.0].into_iter()), (-1.0, 1.0));
         let (lo, hi) = range([1.0, 3.0].into_iter());

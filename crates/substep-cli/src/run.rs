@@ -154,6 +154,16 @@ fn plotted_dofs(n: usize, coupling: &[usize]) -> Vec<usize> {
     dofs
 }
 
+/// A ratio as a percentage, exponent notation when it is huge (a diverged run).
+fn percent(ratio: f64) -> String {
+    let p = 100.0 * ratio;
+    if p.abs() < 1e4 {
+        format!("{p:.3}")
+    } else {
+        format!("{p:.3e}")
+    }
+}
+
 fn path_list(paths: &[PathBuf]) -> String {
     paths
         .iter()
@@ -541,9 +551,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 "monolithic Newmark solution"
             };
             println!(
-                "  max error vs {what}: {:.3} % (displacement), {:.3} % (coupling force)",
-                100.0 * r.max_displacement_error,
-                100.0 * r.max_force_error
+                "  max error vs {what}: {} % (displacement), {} % (coupling force)",
+                percent(r.max_displacement_error),
+                percent(r.max_force_error)
             );
         }
         println!("  outputs in {}: {}", out_dir.display(), {

@@ -156,7 +156,12 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
                 }
                 let mut put = |r: usize, c: usize, v: f64| -> Result<()> {
                     if std::mem::replace(&mut set[r + c * rows], true) {
-                        return Err(fail(line, format!("entry ({}, {}) is given twice", r + 1, c + 1)));
+                        let note = if symmetry == Symmetry::General {
+                            ""
+                        } else {
+                            " (a symmetric file lists each off-diagonal pair once)"
+                        };
+                        return Err(fail(line, format!("entry ({}, {}) is given twice{note}", r + 1, c + 1)));
                     }
                     m[(r, c)] = v;
                     Ok(())
@@ -330,7 +335,11 @@ mod tests {
         );
         assert_eq!(
             err("%%MatrixMarket matrix coordinate real symmetric\n2 2 2\n2 1 1\n1 2 1\n"),
-            "K.mtx: line 4: entry (2, 1) is given twice"
+            "K.mtx: line 4: entry (1, 2) is given twice (a symmetric file lists each off-diagonal pair once)"
+        );
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate real general\n2 2 2\n1 1 1\n1 1 2\n"),
+            "K.mtx: line 4: entry (1, 1) is given twice"
         );
         assert_eq!(
             err("%%MatrixMarket matrix coordinate real general\n2 x 1\n"),
