@@ -21,10 +21,6 @@ fn read_text(path: &Path) -> Result<(String, String)> {
     }
 }
 
-fn file_error(path: String, reason: String) -> Error {
-    Error::file(path, reason)
-}
-
 /// The fields of one line, without a `#` comment (and without a byte-order mark).
 fn fields(line: &str) -> impl Iterator<Item = &str> {
     let line = line.split('#').next().unwrap_or("");
@@ -120,7 +116,7 @@ pub fn parse_two_column(text: &str, name: &str) -> Result<Record> {
         &values,
         name,
         |k| format!("line {}", line_nos[k]),
-        file_error,
+        Error::file,
     )
 }
 
@@ -266,13 +262,15 @@ pub fn read_record(path: impl AsRef<Path>, dt: Option<f64>) -> Result<Record> {
     if is_at2 {
         let record = read_at2(path)?;
         match dt {
-            Some(dt) if !((dt - record.dt).abs() <= 1e-9 * record.dt) => Err(Error::file(
-                path.display().to_string(),
-                format!(
-                    "dt = {dt} s was given but the AT2 header says DT = {} s",
-                    record.dt
-                ),
-            )),
+            Some(dt) if dt.is_nan() || (dt - record.dt).abs() > 1e-9 * record.dt => {
+                Err(Error::file(
+                    path.display().to_string(),
+                    format!(
+                        "dt = {dt} s was given but the AT2 header says DT = {} s",
+                        record.dt
+                    ),
+                ))
+            }
             _ => Ok(record),
         }
     } else if let Some(dt) = dt {

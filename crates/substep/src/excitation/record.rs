@@ -83,7 +83,7 @@ impl Record {
         }
         let last = (n - 1) as f64;
         let s = t / self.dt;
-        if !(s >= -INDEX_TOL && s <= last + INDEX_TOL) {
+        if s < -INDEX_TOL || s > last + INDEX_TOL {
             return 0.0;
         }
         if n == 1 {
@@ -130,7 +130,7 @@ impl Record {
             values,
             name,
             |k| format!("sample {k}"),
-            |p, r| Error::invalid(p, r),
+            Error::invalid,
         )
     }
 }
