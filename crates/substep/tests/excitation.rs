@@ -3,8 +3,8 @@
 use std::f64::consts::PI;
 use std::path::PathBuf;
 use substep::excitation::{
-    Envelope, G, KanaiTajimi, Record, harmonic, kanai_tajimi, parse_at2, parse_single_column,
-    parse_two_column, read_at2, read_record, read_single_column, read_two_column, sine_sweep,
+    Envelope, G, KanaiTajimi, Record, harmonic, kanai_tajimi, parse_at2, parse_single_column, parse_two_column,
+    read_at2, read_record, read_single_column, read_two_column, sine_sweep,
 };
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
@@ -25,17 +25,13 @@ fn err<T: std::fmt::Debug>(r: substep::Result<T>) -> String {
 
 fn assert_err<T: std::fmt::Debug>(r: substep::Result<T>, needle: &str) {
     let msg = err(r);
-    assert!(
-        msg.contains(needle),
-        "error '{msg}' does not contain '{needle}'"
-    );
+    assert!(msg.contains(needle), "error '{msg}' does not contain '{needle}'");
     assert!(!msg.contains('\n'), "error '{msg}' is not one line");
 }
 
 /// A fresh directory for the files of one test.
 fn temp_dir(test: &str) -> PathBuf {
-    let dir =
-        std::env::temp_dir().join(format!("substep-excitation-{}-{test}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("substep-excitation-{}-{test}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
@@ -64,10 +60,7 @@ fn record_duration_value_at_and_scaling() {
     let s = r.scaled(-2.0).unwrap();
     assert_eq!(s.dt, 0.1);
     assert_eq!(s.accel, vec![0.0, -2.0, -6.0, -4.0]);
-    assert_err(
-        r.scaled(f64::NAN),
-        "scale factor: must be a finite number, got NaN",
-    );
+    assert_err(r.scaled(f64::NAN), "scale factor: must be a finite number, got NaN");
 
     assert_err(
         Record::new(0.0, vec![1.0]),
@@ -105,10 +98,7 @@ fn resample_of_linear_ramp_is_exact() {
     let short = r.resample(0.1, Some(0.35)).unwrap();
     assert_all_close(&short, &[0.0, 0.25, 0.5, 0.75], 1e-12);
 
-    assert_err(
-        r.resample(0.0, None),
-        "resample.dt: must be a finite number > 0, got 0",
-    );
+    assert_err(r.resample(0.0, None), "resample.dt: must be a finite number > 0, got 0");
     assert_err(
         r.resample(0.01, Some(-1.0)),
         "resample.duration: must be a finite number >= 0",
@@ -158,10 +148,7 @@ fn from_samples_uniform_nonuniform_and_late_start() {
         Record::from_samples(&[-0.5, 0.0], &[1.0, 1.0], "s"),
         "s: sample 0: time must be >= 0",
     );
-    assert_err(
-        Record::from_samples(&[0.0], &[1.0], "s"),
-        "at least two samples",
-    );
+    assert_err(Record::from_samples(&[0.0], &[1.0], "s"), "at least two samples");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -260,10 +247,7 @@ fn parse_single_column_several_values_per_line() {
         parse_single_column("1 2\n3 inf\n", 0.01, "ag.txt"),
         "ag.txt: line 2: value is not finite (inf)",
     );
-    assert_err(
-        parse_single_column("header\n# c\n", 0.01, "ag.txt"),
-        "ag.txt: no data",
-    );
+    assert_err(parse_single_column("header\n# c\n", 0.01, "ag.txt"), "ag.txt: no data");
 }
 
 const AT2_SAMPLE: &str = "\
@@ -304,9 +288,7 @@ fn parse_at2_converts_g_to_m_per_s2() {
 #[test]
 fn parse_at2_errors() {
     // NPTS = 3000 with 2999 values.
-    let mut text = String::from(
-        "PEER\nEVENT\nACCELERATION TIME SERIES IN UNITS OF G\nNPTS= 3000, DT= .0100 SEC\n",
-    );
+    let mut text = String::from("PEER\nEVENT\nACCELERATION TIME SERIES IN UNITS OF G\nNPTS= 3000, DT= .0100 SEC\n");
     for i in 0..2999 {
         text.push_str(&format!("{:15.7E}", 1e-3 * (i % 7) as f64));
         if i % 5 == 4 {
@@ -347,10 +329,7 @@ fn parse_at2_errors() {
         "rec.AT2: line 6: cannot parse '1.0000000E-0x' as a number",
     );
     let bad = AT2_SAMPLE.replace("  .2500000E+00", "  NaN");
-    assert_err(
-        parse_at2(&bad, "rec.AT2"),
-        "rec.AT2: line 6: value is not finite (NaN)",
-    );
+    assert_err(parse_at2(&bad, "rec.AT2"), "rec.AT2: line 6: value is not finite (NaN)");
     let bad = AT2_SAMPLE.replace("ACCELERATION", "VELOCITY");
     assert_err(
         parse_at2(&bad, "rec.AT2"),
@@ -408,15 +387,9 @@ fn read_files_and_dispatch_by_extension() {
         read_record(&missing, None),
         read_single_column(&missing, 0.01),
     ] {
-        assert_err(
-            r,
-            "ag.csv: cannot read file: No such file or directory (os error 2)",
-        );
+        assert_err(r, "ag.csv: cannot read file: No such file or directory (os error 2)");
     }
-    assert_err(
-        read_at2(dir.join("none.at2")),
-        "none.at2: cannot read file:",
-    );
+    assert_err(read_at2(dir.join("none.at2")), "none.at2: cannot read file:");
     assert_err(
         read_single_column(&txt, -1.0),
         "ag.txt: dt: must be a finite number > 0, got -1",
@@ -436,11 +409,7 @@ fn harmonic_values() {
     assert!(close(r.accel[20], 2.0, 1e-12)); // t = 0.2: sin(π/2)
     assert!(close(r.accel[40], 0.0, 1e-12)); // t = 0.4: sin(π)
     assert!(close(r.accel[60], -2.0, 1e-12)); // t = 0.6: sin(3π/2)
-    assert!(close(
-        r.accel[7],
-        2.0 * (2.0 * PI * 1.25 * 0.07).sin(),
-        1e-12
-    ));
+    assert!(close(r.accel[7], 2.0 * (2.0 * PI * 1.25 * 0.07).sin(), 1e-12));
     assert!(close(r.accel[7], 1.0449971, 1e-6)); // 2 sin(0.175π)
 
     assert_err(
@@ -472,9 +441,7 @@ fn harmonic_values() {
 
 /// Number of sign changes of `x[i0..i1]`.
 fn zero_crossings(x: &[f64]) -> usize {
-    x.windows(2)
-        .filter(|w| (w[0] < 0.0) != (w[1] < 0.0))
-        .count()
+    x.windows(2).filter(|w| (w[0] < 0.0) != (w[1] < 0.0)).count()
 }
 
 #[test]
@@ -566,20 +533,13 @@ fn kanai_tajimi_pga_scaling_and_envelope() {
         assert!(close(*s, factor * b, 1e-12));
     }
 
-    let env = Envelope::Trapezoid {
-        rise: 2.0,
-        hold: 10.0,
-    };
+    let env = Envelope::Trapezoid { rise: 2.0, hold: 10.0 };
     assert_eq!(env.factor(1.0, 20.0), 0.5);
     assert_eq!(env.factor(7.0, 20.0), 1.0);
     assert_eq!(env.factor(16.0, 20.0), 0.5);
     assert_eq!(env.factor(20.0, 20.0), 0.0);
     assert_eq!(Envelope::None.factor(20.0, 20.0), 1.0);
-    let shaped = kanai_tajimi(KanaiTajimi {
-        envelope: env,
-        ..kt(3)
-    })
-    .unwrap();
+    let shaped = kanai_tajimi(KanaiTajimi { envelope: env, ..kt(3) }).unwrap();
     // Same noise, multiplied by the envelope: half amplitude at t = 1 s and t = 16 s.
     assert!(close(shaped.accel[100], 0.5 * base.accel[100], 1e-12));
     assert!(close(shaped.accel[700], base.accel[700], 1e-12));
@@ -602,17 +562,11 @@ fn kanai_tajimi_pga_scaling_and_envelope() {
         "kanai_tajimi.omega_g: must be below the Nyquist frequency",
     );
     assert_err(
-        bad(KanaiTajimi {
-            omega_g: -1.0,
-            ..kt(1)
-        }),
+        bad(KanaiTajimi { omega_g: -1.0, ..kt(1) }),
         "kanai_tajimi.omega_g: must be a finite number > 0, got -1",
     );
     assert_err(
-        bad(KanaiTajimi {
-            zeta_g: 0.0,
-            ..kt(1)
-        }),
+        bad(KanaiTajimi { zeta_g: 0.0, ..kt(1) }),
         "kanai_tajimi.zeta_g: must be a finite number > 0, got 0",
     );
     assert_err(
@@ -623,28 +577,19 @@ fn kanai_tajimi_pga_scaling_and_envelope() {
         "kanai_tajimi.pga_target: must be a finite number > 0",
     );
     assert_err(
-        bad(KanaiTajimi {
-            dt: f64::NAN,
-            ..kt(1)
-        }),
+        bad(KanaiTajimi { dt: f64::NAN, ..kt(1) }),
         "kanai_tajimi.dt: must be a finite number > 0, got NaN",
     );
     assert_err(
         bad(KanaiTajimi {
-            envelope: Envelope::Trapezoid {
-                rise: 15.0,
-                hold: 10.0,
-            },
+            envelope: Envelope::Trapezoid { rise: 15.0, hold: 10.0 },
             ..kt(1)
         }),
         "kanai_tajimi.envelope: rise + hold = 25 s exceeds the duration 20 s",
     );
     assert_err(
         bad(KanaiTajimi {
-            envelope: Envelope::Trapezoid {
-                rise: -1.0,
-                hold: 10.0,
-            },
+            envelope: Envelope::Trapezoid { rise: -1.0, hold: 10.0 },
             ..kt(1)
         }),
         "kanai_tajimi.envelope.rise: must be a finite number >= 0, got -1",
@@ -673,10 +618,7 @@ fn kanai_tajimi_variance_matches_closed_form() {
         let want = PI * 15.0 * (1.0 + 4.0 * zeta * zeta) / (2.0 * zeta);
         assert!(close(p.stationary_std().powi(2), want, 1e-9));
         let got = variance(&r.accel[2000..]); // skip the start-up transient (10 s)
-        assert!(
-            (got / want - 1.0).abs() < 0.05,
-            "ζ = {zeta}: variance {got} vs {want}"
-        );
+        assert!((got / want - 1.0).abs() < 0.05, "ζ = {zeta}: variance {got} vs {want}");
     }
 }
 
@@ -719,9 +661,7 @@ fn kanai_tajimi_spectral_peak_near_omega_g() {
             }
         })
         .collect();
-    let k_peak = (1..n_bins)
-        .max_by(|&a, &b| smooth[a].total_cmp(&smooth[b]))
-        .unwrap();
+    let k_peak = (1..n_bins).max_by(|&a, &b| smooth[a].total_cmp(&smooth[b])).unwrap();
     let f_peak = k_peak as f64 / (seg as f64 * dt);
     let f_g = omega_g / (2.0 * PI);
     assert!(
@@ -733,16 +673,8 @@ fn kanai_tajimi_spectral_peak_near_omega_g() {
     let zeta: f64 = 0.3;
     let r_peak = ((1.0 + 8.0 * zeta * zeta).sqrt() - 1.0).sqrt() / (2.0 * zeta);
     assert!(close(r_peak, 0.9302, 1e-4));
-    assert!(
-        (f_peak / (r_peak * f_g) - 1.0).abs() < 0.1,
-        "peak at {f_peak} Hz"
-    );
+    assert!((f_peak / (r_peak * f_g) - 1.0).abs() < 0.1, "peak at {f_peak} Hz");
     // The spectrum falls off well above the peak and is smaller at low frequency.
-    assert!(
-        psd[k_peak] > 5.0 * psd[55],
-        "{} vs {}",
-        psd[k_peak],
-        psd[55]
-    );
+    assert!(psd[k_peak] > 5.0 * psd[55], "{} vs {}", psd[k_peak], psd[55]);
     assert!(psd[k_peak] > 2.0 * psd[2], "{} vs {}", psd[k_peak], psd[2]);
 }

@@ -31,10 +31,7 @@ fn require_finite(what: &str, value: f64) -> Result<f64> {
     if value.is_finite() {
         Ok(value)
     } else {
-        Err(Error::invalid(
-            what,
-            format!("must be a finite number, got {value}"),
-        ))
+        Err(Error::invalid(what, format!("must be a finite number, got {value}")))
     }
 }
 
@@ -66,13 +63,7 @@ pub fn harmonic(amplitude: f64, frequency_hz: f64, duration: f64, dt: f64) -> Re
 /// Linear sine sweep from `f0_hz` at `t = 0` to `f1_hz` at `t = duration` (either may be the
 /// larger): `a_g = A sin φ(t)`, `φ(t) = 2π (f0 t + (f1 − f0) t²/(2T))`, so that the instantaneous
 /// frequency is `f0 + (f1 − f0) t/T`.
-pub fn sine_sweep(
-    amplitude: f64,
-    f0_hz: f64,
-    f1_hz: f64,
-    duration: f64,
-    dt: f64,
-) -> Result<Record> {
+pub fn sine_sweep(amplitude: f64, f0_hz: f64, f1_hz: f64, duration: f64, dt: f64) -> Result<Record> {
     let n = grid("sine_sweep", duration, dt)?;
     let amplitude = require_finite("sine_sweep.amplitude", amplitude)?;
     let f0 = require_non_negative("sine_sweep.f0_hz", f0_hz)?;
@@ -112,11 +103,7 @@ impl Envelope {
                     1.0
                 } else {
                     let decay = duration - rise - hold;
-                    if decay > 0.0 {
-                        (duration - t) / decay
-                    } else {
-                        1.0
-                    }
+                    if decay > 0.0 { (duration - t) / decay } else { 1.0 }
                 };
                 e.clamp(0.0, 1.0)
             }
@@ -130,10 +117,7 @@ impl Envelope {
             if rise + hold > duration * (1.0 + 1e-12) {
                 return Err(Error::invalid(
                     what,
-                    format!(
-                        "rise + hold = {} s exceeds the duration {duration} s",
-                        rise + hold
-                    ),
+                    format!("rise + hold = {} s exceeds the duration {duration} s", rise + hold),
                 ));
             }
         }
@@ -196,10 +180,7 @@ pub fn kanai_tajimi(params: KanaiTajimi) -> Result<Record> {
     if w * dt >= PI {
         return Err(Error::invalid(
             "kanai_tajimi.omega_g",
-            format!(
-                "must be below the Nyquist frequency π/dt = {} rad/s, got {w}",
-                PI / dt
-            ),
+            format!("must be below the Nyquist frequency π/dt = {} rad/s, got {w}", PI / dt),
         ));
     }
     if let Some(pga) = pga_target {
@@ -208,18 +189,7 @@ pub fn kanai_tajimi(params: KanaiTajimi) -> Result<Record> {
     envelope.validate("kanai_tajimi.envelope", duration)?;
 
     // Exact ZOH step of ż = A z + B w_k, z = [x_f, ẋ_f]: exp(dt [[A, B], [0, 0]]) = [[Φ, Γ], [0, 1]].
-    let e = Matrix3::new(
-        0.0,
-        dt,
-        0.0,
-        -w * w * dt,
-        -2.0 * z * w * dt,
-        -dt,
-        0.0,
-        0.0,
-        0.0,
-    )
-    .exp();
+    let e = Matrix3::new(0.0, dt, 0.0, -w * w * dt, -2.0 * z * w * dt, -dt, 0.0, 0.0, 0.0).exp();
     let (p00, p01, p10, p11) = (e[(0, 0)], e[(0, 1)], e[(1, 0)], e[(1, 1)]);
     let (g0, g1) = (e[(0, 2)], e[(1, 2)]);
     let sigma = (2.0 * PI / dt).sqrt();
@@ -235,9 +205,12 @@ pub fn kanai_tajimi(params: KanaiTajimi) -> Result<Record> {
     }
 
     if let Some(target) = pga_target {
-        let (i_max, peak) = accel.iter().enumerate().fold((0, 0.0), |(im, m), (i, a)| {
-            if a.abs() > m { (i, a.abs()) } else { (im, m) }
-        });
+        let (i_max, peak) = accel.iter().enumerate().fold(
+            (0, 0.0),
+            |(im, m), (i, a)| {
+                if a.abs() > m { (i, a.abs()) } else { (im, m) }
+            },
+        );
         if !(peak > 0.0 && peak.is_finite()) {
             return Err(Error::numerical(
                 "kanai_tajimi",

@@ -42,19 +42,12 @@ fn parse_number(field: &str) -> Option<f64> {
 
 /// Parse a data field of line `line_no`, which must be a finite number.
 fn data_value(field: &str, name: &str, line_no: usize, what: &str) -> Result<f64> {
-    let v = parse_number(field).ok_or_else(|| {
-        Error::file(
-            name,
-            format!("line {line_no}: cannot parse '{field}' as a number"),
-        )
-    })?;
+    let v = parse_number(field)
+        .ok_or_else(|| Error::file(name, format!("line {line_no}: cannot parse '{field}' as a number")))?;
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(Error::file(
-            name,
-            format!("line {line_no}: {what} is not finite ({v})"),
-        ))
+        Err(Error::file(name, format!("line {line_no}: {what} is not finite ({v})")))
     }
 }
 
@@ -79,12 +72,8 @@ pub fn parse_two_column(text: &str, name: &str) -> Result<Record> {
         if times.is_empty() && parse_number(first).is_none() {
             continue; // header line
         }
-        let t = parse_number(first).ok_or_else(|| {
-            Error::file(
-                name,
-                format!("line {line_no}: cannot parse '{first}' as a number"),
-            )
-        })?;
+        let t = parse_number(first)
+            .ok_or_else(|| Error::file(name, format!("line {line_no}: cannot parse '{first}' as a number")))?;
         let Some(second) = it.next() else {
             return Err(Error::file(
                 name,
@@ -95,29 +84,16 @@ pub fn parse_two_column(text: &str, name: &str) -> Result<Record> {
         if extra > 0 {
             return Err(Error::file(
                 name,
-                format!(
-                    "line {line_no}: expected 2 values (t, a_g), found {}",
-                    2 + extra
-                ),
+                format!("line {line_no}: expected 2 values (t, a_g), found {}", 2 + extra),
             ));
         }
-        let a = parse_number(second).ok_or_else(|| {
-            Error::file(
-                name,
-                format!("line {line_no}: cannot parse '{second}' as a number"),
-            )
-        })?;
+        let a = parse_number(second)
+            .ok_or_else(|| Error::file(name, format!("line {line_no}: cannot parse '{second}' as a number")))?;
         times.push(t);
         values.push(a);
         line_nos.push(line_no);
     }
-    from_located_samples(
-        &times,
-        &values,
-        name,
-        |k| format!("line {}", line_nos[k]),
-        Error::file,
-    )
+    from_located_samples(&times, &values, name, |k| format!("line {}", line_nos[k]), Error::file)
 }
 
 /// Read a file of `a_g` values (m/s²) sampled at `dt` (s); see [`parse_single_column`].
@@ -178,10 +154,7 @@ pub fn parse_at2(text: &str, name: &str) -> Result<Record> {
     if quantity.contains("VELOCITY") || quantity.contains("DISPLACEMENT") {
         return Err(Error::file(
             name,
-            format!(
-                "line 3: not an acceleration record ('{}')",
-                header[2].trim()
-            ),
+            format!("line 3: not an acceleration record ('{}')", header[2].trim()),
         ));
     }
     let (npts, dt) = at2_npts_dt(header[3]).ok_or_else(|| {
@@ -213,10 +186,7 @@ pub fn parse_at2(text: &str, name: &str) -> Result<Record> {
     if accel.len() as f64 != npts {
         return Err(Error::file(
             name,
-            format!(
-                "header says NPTS = {npts} but {} values were found",
-                accel.len()
-            ),
+            format!("header says NPTS = {npts} but {} values were found", accel.len()),
         ));
     }
     Ok(Record { dt, accel })
@@ -262,15 +232,10 @@ pub fn read_record(path: impl AsRef<Path>, dt: Option<f64>) -> Result<Record> {
     if is_at2 {
         let record = read_at2(path)?;
         match dt {
-            Some(dt) if dt.is_nan() || (dt - record.dt).abs() > 1e-9 * record.dt => {
-                Err(Error::file(
-                    path.display().to_string(),
-                    format!(
-                        "dt = {dt} s was given but the AT2 header says DT = {} s",
-                        record.dt
-                    ),
-                ))
-            }
+            Some(dt) if dt.is_nan() || (dt - record.dt).abs() > 1e-9 * record.dt => Err(Error::file(
+                path.display().to_string(),
+                format!("dt = {dt} s was given but the AT2 header says DT = {} s", record.dt),
+            )),
             _ => Ok(record),
         }
     } else if let Some(dt) = dt {

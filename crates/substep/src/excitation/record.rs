@@ -39,10 +39,7 @@ impl Record {
             return Err(Error::invalid(what, "no data"));
         }
         if let Some((i, a)) = self.accel.iter().enumerate().find(|(_, a)| !a.is_finite()) {
-            return Err(Error::invalid(
-                what,
-                format!("sample {i}: value is not finite ({a})"),
-            ));
+            return Err(Error::invalid(what, format!("sample {i}: value is not finite ({a})")));
         }
         Ok(())
     }
@@ -125,13 +122,7 @@ impl Record {
                 format!("{} times but {} values", times.len(), values.len()),
             ));
         }
-        from_located_samples(
-            times,
-            values,
-            name,
-            |k| format!("sample {k}"),
-            Error::invalid,
-        )
+        from_located_samples(times, values, name, |k| format!("sample {k}"), Error::invalid)
     }
 }
 
@@ -142,9 +133,7 @@ pub(crate) fn sample_count(what: &str, duration: f64, dt: f64) -> Result<usize> 
     if !steps.is_finite() || steps >= MAX_SAMPLES as f64 {
         return Err(Error::invalid(
             what,
-            format!(
-                "a duration of {duration} s at dt = {dt} s needs more than {MAX_SAMPLES} samples"
-            ),
+            format!("a duration of {duration} s at dt = {dt} s needs more than {MAX_SAMPLES} samples"),
         ));
     }
     Ok(steps as usize + 1)
@@ -178,10 +167,7 @@ pub(crate) fn from_located_samples(
         }
         if k > 0 && t <= times[k - 1] {
             let prev = times[k - 1];
-            return fail(format!(
-                "times are not increasing at {} (t = {t} after {prev})",
-                loc(k)
-            ));
+            return fail(format!("times are not increasing at {} (t = {t} after {prev})", loc(k)));
         }
     }
 
@@ -213,10 +199,7 @@ pub(crate) fn from_located_samples(
         uniform &= (h - mean).abs() <= UNIFORM_TOL * mean;
     }
     if uniform {
-        return Ok(Record {
-            dt: mean,
-            accel: vs,
-        });
+        return Ok(Record { dt: mean, accel: vs });
     }
 
     // Non-uniform: linear interpolation onto the smallest spacing.

@@ -179,7 +179,7 @@ impl ExplicitNewmark {
 
 impl Integrator for ExplicitNewmark {
     fn name(&self) -> &'static str {
-        "central_difference"
+        if self.gamma == 0.5 { "central_difference" } else { "explicit_newmark" }
     }
     fn dt(&self) -> f64 {
         self.dt

@@ -7,9 +7,9 @@ use std::f64::consts::PI;
 
 /// Single-DOF oscillator.
 pub fn sdof(mass: f64, damping: f64, stiffness: f64) -> Result<StructuralModel> {
-    require_positive("mass", mass)?;
-    require_non_negative("damping", damping)?;
-    require_non_negative("stiffness", stiffness)?;
+    require_positive("structure.sdof.mass", mass)?;
+    require_non_negative("structure.sdof.damping", damping)?;
+    require_non_negative("structure.sdof.stiffness", stiffness)?;
     StructuralModel::new(dmatrix![mass], dmatrix![damping], dmatrix![stiffness], None)
 }
 

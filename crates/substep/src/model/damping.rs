@@ -85,6 +85,12 @@ pub fn rayleigh_coefficients(zeta: f64, w1: f64, w2: f64) -> Result<(f64, f64)> 
 
 /// `C = M Φ diag(2 ζ_j ω_j) Φᵀ M`.
 pub fn modal_damping(mass: &DMatrix<f64>, stiffness: &DMatrix<f64>, zeta: &[f64]) -> Result<DMatrix<f64>> {
+    if zeta.len() != mass.nrows() {
+        return Err(Error::invalid(
+            "structure.modal.zeta",
+            format!("has {} entries but the model has {} modes", zeta.len(), mass.nrows()),
+        ));
+    }
     let m = modes(mass, stiffness)?;
     let d = DVector::from_iterator(zeta.len(), zeta.iter().zip(m.omega.iter()).map(|(z, w)| 2.0 * z * w));
     let mphi = mass * &m.shapes;

@@ -51,16 +51,17 @@ pub fn modes(mass: &DMatrix<f64>, stiffness: &DMatrix<f64>) -> Result<Modes> {
             ));
         }
         omega[k] = lambda.max(0.0).sqrt();
-        let mut col = eig.eigenvectors.column(i).into_owned();
-        // Deterministic sign: largest-magnitude component positive.
-        if col[col.iamax()] < 0.0 {
-            col = -col;
-        }
-        y.set_column(k, &col);
+        y.set_column(k, &eig.eigenvectors.column(i));
     }
-    let shapes = l
+    let mut shapes = l
         .transpose()
         .solve_upper_triangular(&y)
         .ok_or_else(|| Error::numerical("modal analysis", "singular mass factor"))?;
+    // Deterministic sign: the largest-magnitude component of each mode shape is positive.
+    for mut col in shapes.column_iter_mut() {
+        if col[col.iamax()] < 0.0 {
+            col.neg_mut();
+        }
+    }
     Ok(Modes { omega, shapes })
 }

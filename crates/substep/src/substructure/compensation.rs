@@ -44,7 +44,7 @@ pub struct ErrorForceCompensation {
     pub spec: ErrorForceSpec,
     /// `Σ e_l` (PID) — per coupling DOF.
     integral: Vec<f64>,
-    /// `e_i` (PID derivative) or `r_i` (residual variant).
+    /// `e_i` (PID derivative).
     previous: Vec<f64>,
 }
 
@@ -72,25 +72,32 @@ impl ErrorForceCompensation {
             }
             ErrorForceSpec::PidResidual { p } => {
                 for k in 0..e.len() {
-                    let r = e[k] - f_u[k];
-                    f_u[k] = p * r;
-                    self.previous[k] = r;
+                    f_u[k] = p * (e[k] - f_u[k]);
                 }
             }
         }
     }
 
+    /// State that carries over between steps: `[Σe, e_i]` per DOF for PID, nothing otherwise
+    /// (the residual variant's only memory is `f_u`, which the controller already holds).
     pub fn state_len(&self) -> usize {
-        2 * self.integral.len()
+        match self.spec {
+            ErrorForceSpec::Pid { .. } => 2 * self.integral.len(),
+            _ => 0,
+        }
     }
     pub fn write_state(&self, out: &mut [f64]) {
-        let n = self.integral.len();
-        out[..n].copy_from_slice(&self.integral);
-        out[n..2 * n].copy_from_slice(&self.previous);
+        if self.state_len() > 0 {
+            let n = self.integral.len();
+            out[..n].copy_from_slice(&self.integral);
+            out[n..2 * n].copy_from_slice(&self.previous);
+        }
     }
     pub fn read_state(&mut self, s: &[f64]) {
-        let n = self.integral.len();
-        self.integral.copy_from_slice(&s[..n]);
-        self.previous.copy_from_slice(&s[n..2 * n]);
+        if self.state_len() > 0 {
+            let n = self.integral.len();
+            self.integral.copy_from_slice(&s[..n]);
+            self.previous.copy_from_slice(&s[n..2 * n]);
+        }
     }
 }

@@ -104,6 +104,21 @@ impl SubstructureTest {
         Ok(())
     }
 
+    /// Length of the full algorithm state: controller, then experimental side.
+    pub fn state_len(&self) -> usize {
+        self.controller.state_len() + self.site.state_len()
+    }
+    pub fn write_state(&self, out: &mut [f64]) {
+        let n = self.controller.state_len();
+        self.controller.write_state(&mut out[..n]);
+        self.site.write_state(&mut out[n..]);
+    }
+    pub fn read_state(&mut self, state: &[f64]) {
+        let n = self.controller.state_len();
+        self.controller.read_state(&state[..n]);
+        self.site.read_state(&state[n..]);
+    }
+
     pub fn steps_done(&self) -> usize {
         self.step
     }

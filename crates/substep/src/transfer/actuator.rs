@@ -84,7 +84,8 @@ impl ActuatorSpec {
 
 /// A pure delay of a piecewise-linear signal, with linear interpolation between samples
 /// (fractional delays). Samples are time-stamped, so a change of the sample spacing is fine as
-/// long as the history covers the delay; older requests return the oldest sample.
+/// long as the history covers the delay; older requests return the oldest sample. The history
+/// starts full (the signal was 0 since t = −∞), so its state has a fixed layout from the start.
 #[derive(Debug, Clone)]
 pub struct DelayLine {
     delay: f64,
@@ -92,7 +93,6 @@ pub struct DelayLine {
     values: Vec<f64>,
     /// Index of the newest sample.
     head: usize,
-    len: usize,
     now: f64,
 }
 
@@ -100,16 +100,14 @@ impl DelayLine {
     pub fn new(delay: f64, dt_nominal: f64) -> Self {
         // Twice the needed length tolerates sub-steps re-spaced down to half their length.
         let cap = 2 * ((delay / dt_nominal).ceil() as usize + 2);
-        let mut d = Self {
+        let times = (0..cap).map(|k| (k as f64 - (cap - 1) as f64) * dt_nominal).collect();
+        Self {
             delay,
-            times: vec![0.0; cap],
+            times,
             values: vec![0.0; cap],
-            head: 0,
-            len: 1,
+            head: cap - 1,
             now: 0.0,
-        };
-        d.times[0] = 0.0;
-        d
+        }
     }
 
     /// Append the signal value at the end of an interval of length `dt`; return the delayed
@@ -119,14 +117,13 @@ impl DelayLine {
         self.head = (self.head + 1) % self.times.len();
         self.times[self.head] = self.now;
         self.values[self.head] = value;
-        self.len = (self.len + 1).min(self.times.len());
         self.value_at(self.now - self.delay)
     }
 
     fn value_at(&self, t: f64) -> f64 {
         let cap = self.times.len();
         let mut newer = self.head;
-        for _ in 1..self.len {
+        for _ in 1..cap {
             let older = (newer + cap - 1) % cap;
             if self.times[older] <= t {
                 let (t0, t1) = (self.times[older], self.times[newer]);
@@ -148,8 +145,7 @@ impl DelayLine {
             *o = self.values[(self.head + cap - k) % cap];
         }
     }
-    /// Set the history values (newest first) keeping the current time grid. Requires a full
-    /// history, i.e. a delay line that has been stepped at least `state_len()` times.
+    /// Set the history values (newest first) keeping the current time grid.
     pub fn read_state(&mut self, state: &[f64]) {
         let cap = self.values.len();
         for (k, &v) in state.iter().enumerate() {

@@ -1,0 +1,15 @@
+//! Accuracy and stability analysis of the complete sub-step algorithm (spec §7).
+//!
+//! The one-step map `X_{i+1} = 𝔸 X_i + 𝔹₀ a_g,i + 𝔹₁ a_g,i+1` is probed from the library's own
+//! step function ([`amplification::StepMap::probe`]), so the analysis and the simulation cannot
+//! disagree. On top of it: spectral radius and stability class, stability maps over parameter
+//! grids, and the discrete frequency response with amplitude and period errors.
+
+pub mod amplification;
+pub mod frequency;
+pub mod stability;
+pub mod tmd_case;
+pub mod verify;
+
+pub use amplification::{Stability, StepMap};
+pub use tmd_case::{AnalysisCase, Parameter};

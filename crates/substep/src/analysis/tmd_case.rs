@@ -1,0 +1,205 @@
+//! The analysis model of spec §7.1: numerical SDOF (`m`, `c`, `k`) with a TMD specimen
+//! (`m_s`, `c_s`, `k_s`) on an actuator, in dimensionless form (`m = 1`, `ω = 1`, so
+//! `Δt = Ω`, `T = 2π`).
+
+use super::StepMap;
+use crate::error::{Error, Result, require_non_negative, require_positive};
+use crate::model::{StructuralModel, TmdSystem, sdof, tmd_two_dof};
+use crate::specimen::SpecimenSpec;
+use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings, SubstructureTest};
+use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab};
+use nalgebra::DVector;
+use std::f64::consts::PI;
+
+/// One parameter point of the analysis model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AnalysisCase {
+    /// Mass ratio `η_m = m_s/m`.
+    pub eta_m: f64,
+    /// Frequency ratio `η_f = ω_s/ω`.
+    pub eta_f: f64,
+    /// Damping ratio of the numerical substructure.
+    pub zeta: f64,
+    /// Damping ratio of the specimen.
+    pub zeta_s: f64,
+    /// `Ω = ωΔt`.
+    pub omega_dt: f64,
+    pub k_sub: usize,
+    /// Phase-lag ratio `η_p = τ/Δt` (pure delay of an otherwise ideal actuator).
+    pub eta_p: f64,
+    pub error_force: ErrorForceSpec,
+}
+
+/// Parameters that maps and series vary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Parameter {
+    ZetaS,
+    Zeta,
+    EtaF,
+    EtaM,
+    EtaP,
+    /// `η_T = Δt/T = Ω/2π`.
+    EtaT,
+    Omega,
+}
+
+impl Parameter {
+    pub fn from_name(name: &str) -> Result<Self> {
+        Ok(match name {
+            "zeta_s" => Parameter::ZetaS,
+            "zeta" => Parameter::Zeta,
+            "eta_f" => Parameter::EtaF,
+            "eta_m" => Parameter::EtaM,
+            "eta_p" => Parameter::EtaP,
+            "eta_t" | "eta_T" => Parameter::EtaT,
+            "omega" | "Omega" => Parameter::Omega,
+            other => {
+                return Err(Error::invalid(
+                    "parameter",
+                    format!("unknown parameter '{other}' (expected zeta_s, zeta, eta_f, eta_m, eta_p, eta_T or Omega)"),
+                ));
+            }
+        })
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Parameter::ZetaS => "zeta_s",
+            Parameter::Zeta => "zeta",
+            Parameter::EtaF => "eta_f",
+            Parameter::EtaM => "eta_m",
+            Parameter::EtaP => "eta_p",
+            Parameter::EtaT => "eta_T",
+            Parameter::Omega => "Omega",
+        }
+    }
+}
+
+impl AnalysisCase {
+    /// "Typical TMD system": `η_m = 5 %`, `ζ = 5 %`, `ζ_s = 10 %`, `η_f = 1`.
+    pub fn typical_tmd() -> Self {
+        Self {
+            eta_m: 0.05,
+            eta_f: 1.0,
+            zeta: 0.05,
+            zeta_s: 0.10,
+            omega_dt: 0.1,
+            k_sub: 1,
+            eta_p: 0.0,
+            error_force: ErrorForceSpec::None,
+        }
+    }
+    /// "Coupled system with large mass ratio": `η_m = 50 %`, `ζ = ζ_s = 5 %`, `η_f = 1`.
+    pub fn large_mass_ratio() -> Self {
+        Self {
+            eta_m: 0.5,
+            zeta_s: 0.05,
+            ..Self::typical_tmd()
+        }
+    }
+
+    pub fn with(mut self, p: Parameter, value: f64) -> Self {
+        match p {
+            Parameter::ZetaS => self.zeta_s = value,
+            Parameter::Zeta => self.zeta = value,
+            Parameter::EtaF => self.eta_f = value,
+            Parameter::EtaM => self.eta_m = value,
+            Parameter::EtaP => self.eta_p = value,
+            Parameter::EtaT => self.omega_dt = 2.0 * PI * value,
+            Parameter::Omega => self.omega_dt = value,
+        }
+        self
+    }
+
+    pub fn get(&self, p: Parameter) -> f64 {
+        match p {
+            Parameter::ZetaS => self.zeta_s,
+            Parameter::Zeta => self.zeta,
+            Parameter::EtaF => self.eta_f,
+            Parameter::EtaM => self.eta_m,
+            Parameter::EtaP => self.eta_p,
+            Parameter::EtaT => self.omega_dt / (2.0 * PI),
+            Parameter::Omega => self.omega_dt,
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        require_positive("eta_m", self.eta_m)?;
+        require_positive("eta_f", self.eta_f)?;
+        require_non_negative("zeta", self.zeta)?;
+        require_non_negative("zeta_s", self.zeta_s)?;
+        require_positive("Omega", self.omega_dt)?;
+        require_non_negative("eta_p", self.eta_p)?;
+        if self.k_sub == 0 {
+            return Err(Error::invalid("k_sub", "must be at least 1"));
+        }
+        self.error_force.validate()
+    }
+
+    fn system(&self) -> TmdSystem {
+        TmdSystem {
+            mass: 1.0,
+            frequency: 1.0 / (2.0 * PI),
+            zeta: self.zeta,
+            eta_m: self.eta_m,
+            eta_f: self.eta_f,
+            zeta_s: self.zeta_s,
+        }
+    }
+
+    /// `Δt` of the dimensionless model (`ω = 1`).
+    pub fn dt(&self) -> f64 {
+        self.omega_dt
+    }
+
+    /// The assembled 2-DOF model (DOF 1 primary, DOF 2 TMD), the exact reference.
+    pub fn assembled_model(&self) -> Result<StructuralModel> {
+        tmd_two_dof(&self.system())
+    }
+
+    /// The substructure test of this case: numerical SDOF, TMD specimen on a delayed ideal
+    /// actuator, Newmark average acceleration, noise-free sensors.
+    pub fn build_test(&self) -> Result<SubstructureTest> {
+        self.validate()?;
+        let sys = self.system();
+        let (k, c) = sys.primary();
+        let (ms, ks, cs) = sys.absorber();
+        let model = sdof(1.0, c, k)?;
+        let settings = SubstepSettings {
+            dt: self.dt(),
+            beta: 0.25,
+            gamma: 0.5,
+            substeps: self.k_sub,
+            coupling_dofs: vec![0],
+            error_force: self.error_force,
+        };
+        let controller = SubstepController::new(&model, &settings, &DVector::zeros(1))?;
+        let actuator = ActuatorSpec {
+            dynamics: Dynamics::Ideal,
+            delay: self.eta_p * self.dt(),
+        };
+        let specimen = SpecimenSpec::LinearSdof {
+            dof: 0,
+            mass: Some(ms),
+            stiffness: ks,
+            damping: cs,
+        };
+        let lab = VirtualLab::from_specs(
+            &[0],
+            &[specimen],
+            &[actuator],
+            &[SensorSpec::ideal()],
+            &[SensorSpec::ideal()],
+            self.dt() / self.k_sub as f64,
+            1,
+        )?;
+        SubstructureTest::new(&model, controller, Box::new(lab))
+    }
+
+    pub fn step_map(&self) -> Result<StepMap> {
+        StepMap::probe(&mut self.build_test()?)
+    }
+
+    pub fn spectral_radius(&self) -> Result<f64> {
+        Ok(self.step_map()?.spectral_radius())
+    }
+}
