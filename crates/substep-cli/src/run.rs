@@ -164,12 +164,306 @@ fn percent(ratio: f64) -> String {
     }
 }
 
-fn path_list(paths: &[PathBuf]) -> String {
-    paths
-        .iter()
-        .map(|p| p.display().to_string())
-        .collect::<Vec<_>>()
-        .join(", ")
+/// What is gathered between steps for `summary.json` and the plots: peaks, errors against the
+/// reference, and a decimated table `t, u(sel), a(sel), [fc, fe, dm, uref] per coupling DOF`.
+struct Recorder {
+    /// Plotted DOFs (0-based) and coupling DOFs (0-based).
+    sel: Vec<usize>,
+    coupling: Vec<usize>,
+    table: Decimated,
+    row: Vec<f64>,
+    /// Measured coupling force of the current step (zero for monolithic runs).
+    force: Vec<f64>,
+    peak_u: PeakTracker,
+    peak_v: PeakTracker,
+    peak_a: PeakTracker,
+    peak_fc: PeakTracker,
+    peak_fe: PeakTracker,
+    err_u: ErrorTracker,
+    err_f: ErrorTracker,
+}
+
+impl Recorder {
+    fn new(n: usize, coupling: &[usize]) -> Self {
+        let sel = plotted_dofs(n, coupling);
+        let n_c = coupling.len();
+        let width = 1 + 2 * sel.len() + 4 * n_c;
+        Self {
+            sel,
+            coupling: coupling.to_vec(),
+            table: Decimated::new(width, PLOT_ROWS),
+            row: vec![0.0; width],
+            force: vec![0.0; n_c],
+            peak_u: PeakTracker::new(n),
+            peak_v: PeakTracker::new(n),
+            peak_a: PeakTracker::new(n),
+            peak_fc: PeakTracker::new(n_c),
+            peak_fe: PeakTracker::new(n_c),
+            err_u: ErrorTracker::new(n),
+            err_f: ErrorTracker::new(n_c),
+        }
+    }
+
+    fn col_u(&self, k: usize) -> usize {
+        1 + k
+    }
+    fn col_a(&self, k: usize) -> usize {
+        1 + self.sel.len() + k
+    }
+    /// Column of coupling quantity `j` (0 fc, 1 fe, 2 dm, 3 uref) of coupling DOF `k`.
+    fn col_coupling(&self, k: usize, j: usize) -> usize {
+        1 + 2 * self.sel.len() + 4 * k + j
+    }
+
+    fn record(&mut self, sim: &Simulation, reference: Option<&Reference>) {
+        let t = sim.time();
+        let s = sim.state();
+        self.peak_u.update(s.u.as_slice(), t);
+        self.peak_v.update(s.v.as_slice(), t);
+        self.peak_a.update(s.a.as_slice(), t);
+        self.row[0] = t;
+        for k in 0..self.sel.len() {
+            let (cu, ca) = (self.col_u(k), self.col_a(k));
+            self.row[cu] = s.u[self.sel[k]];
+            self.row[ca] = s.a[self.sel[k]];
+        }
+        if let Some(rec) = sim.coupling() {
+            self.peak_fc.update(rec.coupling_force, t);
+            self.peak_fe.update(rec.error_force, t);
+            self.force.copy_from_slice(rec.coupling_force);
+            for k in 0..self.coupling.len() {
+                let c = self.col_coupling(k, 0);
+                self.row[c] = rec.coupling_force[k];
+                self.row[c + 1] = rec.error_force[k];
+                self.row[c + 2] = rec.measured_displacement[k];
+                self.row[c + 3] = reference.map_or(f64::NAN, |r| r.u()[self.coupling[k]]);
+            }
+        }
+        if let Some(r) = reference {
+            self.err_u.update(s.u.as_slice(), r.u());
+            self.err_f.update(&self.force, r.coupling_force());
+        }
+        self.table.push(&self.row);
+    }
+
+    fn reference_summary(&self, r: &Reference) -> ReferenceSummary {
+        let dofs: Vec<DofError> = (0..self.peak_u.0.len())
+            .map(|k| DofError {
+                dof: k + 1,
+                displacement: self.err_u.stats(k),
+            })
+            .collect();
+        let coupling: Vec<CouplingError> = self
+            .coupling
+            .iter()
+            .enumerate()
+            .map(|(k, &c)| CouplingError {
+                dof: c + 1,
+                displacement: self.err_u.stats(c),
+                force: self.err_f.stats(k),
+            })
+            .collect();
+        let max = |it: &mut dyn Iterator<Item = f64>| it.filter(|x| x.is_finite()).fold(0.0, f64::max);
+        ReferenceSummary {
+            scheme: r.scheme(),
+            n_dofs: r.n_dofs(),
+            max_displacement_error: max(&mut dofs.iter().map(|d| d.displacement.peak_error)),
+            max_force_error: max(&mut coupling.iter().map(|c| c.force.peak_error)),
+            dofs,
+            coupling,
+        }
+    }
+
+    /// The charts of the run (`reference`: the reference's scheme name, if there is one).
+    fn charts(&self, reference: Option<&str>) -> Vec<Chart> {
+        let time = self.table.column(0);
+        let dof_curves = |col: &dyn Fn(usize) -> usize| -> Vec<Curve> {
+            (0..self.sel.len())
+                .map(|k| Curve {
+                    label: format!("DOF {}", self.sel[k] + 1),
+                    x: time.clone(),
+                    y: self.table.column(col(k)),
+                })
+                .collect()
+        };
+        let time_s = "time t [s]";
+        let mut charts = vec![
+            Chart {
+                file: "displacement.png",
+                title: "Relative displacement".into(),
+                x_label: time_s,
+                y_label: "displacement u [m]",
+                curves: dof_curves(&|k| self.col_u(k)),
+            },
+            Chart {
+                file: "acceleration.png",
+                title: "Relative acceleration".into(),
+                x_label: time_s,
+                y_label: "acceleration a [m/s²]",
+                curves: dof_curves(&|k| self.col_a(k)),
+            },
+        ];
+        if self.coupling.is_empty() {
+            return charts;
+        }
+        // Quantity `j` of each coupling DOF against time, or against the measured displacement.
+        let coupling_curves = |j: usize, against_time: bool| -> Vec<Curve> {
+            (0..self.coupling.len().min(MAX_CURVES))
+                .map(|k| Curve {
+                    label: format!("DOF {}", self.coupling[k] + 1),
+                    x: if against_time {
+                        time.clone()
+                    } else {
+                        self.table.column(self.col_coupling(k, 2))
+                    },
+                    y: self.table.column(self.col_coupling(k, j)),
+                })
+                .collect()
+        };
+        charts.push(Chart {
+            file: "coupling_force.png",
+            title: "Measured coupling force on the structure".into(),
+            x_label: time_s,
+            y_label: "force f_c [N]",
+            curves: coupling_curves(0, true),
+        });
+        charts.push(Chart {
+            file: "error_force.png",
+            title: "Error force f(k) − f(k−1)".into(),
+            x_label: time_s,
+            y_label: "error force [N]",
+            curves: coupling_curves(1, true),
+        });
+        charts.push(Chart {
+            file: "hysteresis.png",
+            title: "Coupling force vs measured displacement".into(),
+            x_label: "measured displacement d_m [m]",
+            y_label: "force f_c [N]",
+            curves: coupling_curves(0, false),
+        });
+        if let Some(scheme) = reference {
+            // The first coupling DOF is always among the plotted DOFs.
+            let c = self.coupling[0];
+            let k = self.sel.iter().position(|&d| d == c).unwrap_or(0);
+            charts.push(Chart {
+                file: "reference.png",
+                title: format!("DOF {}: substructure test vs reference ({scheme})", c + 1),
+                x_label: time_s,
+                y_label: "displacement u [m]",
+                curves: vec![
+                    Curve {
+                        label: format!("reference ({scheme})"),
+                        x: time.clone(),
+                        y: self.table.column(self.col_coupling(0, 3)),
+                    },
+                    Curve {
+                        label: "substructure test".into(),
+                        x: time.clone(),
+                        y: self.table.column(self.col_u(k)),
+                    },
+                ],
+            });
+        }
+        charts
+    }
+
+    fn print(&self) {
+        let show = |name: &str, unit: &str, p: &PeakTracker| {
+            let (k, peak) = p.largest();
+            println!(
+                "  peak |{name}| = {:.4e} {unit} (DOF {}, t = {:.3} s)",
+                peak.max_abs,
+                k + 1,
+                peak.t
+            );
+        };
+        show("u", "m", &self.peak_u);
+        show("v", "m/s", &self.peak_v);
+        show("a", "m/s²", &self.peak_a);
+        if !self.coupling.is_empty() {
+            let (k, p) = self.peak_fc.largest();
+            let (ke, pe) = self.peak_fe.largest();
+            println!(
+                "  peak coupling force {:.4e} N (DOF {}, t = {:.3} s), peak |error force| {:.4e} N (DOF {})",
+                p.max_abs,
+                self.coupling[k] + 1,
+                p.t,
+                pe.max_abs,
+                self.coupling[ke] + 1
+            );
+        }
+    }
+}
+
+struct Chart {
+    file: &'static str,
+    title: String,
+    x_label: &'static str,
+    y_label: &'static str,
+    curves: Vec<Curve>,
+}
+
+fn print_header(args: &RunArgs, def: &TestDefinition) {
+    match &args.config {
+        None => println!(
+            "substep run: no config given, running the embedded default example (examples/default.toml):\n  \
+             the typical TMD system as a virtual substructure test"
+        ),
+        Some(p) => println!("substep run: {}", p.display()),
+    }
+    let kind = match &def.substructure {
+        None => format!("monolithic, scheme {}", def.integrator.name),
+        Some(s) => format!(
+            "substructured, scheme {}, coupling DOF(s) {:?}, k_sub = {}",
+            def.integrator.name,
+            s.coupling_dofs.iter().map(|c| c + 1).collect::<Vec<_>>(),
+            s.substeps
+        ),
+    };
+    println!("  model: {} DOF(s), {kind}", def.model.n_dofs());
+    let steps = def.integrator.steps;
+    println!(
+        "  ground motion: {}; dt = {} s, {steps} steps ({} s)",
+        def.ground_motion.description,
+        def.integrator.dt,
+        def.time(steps)
+    );
+}
+
+/// A progress bar that appears once a run has taken more than a second (on a terminal, unless
+/// `--quiet`).
+struct Progress {
+    bar: ProgressBar,
+    started: Instant,
+    enabled: bool,
+    shown: bool,
+}
+
+impl Progress {
+    fn new(steps: usize, enabled: bool) -> Self {
+        let bar = ProgressBar::with_draw_target(Some(steps as u64), ProgressDrawTarget::hidden());
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} {elapsed_precise} [{wide_bar}] {pos}/{len} steps, ETA {eta}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        Self {
+            bar,
+            started: Instant::now(),
+            enabled,
+            shown: false,
+        }
+    }
+    fn update(&mut self, step: usize) {
+        if !step.is_multiple_of(64) {
+            return;
+        }
+        if self.enabled && !self.shown && self.started.elapsed() > Duration::from_secs(1) {
+            self.bar.set_draw_target(ProgressDrawTarget::stderr());
+            self.shown = true;
+        }
+        self.bar.set_position(step as u64);
+    }
 }
 
 pub fn run(args: &RunArgs) -> Result<()> {
@@ -182,42 +476,20 @@ pub fn run(args: &RunArgs) -> Result<()> {
         .clone()
         .or_else(|| def.output.dir.clone())
         .unwrap_or_else(|| PathBuf::from("results"));
-    let draw_plots = def.output.plots && !args.no_plots;
     let mut sim = Simulation::new(&def)?;
     let mut reference = Reference::new(&def)?;
-
     let n = def.model.n_dofs();
-    let dt = def.integrator.dt;
     let steps = def.integrator.steps;
-    let sub = def.substructure.as_ref();
-    let coupling: Vec<usize> = sub.map_or_else(Vec::new, |s| s.coupling_dofs.clone());
-    let n_c = coupling.len();
-
+    let coupling: Vec<usize> = def
+        .substructure
+        .as_ref()
+        .map_or_else(Vec::new, |s| s.coupling_dofs.clone());
     if !args.quiet {
-        match &args.config {
-            None => println!(
-                "substep run: no config given, running the embedded default example (examples/default.toml):\n  \
-                 the typical TMD system as a virtual substructure test"
-            ),
-            Some(p) => println!("substep run: {}", p.display()),
-        }
-        let kind = match sub {
-            None => format!("monolithic, scheme {}", def.integrator.name),
-            Some(s) => format!(
-                "substructured, scheme {}, coupling DOF(s) {:?}, k_sub = {}",
-                def.integrator.name,
-                coupling.iter().map(|c| c + 1).collect::<Vec<_>>(),
-                s.substeps
-            ),
-        };
-        println!("  model: {n} DOF(s), {kind}");
-        println!(
-            "  ground motion: {}; dt = {dt} s, {steps} steps ({} s)",
-            def.ground_motion.description,
-            def.time(steps)
-        );
+        print_header(args, &def);
     }
 
+    // Everything above is validation; from here on outputs are written.
+    let cannot_write = |p: &Path| format!("cannot write {}", p.display());
     std::fs::create_dir_all(&out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     // A summary from an earlier run must not survive a run that stops early.
     let summary_path = out_dir.join("summary.json");
@@ -225,13 +497,13 @@ pub fn run(args: &RunArgs) -> Result<()> {
         std::fs::remove_file(&summary_path).with_context(|| format!("cannot remove {}", summary_path.display()))?;
     }
     let history_path = out_dir.join("history.csv");
-    let mut history = HistoryWriter::create(&history_path, n, n_c, reference.is_some())
-        .with_context(|| format!("cannot write {}", history_path.display()))?;
+    let mut history = HistoryWriter::create(&history_path, n, coupling.len(), reference.is_some())
+        .with_context(|| cannot_write(&history_path))?;
     let substeps_path = out_dir.join("substeps.csv");
-    let mut substep_writer = match sub {
+    let mut substep_writer = match &def.substructure {
         Some(s) => Some(
-            SubstepWriter::create(&substeps_path, n_c, dt, s.substeps)
-                .with_context(|| format!("cannot write {}", substeps_path.display()))?,
+            SubstepWriter::create(&substeps_path, coupling.len(), def.integrator.dt, s.substeps)
+                .with_context(|| cannot_write(&substeps_path))?,
         ),
         None => None,
     };
@@ -240,78 +512,25 @@ pub fn run(args: &RunArgs) -> Result<()> {
         outputs.push(substeps_path.clone());
     }
 
-    // Plot table: t, u(sel), a(sel), then per coupling DOF fc, fe, dm, uref.
-    let sel = plotted_dofs(n, &coupling);
-    let n_sel = sel.len();
-    let width = 1 + 2 * n_sel + 4 * n_c;
-    let mut table = Decimated::new(width, PLOT_ROWS);
-    let mut row = vec![0.0; width];
-
-    let mut peak_u = PeakTracker::new(n);
-    let mut peak_v = PeakTracker::new(n);
-    let mut peak_a = PeakTracker::new(n);
-    let mut peak_fc = PeakTracker::new(n_c);
-    let mut peak_fe = PeakTracker::new(n_c);
-    let mut err_u = ErrorTracker::new(n);
-    let mut err_f = ErrorTracker::new(n_c);
-
-    let progress = ProgressBar::with_draw_target(Some(steps as u64), ProgressDrawTarget::hidden());
-    progress.set_style(
-        ProgressStyle::with_template("{spinner} {elapsed_precise} [{wide_bar}] {pos}/{len} steps, ETA {eta}")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
-    let mut progress_shown = false;
-
-    let started = Instant::now();
+    let mut recorder = Recorder::new(n, &coupling);
+    let mut progress = Progress::new(steps, !args.quiet);
     let mut compute = Duration::ZERO;
     let mut failure: Option<substep::Error> = None;
-    let mut coupling_f: Vec<f64> = vec![0.0; n_c];
     loop {
         let i = sim.steps_done();
-        let t = sim.time();
-        let state = sim.state();
-        let record = sim.coupling();
-        let reference_u = reference.as_ref().map(|r| r.u());
         history
-            .row(t, state, record.as_ref(), reference_u)
-            .with_context(|| format!("cannot write {}", history_path.display()))?;
-        peak_u.update(state.u.as_slice(), t);
-        peak_v.update(state.v.as_slice(), t);
-        peak_a.update(state.a.as_slice(), t);
-        row[0] = t;
-        for (k, &d) in sel.iter().enumerate() {
-            row[1 + k] = state.u[d];
-            row[1 + n_sel + k] = state.a[d];
-        }
-        if let Some(rec) = &record {
-            peak_fc.update(rec.coupling_force, t);
-            peak_fe.update(rec.error_force, t);
-            coupling_f.copy_from_slice(rec.coupling_force);
-            let base = 1 + 2 * n_sel;
-            for k in 0..n_c {
-                row[base + 4 * k] = rec.coupling_force[k];
-                row[base + 4 * k + 1] = rec.error_force[k];
-                row[base + 4 * k + 2] = rec.measured_displacement[k];
-                row[base + 4 * k + 3] = reference.as_ref().map_or(f64::NAN, |r| r.u()[coupling[k]]);
-            }
-        }
-        if let Some(r) = &reference {
-            err_u.update(state.u.as_slice(), r.u());
-            err_f.update(&coupling_f, r.coupling_force());
-        }
-        table.push(&row);
-
+            .row(
+                sim.time(),
+                sim.state(),
+                sim.coupling().as_ref(),
+                reference.as_ref().map(|r| r.u()),
+            )
+            .with_context(|| cannot_write(&history_path))?;
+        recorder.record(&sim, reference.as_ref());
         if i == steps {
             break;
         }
-        if i % 64 == 0 {
-            if !progress_shown && !args.quiet && started.elapsed() > Duration::from_secs(1) {
-                progress.set_draw_target(ProgressDrawTarget::stderr());
-                progress_shown = true;
-            }
-            progress.set_position(i as u64);
-        }
+        progress.update(i);
         let t0 = Instant::now();
         let result = match &mut substep_writer {
             Some(w) => sim.step(w),
@@ -326,191 +545,70 @@ pub fn run(args: &RunArgs) -> Result<()> {
             r.step(sim.ground_acceleration(i + 1));
         }
     }
-    progress.finish_and_clear();
-    let wall = started.elapsed().as_secs_f64();
-    history
-        .finish()
-        .with_context(|| format!("cannot write {}", history_path.display()))?;
+    progress.bar.finish_and_clear();
+    let wall = progress.started.elapsed().as_secs_f64();
+    history.finish().with_context(|| cannot_write(&history_path))?;
     if let Some(w) = substep_writer {
-        w.finish()
-            .with_context(|| format!("cannot write {}", substeps_path.display()))?;
+        w.finish().with_context(|| cannot_write(&substeps_path))?;
     }
     let done = sim.steps_done();
 
-    // Summary.
-    let reference_summary = reference.as_ref().map(|r| {
-        let dofs: Vec<DofError> = (0..n)
-            .map(|k| DofError {
-                dof: k + 1,
-                displacement: err_u.stats(k),
-            })
-            .collect();
-        let coupling_err: Vec<CouplingError> = (0..n_c)
-            .map(|k| CouplingError {
-                dof: coupling[k] + 1,
-                displacement: err_u.stats(coupling[k]),
-                force: err_f.stats(k),
-            })
-            .collect();
-        let max = |it: &mut dyn Iterator<Item = f64>| it.filter(|x| x.is_finite()).fold(0.0, f64::max);
-        ReferenceSummary {
-            scheme: r.scheme(),
-            n_dofs: r.n_dofs(),
-            max_displacement_error: max(&mut dofs.iter().map(|d| d.displacement.peak_error)),
-            max_force_error: max(&mut coupling_err.iter().map(|c| c.force.peak_error)),
-            dofs,
-            coupling: coupling_err,
+    if def.output.plots && !args.no_plots && recorder.table.rows() > 1 {
+        for chart in recorder.charts(reference.as_ref().map(|r| r.scheme())) {
+            let path = out_dir.join(chart.file);
+            line_chart(&path, &chart.title, chart.x_label, chart.y_label, &chart.curves)?;
+            outputs.push(path);
         }
-    });
+    }
+    outputs.push(summary_path.clone());
+
     let (stopped_at_step, reason) = match &failure {
         Some(substep::Error::Diverged { step, reason, .. }) => (Some(*step), Some(reason.clone())),
         Some(e) => (Some(done + 1), Some(e.to_string())),
         None => (None, None),
     };
-
-    let mut plot_paths = Vec::new();
-    if draw_plots && table.rows() > 1 {
-        let time = table.column(0);
-        let curves = |offset: usize| -> Vec<Curve> {
-            sel.iter()
-                .enumerate()
-                .map(|(k, &d)| Curve {
-                    label: format!("DOF {}", d + 1),
-                    x: time.clone(),
-                    y: table.column(offset + k),
-                })
-                .collect()
-        };
-        let mut charts: Vec<(&str, String, &str, Vec<Curve>, &str)> = vec![
-            (
-                "displacement.png",
-                "Relative displacement".into(),
-                "displacement u [m]",
-                curves(1),
-                "time t [s]",
-            ),
-            (
-                "acceleration.png",
-                "Relative acceleration".into(),
-                "acceleration a [m/s²]",
-                curves(1 + n_sel),
-                "time t [s]",
-            ),
-        ];
-        if n_c > 0 {
-            let base = 1 + 2 * n_sel;
-            let per_coupling = |j: usize, x: &dyn Fn(usize) -> Vec<f64>| -> Vec<Curve> {
-                (0..n_c.min(MAX_CURVES))
-                    .map(|k| Curve {
-                        label: format!("DOF {}", coupling[k] + 1),
-                        x: x(k),
-                        y: table.column(base + 4 * k + j),
-                    })
-                    .collect()
-            };
-            let t_of = |_k: usize| time.clone();
-            let dm_of = |k: usize| table.column(base + 4 * k + 2);
-            charts.push((
-                "coupling_force.png",
-                "Measured coupling force on the structure".into(),
-                "force f_c [N]",
-                per_coupling(0, &t_of),
-                "time t [s]",
-            ));
-            charts.push((
-                "error_force.png",
-                "Error force f(k) − f(k−1)".into(),
-                "error force [N]",
-                per_coupling(1, &t_of),
-                "time t [s]",
-            ));
-            charts.push((
-                "hysteresis.png",
-                "Coupling force vs measured displacement".into(),
-                "force f_c [N]",
-                per_coupling(0, &dm_of),
-                "measured displacement d_m [m]",
-            ));
-            if let Some(r) = &reference {
-                let k = 0;
-                charts.push((
-                    "reference.png",
-                    format!(
-                        "DOF {}: substructure test vs reference ({})",
-                        coupling[k] + 1,
-                        r.scheme()
-                    ),
-                    "displacement u [m]",
-                    vec![
-                        Curve {
-                            label: format!("reference ({})", r.scheme()),
-                            x: time.clone(),
-                            y: table.column(base + 4 * k + 3),
-                        },
-                        Curve {
-                            label: "substructure test".into(),
-                            x: time.clone(),
-                            y: table.column(
-                                1 + sel
-                                    .iter()
-                                    .position(|&d| d == coupling[k])
-                                    .expect("coupling DOF is plotted"),
-                            ),
-                        },
-                    ],
-                    "time t [s]",
-                ));
-            }
-        }
-        for (file, title, y_label, curves, x_label) in charts {
-            let path = out_dir.join(file);
-            line_chart(&path, &title, x_label, y_label, &curves)?;
-            plot_paths.push(path);
-        }
-    }
-    outputs.extend(plot_paths.iter().cloned());
-    outputs.push(summary_path.clone());
-
     let summary = Summary {
         config: match &args.config {
             None => DEFAULT_CONFIG_NAME.to_string(),
             Some(p) => p.display().to_string(),
         },
         scheme: def.integrator.name.clone(),
-        dt,
+        dt: def.integrator.dt,
         steps,
         duration: def.time(steps),
         n_dofs: n,
         ground_motion: def.ground_motion.description.clone(),
-        substructure: sub.map(substructure_json),
+        substructure: def.substructure.as_ref().map(substructure_json),
         completed: failure.is_none(),
         steps_done: done,
         stopped_at_step,
-        reason: reason.clone(),
+        reason,
         wall_time_s: wall,
         us_per_step: compute.as_secs_f64() * 1e6 / done.max(1) as f64,
         peaks: (0..n)
             .map(|k| DofPeaks {
                 dof: k + 1,
-                u: peak_u.0[k],
-                v: peak_v.0[k],
-                a: peak_a.0[k],
+                u: recorder.peak_u.0[k],
+                v: recorder.peak_v.0[k],
+                a: recorder.peak_a.0[k],
             })
             .collect(),
-        coupling_peaks: sub.map(|_| {
-            (0..n_c)
-                .map(|k| CouplingPeaks {
-                    dof: coupling[k] + 1,
-                    force: peak_fc.0[k],
-                    error_force: peak_fe.0[k],
+        coupling_peaks: def.substructure.as_ref().map(|_| {
+            coupling
+                .iter()
+                .enumerate()
+                .map(|(k, &c)| CouplingPeaks {
+                    dof: c + 1,
+                    force: recorder.peak_fc.0[k],
+                    error_force: recorder.peak_fe.0[k],
                 })
                 .collect()
         }),
-        reference: reference_summary,
+        reference: reference.as_ref().map(|r| recorder.reference_summary(r)),
         outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
     };
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
-    std::fs::write(&summary_path, json + "\n").with_context(|| format!("cannot write {}", summary_path.display()))?;
+    std::fs::write(&summary_path, json + "\n").with_context(|| cannot_write(&summary_path))?;
 
     if !args.quiet {
         match &failure {
@@ -520,30 +618,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
             ),
             Some(e) => println!("  STOPPED after {done} of {steps} steps: {e}"),
         }
-        let show = |name: &str, unit: &str, p: &PeakTracker| {
-            let (k, peak) = p.largest();
-            println!(
-                "  peak |{name}| = {:.4e} {unit} (DOF {}, t = {:.3} s)",
-                peak.max_abs,
-                k + 1,
-                peak.t
-            );
-        };
-        show("u", "m", &peak_u);
-        show("v", "m/s", &peak_v);
-        show("a", "m/s²", &peak_a);
-        if n_c > 0 {
-            let (k, p) = peak_fc.largest();
-            let (ke, pe) = peak_fe.largest();
-            println!(
-                "  peak coupling force {:.4e} N (DOF {}, t = {:.3} s), peak |error force| {:.4e} N (DOF {})",
-                p.max_abs,
-                coupling[k] + 1,
-                p.t,
-                pe.max_abs,
-                coupling[ke] + 1
-            );
-        }
+        recorder.print();
         if let Some(r) = &summary.reference {
             let what = if r.scheme == "exact" {
                 "exact solution"
@@ -556,13 +631,14 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 percent(r.max_force_error)
             );
         }
-        println!("  outputs in {}: {}", out_dir.display(), {
-            let names: Vec<PathBuf> = outputs
-                .iter()
-                .map(|p| p.file_name().map(PathBuf::from).unwrap_or_default())
-                .collect();
-            path_list(&names)
-        });
+        let names: Vec<String> = outputs
+            .iter()
+            .map(|p| {
+                p.file_name()
+                    .map_or_else(String::new, |f| f.to_string_lossy().into_owned())
+            })
+            .collect();
+        println!("  outputs in {}: {}", out_dir.display(), names.join(", "));
     }
     match failure {
         Some(e) => Err(e.into()),

@@ -20,7 +20,7 @@
 use super::matrix_market::read_matrix_market;
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::excitation::{self, Envelope, KanaiTajimi, Record};
-use crate::integrate::Scheme;
+use crate::integrate::{Scheme, check_hilber_alpha};
 use crate::model::{DampingSpec, ShearBuilding, StructuralModel, TmdSystem, sdof, shear_building, tmd_two_dof};
 use crate::specimen::SpecimenSpec;
 use crate::substructure::{ErrorForceSpec, SubstepSettings};
@@ -748,13 +748,8 @@ impl RawIntegrator {
             require_non_negative("integrator.gamma", gamma)?;
         }
         let scheme = Scheme::from_name(name, beta, gamma, self.alpha.unwrap_or(-0.1))?;
-        if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha } = scheme
-            && !(alpha.is_finite() && (-1.0 / 3.0 - 1e-12..=0.0).contains(&alpha))
-        {
-            return Err(Error::invalid(
-                "integrator.alpha",
-                format!("Hilber's alpha must lie in [-1/3, 0], got {alpha} (OpenSees' alpha = 1 + this)"),
-            ));
+        if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha } = scheme {
+            check_hilber_alpha(alpha)?;
         }
         Ok((name.to_string(), scheme, dt, self.duration))
     }

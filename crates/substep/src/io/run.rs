@@ -38,6 +38,9 @@ impl Simulation {
     /// Build the integrator, or the controller and the virtual lab, at rest at `t = 0`.
     pub fn new(def: &TestDefinition) -> Result<Self> {
         let model = &def.model;
+        if def.ground_motion.accel.len() < 2 {
+            return Err(Error::invalid("ground_motion", "needs at least two samples (one step)"));
+        }
         let accel = def.ground_motion.accel.clone();
         let dt = def.integrator.dt;
         let mass_influence = model.effective_mass_vector();
@@ -198,7 +201,7 @@ impl Reference {
             )
         };
         let mass_influence = assembled.effective_mass_vector();
-        let load = -&mass_influence * def.ground_motion.accel[0];
+        let load = -&mass_influence * def.ground_motion.accel.first().copied().unwrap_or(0.0);
         let integrator = scheme.build(&assembled, def.integrator.dt, &load)?;
         // Same DOF numbering as assemble_monolithic: internal DOFs appended in specimen order.
         let mut next = n;
@@ -212,16 +215,23 @@ impl Reference {
                 let coupling_index = p
                     .dofs
                     .iter()
-                    .map(|d| s.coupling_dofs.iter().position(|c| c == d).expect("validated"))
-                    .collect();
-                SpecimenRows {
+                    .map(|d| {
+                        s.coupling_dofs.iter().position(|c| c == d).ok_or_else(|| {
+                            Error::invalid(
+                                "substructure.specimen",
+                                format!("DOF {} is not one of substructure.coupling_dofs", d + 1),
+                            )
+                        })
+                    })
+                    .collect::<Result<_>>()?;
+                Ok(SpecimenRows {
                     global,
                     coupling_index,
                     k_rows: p.stiffness.rows(0, n_a).into_owned(),
                     c_rows: p.damping.rows(0, n_a).into_owned(),
-                }
+                })
             })
-            .collect();
+            .collect::<Result<_>>()?;
         Ok(Some(Self {
             integrator,
             scheme: name,
