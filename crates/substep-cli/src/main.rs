@@ -1,3 +1,82 @@
-fn main() {
-    println!("substep");
+//! `substep`: run and benchmark real-time substructure tests with sub-step control.
+//!
+//! Exit codes: 0 success, 1 a run that diverged (or outputs that could not be written),
+//! 2 bad input (config, files, parameters). Errors are printed as one line `error: ...`.
+
+mod bench;
+mod output;
+mod plots;
+mod run;
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// The embedded default example (`examples/default.toml`).
+pub const DEFAULT_CONFIG: &str = include_str!("../../../examples/default.toml");
+/// How the embedded example is named in outputs and messages.
+pub const DEFAULT_CONFIG_NAME: &str = "embedded default";
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "substep",
+    version,
+    about = "Real-time substructure testing (hybrid simulation) with Dorka's sub-step control",
+    long_about = "Real-time substructure testing (hybrid simulation) with Dorka's sub-step control.\n\n\
+                  Without a subcommand, runs the embedded default example (`substep run`)."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run a test definition (TOML, see docs/config.md); without CONFIG, the embedded default example
+    Run(RunArgs),
+    /// Measure µs per step of the integrator and the sub-step controller
+    Bench(bench::BenchArgs),
+}
+
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct RunArgs {
+    /// Test definition (TOML); default: the embedded example `examples/default.toml`
+    pub config: Option<PathBuf>,
+    /// Output directory (default: `[output] dir` of the config, else `results`)
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// No progress bar and no summary on stdout (errors are still printed)
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Do not draw PNG plots (overrides `[output] plots`)
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+/// Exit code of a failed command: 1 for a diverged run and for runtime failures (e.g. outputs
+/// that cannot be written), 2 for bad input (any other library error: config, files, parameters).
+fn exit_code(e: &anyhow::Error) -> u8 {
+    match e.downcast_ref::<substep::Error>() {
+        Some(substep::Error::Diverged { .. }) => 1,
+        Some(_) => 2,
+        None => 1,
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        None => run::run(&RunArgs::default()),
+        Some(Command::Run(args)) => run::run(&args),
+        Some(Command::Bench(args)) => bench::bench(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // `{:#}` joins the context chain with ": "; the line breaks of any part are folded.
+            let message = format!("{e:#}");
+            eprintln!("error: {}", message.split_whitespace().collect::<Vec<_>>().join(" "));
+            ExitCode::from(exit_code(&e))
+        }
+    }
 }

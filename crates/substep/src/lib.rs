@@ -6,11 +6,13 @@
 //! phase-lag compensation, and the accuracy/stability analysis of the whole algorithm.
 //!
 //! Equations and sign conventions follow `shared/spec/algorithm.md`; units are SI throughout.
-//! The numerical core does no I/O; readers for ground-motion files live in [`excitation`].
+//! The numerical core does no I/O; readers for ground-motion files live in [`excitation`],
+//! MatrixMarket and TOML test definitions (and the runner for a defined test) in [`io`].
 
 pub mod error;
 pub mod excitation;
 pub mod integrate;
+pub mod io;
 pub mod model;
 
 pub use error::{Error, Result};

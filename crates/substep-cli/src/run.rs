@@ -1,0 +1,660 @@
+//! `substep run`: load a test definition, step it, record `history.csv`, `substeps.csv`,
+//! `summary.json` and the plots, compare with the monolithic reference, print a summary.
+
+use crate::output::{Decimated, ErrorStats, ErrorTracker, HistoryWriter, Peak, PeakTracker, SubstepWriter};
+use crate::plots::{Curve, line_chart};
+use crate::{DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, RunArgs};
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+use substep::io::{Reference, Simulation, SubstructureDefinition, TestDefinition};
+use substep::specimen::SpecimenSpec;
+use substep::substructure::ErrorForceSpec;
+use substep::transfer::Dynamics;
+
+/// Rows kept for the plots (decimated beyond that).
+const PLOT_ROWS: usize = 20_000;
+/// Curves per displacement / acceleration chart.
+const MAX_CURVES: usize = 4;
+
+#[derive(Debug, Serialize)]
+struct DofPeaks {
+    dof: usize,
+    u: Peak,
+    v: Peak,
+    a: Peak,
+}
+
+#[derive(Debug, Serialize)]
+struct CouplingPeaks {
+    dof: usize,
+    force: Peak,
+    error_force: Peak,
+}
+
+#[derive(Debug, Serialize)]
+struct DofError {
+    dof: usize,
+    #[serde(flatten)]
+    displacement: ErrorStats,
+}
+
+#[derive(Debug, Serialize)]
+struct CouplingError {
+    dof: usize,
+    displacement: ErrorStats,
+    force: ErrorStats,
+}
+
+#[derive(Debug, Serialize)]
+struct ReferenceSummary {
+    /// `exact` (first-order hold) or `newmark`.
+    scheme: &'static str,
+    n_dofs: usize,
+    /// Largest normalised peak error over the numerical DOFs' displacements.
+    max_displacement_error: f64,
+    /// Largest normalised peak error over the coupling forces.
+    max_force_error: f64,
+    dofs: Vec<DofError>,
+    coupling: Vec<CouplingError>,
+}
+
+#[derive(Debug, Serialize)]
+struct Summary {
+    config: String,
+    scheme: String,
+    dt: f64,
+    steps: usize,
+    duration: f64,
+    n_dofs: usize,
+    ground_motion: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    substructure: Option<Value>,
+    completed: bool,
+    steps_done: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    stopped_at_step: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reason: Option<String>,
+    /// Wall time of the stepping loop including recording [s].
+    wall_time_s: f64,
+    /// Compute time of the simulation steps alone per step [µs].
+    us_per_step: f64,
+    peaks: Vec<DofPeaks>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    coupling_peaks: Option<Vec<CouplingPeaks>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reference: Option<ReferenceSummary>,
+    outputs: Vec<String>,
+}
+
+fn substructure_json(s: &SubstructureDefinition) -> Value {
+    let a = s.actuator;
+    let actuator = match a.dynamics {
+        Dynamics::Ideal => json!({ "kind": "ideal", "delay": a.delay }),
+        Dynamics::FirstOrder { time_constant } => {
+            json!({ "kind": "first_order", "time_constant": time_constant, "delay": a.delay })
+        }
+        Dynamics::SecondOrder { frequency_hz, zeta } => {
+            json!({ "kind": "second_order", "frequency": frequency_hz, "zeta": zeta, "delay": a.delay })
+        }
+    };
+    let error_force = match s.error_force {
+        ErrorForceSpec::None => json!({ "kind": "none" }),
+        ErrorForceSpec::Pid { p, i, d } => json!({ "kind": "pid", "p": p, "i": i, "d": d }),
+        ErrorForceSpec::PidResidual { p } => json!({ "kind": "pid_residual", "p": p }),
+    };
+    let specimens: Vec<Value> = s
+        .specimens
+        .iter()
+        .map(|sp| {
+            let dofs: Vec<usize> = sp.dofs().iter().map(|d| d + 1).collect();
+            match sp {
+                SpecimenSpec::LinearSdof {
+                    mass,
+                    stiffness,
+                    damping,
+                    ..
+                } => {
+                    json!({ "kind": sp.kind(), "dofs": dofs, "mass": mass, "stiffness": stiffness, "damping": damping })
+                }
+                _ => json!({ "kind": sp.kind(), "dofs": dofs }),
+            }
+        })
+        .collect();
+    let f = &s.force_sensors[0];
+    let d = &s.displacement_sensors[0];
+    json!({
+        "coupling_dofs": s.coupling_dofs.iter().map(|c| c + 1).collect::<Vec<_>>(),
+        "substeps": s.substeps,
+        "inner_steps": s.inner_steps,
+        "specimens": specimens,
+        "actuator": actuator,
+        "sensors": {
+            "force_noise": f.noise_std, "displacement_noise": d.noise_std,
+            "adc_bits": f.adc_bits.or(d.adc_bits), "lowpass_hz": f.lowpass_hz,
+        },
+        "error_force": error_force,
+    })
+}
+
+/// DOFs (0-based) shown in the displacement and acceleration charts: coupling DOFs, the last
+/// DOF (roof), DOF 1; at most [`MAX_CURVES`].
+fn plotted_dofs(n: usize, coupling: &[usize]) -> Vec<usize> {
+    let mut dofs: Vec<usize> = Vec::new();
+    let roof = n - 1;
+    for &d in coupling.iter().take(MAX_CURVES - 1).chain([roof, 0].iter()) {
+        if !dofs.contains(&d) && dofs.len() < MAX_CURVES {
+            dofs.push(d);
+        }
+    }
+    dofs
+}
+
+/// A ratio as a percentage, exponent notation when it is huge (a diverged run).
+fn percent(ratio: f64) -> String {
+    let p = 100.0 * ratio;
+    if p.abs() < 1e4 {
+        format!("{p:.3}")
+    } else {
+        format!("{p:.3e}")
+    }
+}
+
+/// What is gathered between steps for `summary.json` and the plots: peaks, errors against the
+/// reference, and a decimated table `t, u(sel), a(sel), [fc, fe, dm, uref] per coupling DOF`.
+struct Recorder {
+    /// Plotted DOFs (0-based) and coupling DOFs (0-based).
+    sel: Vec<usize>,
+    coupling: Vec<usize>,
+    table: Decimated,
+    row: Vec<f64>,
+    /// Measured coupling force of the current step (zero for monolithic runs).
+    force: Vec<f64>,
+    peak_u: PeakTracker,
+    peak_v: PeakTracker,
+    peak_a: PeakTracker,
+    peak_fc: PeakTracker,
+    peak_fe: PeakTracker,
+    err_u: ErrorTracker,
+    err_f: ErrorTracker,
+}
+
+impl Recorder {
+    fn new(n: usize, coupling: &[usize]) -> Self {
+        let sel = plotted_dofs(n, coupling);
+        let n_c = coupling.len();
+        let width = 1 + 2 * sel.len() + 4 * n_c;
+        Self {
+            sel,
+            coupling: coupling.to_vec(),
+            table: Decimated::new(width, PLOT_ROWS),
+            row: vec![0.0; width],
+            force: vec![0.0; n_c],
+            peak_u: PeakTracker::new(n),
+            peak_v: PeakTracker::new(n),
+            peak_a: PeakTracker::new(n),
+            peak_fc: PeakTracker::new(n_c),
+            peak_fe: PeakTracker::new(n_c),
+            err_u: ErrorTracker::new(n),
+            err_f: ErrorTracker::new(n_c),
+        }
+    }
+
+    fn col_u(&self, k: usize) -> usize {
+        1 + k
+    }
+    fn col_a(&self, k: usize) -> usize {
+        1 + self.sel.len() + k
+    }
+    /// Column of coupling quantity `j` (0 fc, 1 fe, 2 dm, 3 uref) of coupling DOF `k`.
+    fn col_coupling(&self, k: usize, j: usize) -> usize {
+        1 + 2 * self.sel.len() + 4 * k + j
+    }
+
+    fn record(&mut self, sim: &Simulation, reference: Option<&Reference>) {
+        let t = sim.time();
+        let s = sim.state();
+        self.peak_u.update(s.u.as_slice(), t);
+        self.peak_v.update(s.v.as_slice(), t);
+        self.peak_a.update(s.a.as_slice(), t);
+        self.row[0] = t;
+        for k in 0..self.sel.len() {
+            let (cu, ca) = (self.col_u(k), self.col_a(k));
+            self.row[cu] = s.u[self.sel[k]];
+            self.row[ca] = s.a[self.sel[k]];
+        }
+        if let Some(rec) = sim.coupling() {
+            self.peak_fc.update(rec.coupling_force, t);
+            self.peak_fe.update(rec.error_force, t);
+            self.force.copy_from_slice(rec.coupling_force);
+            for k in 0..self.coupling.len() {
+                let c = self.col_coupling(k, 0);
+                self.row[c] = rec.coupling_force[k];
+                self.row[c + 1] = rec.error_force[k];
+                self.row[c + 2] = rec.measured_displacement[k];
+                self.row[c + 3] = reference.map_or(f64::NAN, |r| r.u()[self.coupling[k]]);
+            }
+        }
+        if let Some(r) = reference {
+            self.err_u.update(s.u.as_slice(), r.u());
+            self.err_f.update(&self.force, r.coupling_force());
+        }
+        self.table.push(&self.row);
+    }
+
+    fn reference_summary(&self, r: &Reference) -> ReferenceSummary {
+        let dofs: Vec<DofError> = (0..self.peak_u.0.len())
+            .map(|k| DofError {
+                dof: k + 1,
+                displacement: self.err_u.stats(k),
+            })
+            .collect();
+        let coupling: Vec<CouplingError> = self
+            .coupling
+            .iter()
+            .enumerate()
+            .map(|(k, &c)| CouplingError {
+                dof: c + 1,
+                displacement: self.err_u.stats(c),
+                force: self.err_f.stats(k),
+            })
+            .collect();
+        let max = |it: &mut dyn Iterator<Item = f64>| it.filter(|x| x.is_finite()).fold(0.0, f64::max);
+        ReferenceSummary {
+            scheme: r.scheme(),
+            n_dofs: r.n_dofs(),
+            max_displacement_error: max(&mut dofs.iter().map(|d| d.displacement.peak_error)),
+            max_force_error: max(&mut coupling.iter().map(|c| c.force.peak_error)),
+            dofs,
+            coupling,
+        }
+    }
+
+    /// The charts of the run (`reference`: the reference's scheme name, if there is one).
+    fn charts(&self, reference: Option<&str>) -> Vec<Chart> {
+        let time = self.table.column(0);
+        let dof_curves = |col: &dyn Fn(usize) -> usize| -> Vec<Curve> {
+            (0..self.sel.len())
+                .map(|k| Curve {
+                    label: format!("DOF {}", self.sel[k] + 1),
+                    x: time.clone(),
+                    y: self.table.column(col(k)),
+                })
+                .collect()
+        };
+        let time_s = "time t [s]";
+        let mut charts = vec![
+            Chart {
+                file: "displacement.png",
+                title: "Relative displacement".into(),
+                x_label: time_s,
+                y_label: "displacement u [m]",
+                curves: dof_curves(&|k| self.col_u(k)),
+            },
+            Chart {
+                file: "acceleration.png",
+                title: "Relative acceleration".into(),
+                x_label: time_s,
+                y_label: "acceleration a [m/s²]",
+                curves: dof_curves(&|k| self.col_a(k)),
+            },
+        ];
+        if self.coupling.is_empty() {
+            return charts;
+        }
+        // Quantity `j` of each coupling DOF against time, or against the measured displacement.
+        let coupling_curves = |j: usize, against_time: bool| -> Vec<Curve> {
+            (0..self.coupling.len().min(MAX_CURVES))
+                .map(|k| Curve {
+                    label: format!("DOF {}", self.coupling[k] + 1),
+                    x: if against_time {
+                        time.clone()
+                    } else {
+                        self.table.column(self.col_coupling(k, 2))
+                    },
+                    y: self.table.column(self.col_coupling(k, j)),
+                })
+                .collect()
+        };
+        charts.push(Chart {
+            file: "coupling_force.png",
+            title: "Measured coupling force on the structure".into(),
+            x_label: time_s,
+            y_label: "force f_c [N]",
+            curves: coupling_curves(0, true),
+        });
+        charts.push(Chart {
+            file: "error_force.png",
+            title: "Error force f(k) − f(k−1)".into(),
+            x_label: time_s,
+            y_label: "error force [N]",
+            curves: coupling_curves(1, true),
+        });
+        charts.push(Chart {
+            file: "hysteresis.png",
+            title: "Coupling force vs measured displacement".into(),
+            x_label: "measured displacement d_m [m]",
+            y_label: "force f_c [N]",
+            curves: coupling_curves(0, false),
+        });
+        if let Some(scheme) = reference {
+            // The first coupling DOF is always among the plotted DOFs.
+            let c = self.coupling[0];
+            let k = self.sel.iter().position(|&d| d == c).unwrap_or(0);
+            charts.push(Chart {
+                file: "reference.png",
+                title: format!("DOF {}: substructure test vs reference ({scheme})", c + 1),
+                x_label: time_s,
+                y_label: "displacement u [m]",
+                curves: vec![
+                    Curve {
+                        label: format!("reference ({scheme})"),
+                        x: time.clone(),
+                        y: self.table.column(self.col_coupling(0, 3)),
+                    },
+                    Curve {
+                        label: "substructure test".into(),
+                        x: time.clone(),
+                        y: self.table.column(self.col_u(k)),
+                    },
+                ],
+            });
+        }
+        charts
+    }
+
+    fn print(&self) {
+        let show = |name: &str, unit: &str, p: &PeakTracker| {
+            let (k, peak) = p.largest();
+            println!(
+                "  peak |{name}| = {:.4e} {unit} (DOF {}, t = {:.3} s)",
+                peak.max_abs,
+                k + 1,
+                peak.t
+            );
+        };
+        show("u", "m", &self.peak_u);
+        show("v", "m/s", &self.peak_v);
+        show("a", "m/s²", &self.peak_a);
+        if !self.coupling.is_empty() {
+            let (k, p) = self.peak_fc.largest();
+            let (ke, pe) = self.peak_fe.largest();
+            println!(
+                "  peak coupling force {:.4e} N (DOF {}, t = {:.3} s), peak |error force| {:.4e} N (DOF {})",
+                p.max_abs,
+                self.coupling[k] + 1,
+                p.t,
+                pe.max_abs,
+                self.coupling[ke] + 1
+            );
+        }
+    }
+}
+
+struct Chart {
+    file: &'static str,
+    title: String,
+    x_label: &'static str,
+    y_label: &'static str,
+    curves: Vec<Curve>,
+}
+
+fn print_header(args: &RunArgs, def: &TestDefinition) {
+    match &args.config {
+        None => println!(
+            "substep run: no config given, running the embedded default example (examples/default.toml):\n  \
+             the typical TMD system as a virtual substructure test"
+        ),
+        Some(p) => println!("substep run: {}", p.display()),
+    }
+    let kind = match &def.substructure {
+        None => format!("monolithic, scheme {}", def.integrator.name),
+        Some(s) => format!(
+            "substructured, scheme {}, coupling DOF(s) {:?}, k_sub = {}",
+            def.integrator.name,
+            s.coupling_dofs.iter().map(|c| c + 1).collect::<Vec<_>>(),
+            s.substeps
+        ),
+    };
+    println!("  model: {} DOF(s), {kind}", def.model.n_dofs());
+    let steps = def.integrator.steps;
+    println!(
+        "  ground motion: {}; dt = {} s, {steps} steps ({} s)",
+        def.ground_motion.description,
+        def.integrator.dt,
+        def.time(steps)
+    );
+}
+
+/// A progress bar that appears once a run has taken more than a second (on a terminal, unless
+/// `--quiet`).
+struct Progress {
+    bar: ProgressBar,
+    started: Instant,
+    enabled: bool,
+    shown: bool,
+}
+
+impl Progress {
+    fn new(steps: usize, enabled: bool) -> Self {
+        let bar = ProgressBar::with_draw_target(Some(steps as u64), ProgressDrawTarget::hidden());
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} {elapsed_precise} [{wide_bar}] {pos}/{len} steps, ETA {eta}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        Self {
+            bar,
+            started: Instant::now(),
+            enabled,
+            shown: false,
+        }
+    }
+    fn update(&mut self, step: usize) {
+        if !step.is_multiple_of(64) {
+            return;
+        }
+        if self.enabled && !self.shown && self.started.elapsed() > Duration::from_secs(1) {
+            self.bar.set_draw_target(ProgressDrawTarget::stderr());
+            self.shown = true;
+        }
+        self.bar.set_position(step as u64);
+    }
+}
+
+pub fn run(args: &RunArgs) -> Result<()> {
+    let def = match &args.config {
+        None => TestDefinition::from_toml(DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, Path::new("."))?,
+        Some(p) => TestDefinition::from_file(p)?,
+    };
+    let out_dir = args
+        .out
+        .clone()
+        .or_else(|| def.output.dir.clone())
+        .unwrap_or_else(|| PathBuf::from("results"));
+    let mut sim = Simulation::new(&def)?;
+    let mut reference = Reference::new(&def)?;
+    let n = def.model.n_dofs();
+    let steps = def.integrator.steps;
+    let coupling: Vec<usize> = def
+        .substructure
+        .as_ref()
+        .map_or_else(Vec::new, |s| s.coupling_dofs.clone());
+    if !args.quiet {
+        print_header(args, &def);
+    }
+
+    // Everything above is validation; from here on outputs are written.
+    let cannot_write = |p: &Path| format!("cannot write {}", p.display());
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    // A summary from an earlier run must not survive a run that stops early.
+    let summary_path = out_dir.join("summary.json");
+    if summary_path.exists() {
+        std::fs::remove_file(&summary_path).with_context(|| format!("cannot remove {}", summary_path.display()))?;
+    }
+    let history_path = out_dir.join("history.csv");
+    let mut history = HistoryWriter::create(&history_path, n, coupling.len(), reference.is_some())
+        .with_context(|| cannot_write(&history_path))?;
+    let substeps_path = out_dir.join("substeps.csv");
+    let mut substep_writer = match &def.substructure {
+        Some(s) => Some(
+            SubstepWriter::create(&substeps_path, coupling.len(), def.integrator.dt, s.substeps)
+                .with_context(|| cannot_write(&substeps_path))?,
+        ),
+        None => None,
+    };
+    let mut outputs = vec![history_path.clone()];
+    if substep_writer.is_some() {
+        outputs.push(substeps_path.clone());
+    }
+
+    let mut recorder = Recorder::new(n, &coupling);
+    let mut progress = Progress::new(steps, !args.quiet);
+    let mut compute = Duration::ZERO;
+    let mut failure: Option<substep::Error> = None;
+    loop {
+        let i = sim.steps_done();
+        history
+            .row(
+                sim.time(),
+                sim.state(),
+                sim.coupling().as_ref(),
+                reference.as_ref().map(|r| r.u()),
+            )
+            .with_context(|| cannot_write(&history_path))?;
+        recorder.record(&sim, reference.as_ref());
+        if i == steps {
+            break;
+        }
+        progress.update(i);
+        let t0 = Instant::now();
+        let result = match &mut substep_writer {
+            Some(w) => sim.step(w),
+            None => sim.step(&mut ()),
+        };
+        compute += t0.elapsed();
+        if let Err(e) = result {
+            failure = Some(e);
+            break;
+        }
+        if let Some(r) = &mut reference {
+            r.step(sim.ground_acceleration(i + 1));
+        }
+    }
+    progress.bar.finish_and_clear();
+    let wall = progress.started.elapsed().as_secs_f64();
+    history.finish().with_context(|| cannot_write(&history_path))?;
+    if let Some(w) = substep_writer {
+        w.finish().with_context(|| cannot_write(&substeps_path))?;
+    }
+    let done = sim.steps_done();
+
+    if def.output.plots && !args.no_plots && recorder.table.rows() > 1 {
+        for chart in recorder.charts(reference.as_ref().map(|r| r.scheme())) {
+            let path = out_dir.join(chart.file);
+            line_chart(&path, &chart.title, chart.x_label, chart.y_label, &chart.curves)?;
+            outputs.push(path);
+        }
+    }
+    outputs.push(summary_path.clone());
+
+    let (stopped_at_step, reason) = match &failure {
+        Some(substep::Error::Diverged { step, reason, .. }) => (Some(*step), Some(reason.clone())),
+        Some(e) => (Some(done + 1), Some(e.to_string())),
+        None => (None, None),
+    };
+    let summary = Summary {
+        config: match &args.config {
+            None => DEFAULT_CONFIG_NAME.to_string(),
+            Some(p) => p.display().to_string(),
+        },
+        scheme: def.integrator.name.clone(),
+        dt: def.integrator.dt,
+        steps,
+        duration: def.time(steps),
+        n_dofs: n,
+        ground_motion: def.ground_motion.description.clone(),
+        substructure: def.substructure.as_ref().map(substructure_json),
+        completed: failure.is_none(),
+        steps_done: done,
+        stopped_at_step,
+        reason,
+        wall_time_s: wall,
+        us_per_step: compute.as_secs_f64() * 1e6 / done.max(1) as f64,
+        peaks: (0..n)
+            .map(|k| DofPeaks {
+                dof: k + 1,
+                u: recorder.peak_u.0[k],
+                v: recorder.peak_v.0[k],
+                a: recorder.peak_a.0[k],
+            })
+            .collect(),
+        coupling_peaks: def.substructure.as_ref().map(|_| {
+            coupling
+                .iter()
+                .enumerate()
+                .map(|(k, &c)| CouplingPeaks {
+                    dof: c + 1,
+                    force: recorder.peak_fc.0[k],
+                    error_force: recorder.peak_fe.0[k],
+                })
+                .collect()
+        }),
+        reference: reference.as_ref().map(|r| recorder.reference_summary(r)),
+        outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
+    };
+    let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
+    std::fs::write(&summary_path, json + "\n").with_context(|| cannot_write(&summary_path))?;
+
+    if !args.quiet {
+        match &failure {
+            None => println!(
+                "  completed {done} steps in {wall:.3} s wall time ({:.2} µs per step of computation)",
+                summary.us_per_step
+            ),
+            Some(e) => println!("  STOPPED after {done} of {steps} steps: {e}"),
+        }
+        recorder.print();
+        if let Some(r) = &summary.reference {
+            let what = if r.scheme == "exact" {
+                "exact solution"
+            } else {
+                "monolithic Newmark solution"
+            };
+            println!(
+                "  max error vs {what}: {} % (displacement), {} % (coupling force)",
+                percent(r.max_displacement_error),
+                percent(r.max_force_error)
+            );
+        }
+        let names: Vec<String> = outputs
+            .iter()
+            .map(|p| {
+                p.file_name()
+                    .map_or_else(String::new, |f| f.to_string_lossy().into_owned())
+            })
+            .collect();
+        println!("  outputs in {}: {}", out_dir.display(), names.join(", "));
+    }
+    match failure {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plotted_dofs_are_distinct_and_bounded() {
+        assert_eq!(plotted_dofs(1, &[0]), vec![0]);
+        assert_eq!(plotted_dofs(10, &[]), vec![9, 0]);
+        assert_eq!(plotted_dofs(10, &[3, 5, 7, 8, 9]), vec![3, 5, 7, 9]);
+        assert_eq!(plotted_dofs(3, &[2]), vec![2, 0]);
+    }
+}

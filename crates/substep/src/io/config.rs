@@ -1,0 +1,1568 @@
+//! Test definitions in TOML (the keys are documented in `docs/config.md`).
+//!
+//! [`TestDefinition::from_file`] / [`TestDefinition::from_toml`] read a config into a validated
+//! [`TestDefinition`]: the numerical model, the ground acceleration at the step times, the
+//! integrator, the optional substructure part and the output settings. Parsing happens in two
+//! stages: serde reads the text into `Raw*` structs that mirror the file (unknown keys are
+//! errors), then `build` checks values and relations between keys and produces library types.
+//!
+//! Messages are one line. Syntax and type errors name the file and line
+//! (`test.toml: line 7: unknown field `foo`, expected ...`); validation errors name the file and
+//! the key path (`test.toml: substructure.coupling_dofs: DOF 7 is out of range (the model has
+//! DOFs 1..=3)`). DOF numbers in configs are 1-based; the definition holds them 0-based.
+//!
+//! Relative file paths (matrices, records) are resolved against the config file's directory.
+//! The output directory is left as given (relative to the working directory of the run).
+//!
+//! To add a specimen kind: add a variant to `RawSpecimen` (its keys are the variant's fields)
+//! and one arm to `RawSpecimen::to_spec`.
+
+use super::matrix_market::read_matrix_market;
+use crate::error::{Error, Result, require_non_negative, require_positive};
+use crate::excitation::{self, Envelope, KanaiTajimi, Record};
+use crate::integrate::{Scheme, check_hilber_alpha};
+use crate::model::{DampingSpec, ShearBuilding, StructuralModel, TmdSystem, sdof, shear_building, tmd_two_dof};
+use crate::specimen::SpecimenSpec;
+use crate::substructure::{ErrorForceSpec, SubstepSettings};
+use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec};
+use nalgebra::{DMatrix, DVector};
+use serde::Deserialize;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A validated test definition.
+#[derive(Debug, Clone)]
+pub struct TestDefinition {
+    /// Where the definition came from (the config path, or a name for embedded text).
+    pub source: String,
+    /// The numerical substructure (with a `[substructure]`, the specimens are not in it).
+    pub model: StructuralModel,
+    pub ground_motion: GroundMotion,
+    pub integrator: IntegratorDefinition,
+    pub substructure: Option<SubstructureDefinition>,
+    pub output: OutputSettings,
+}
+
+/// Ground acceleration at the step times.
+#[derive(Debug, Clone)]
+pub struct GroundMotion {
+    /// `a_g(t_i)`, `t_i = i·dt`, `i = 0..=steps` [m/s²].
+    pub accel: Vec<f64>,
+    /// Short human description (source, scale).
+    pub description: String,
+}
+
+#[derive(Debug, Clone)]
+pub struct IntegratorDefinition {
+    /// The scheme name as given in the config (e.g. `average_acceleration`).
+    pub name: String,
+    pub scheme: Scheme,
+    /// Time step [s].
+    pub dt: f64,
+    /// Number of steps; the run covers `t = 0 ..= steps·dt`.
+    pub steps: usize,
+}
+
+#[derive(Debug, Clone)]
+pub struct SubstructureDefinition {
+    /// Coupling DOFs of the numerical model, 0-based, distinct, in config order.
+    pub coupling_dofs: Vec<usize>,
+    /// Sub-steps per step `k_sub`.
+    pub substeps: usize,
+    /// Inner intervals per sub-step on which actuators and specimens are advanced.
+    pub inner_steps: usize,
+    /// Specimens attached to model DOFs (0-based).
+    pub specimens: Vec<SpecimenSpec>,
+    /// One actuator of this kind per coupling DOF.
+    pub actuator: ActuatorSpec,
+    /// One force and one displacement sensor per coupling DOF.
+    pub force_sensors: Vec<SensorSpec>,
+    pub displacement_sensors: Vec<SensorSpec>,
+    pub error_force: ErrorForceSpec,
+    /// Newmark β, γ of the integrator.
+    pub beta: f64,
+    pub gamma: f64,
+}
+
+impl SubstructureDefinition {
+    /// Settings of the sub-step controller for time step `dt`.
+    pub fn settings(&self, dt: f64) -> SubstepSettings {
+        SubstepSettings {
+            dt,
+            beta: self.beta,
+            gamma: self.gamma,
+            substeps: self.substeps,
+            coupling_dofs: self.coupling_dofs.clone(),
+            error_force: self.error_force,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputSettings {
+    /// Output directory from `[output] dir`, if given.
+    pub dir: Option<PathBuf>,
+    /// Whether to draw PNG plots.
+    pub plots: bool,
+}
+
+impl TestDefinition {
+    /// Read and validate a config file; relative paths in it resolve against its directory.
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| Error::file(&name, format!("cannot read file: {e}")))?;
+        let base = path.parent().unwrap_or(Path::new(""));
+        Self::from_toml(&text, &name, base)
+    }
+
+    /// Parse and validate config text; `name` names it in messages and becomes
+    /// [`TestDefinition::source`], `base_dir` resolves relative paths.
+    pub fn from_toml(text: &str, name: &str, base_dir: &Path) -> Result<Self> {
+        let raw: RawConfig = toml::from_str(text).map_err(|e| toml_error(&e, text, name))?;
+        raw.build(name, base_dir).map_err(|e| match e {
+            Error::InvalidInput { what, reason } => Error::invalid(format!("{name}: {what}"), reason),
+            Error::Numerical { what, reason } => Error::numerical(format!("{name}: {what}"), reason),
+            other => other,
+        })
+    }
+
+    /// Step time `t_i = i·dt` [s].
+    pub fn time(&self, step: usize) -> f64 {
+        step as f64 * self.integrator.dt
+    }
+}
+
+/// `FILE: line L: message` from a toml error (its message may span lines; they are joined).
+fn toml_error(e: &toml::de::Error, text: &str, name: &str) -> Error {
+    let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
+    match e.span() {
+        Some(span) => {
+            let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
+            Error::file(name, format!("line {line}: {message}"))
+        }
+        None => Error::file(name, message),
+    }
+}
+
+/// Prefix the key path of an input error (`mass` → `structure.sdof.mass`).
+fn prefixed(e: Error, prefix: &str) -> Error {
+    match e {
+        Error::InvalidInput { what, reason } if !what.starts_with(prefix) => {
+            Error::invalid(format!("{prefix}{what}"), reason)
+        }
+        other => other,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Raw structs: the file as written.
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    structure: RawStructure,
+    ground_motion: RawGroundMotion,
+    integrator: RawIntegrator,
+    substructure: Option<RawSubstructure>,
+    #[serde(default)]
+    output: RawOutput,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStructure {
+    mass: Option<MatrixInput>,
+    stiffness: Option<MatrixInput>,
+    damping: Option<MatrixInput>,
+    influence: Option<Vec<f64>>,
+    rayleigh: Option<RawRayleigh>,
+    modal: Option<RawModal>,
+    shear_building: Option<RawShearBuilding>,
+    sdof: Option<RawSdof>,
+    tmd: Option<RawTmd>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRayleigh {
+    alpha: Option<f64>,
+    beta: Option<f64>,
+    zeta: Option<f64>,
+    modes: Option<Vec<usize>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawModal {
+    zeta: OneOrMany,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawShearBuilding {
+    stories: usize,
+    story_mass: f64,
+    first_period: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSdof {
+    mass: f64,
+    stiffness: f64,
+    #[serde(default)]
+    damping: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct RawTmd {
+    mass: f64,
+    frequency: f64,
+    zeta: f64,
+    eta_m: f64,
+    eta_f: f64,
+    zeta_s: f64,
+}
+
+impl Default for RawTmd {
+    fn default() -> Self {
+        let t = TmdSystem::typical();
+        Self {
+            mass: t.mass,
+            frequency: t.frequency,
+            zeta: t.zeta,
+            eta_m: t.eta_m,
+            eta_f: t.eta_f,
+            zeta_s: t.zeta_s,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGroundMotion {
+    file: Option<String>,
+    dt: Option<f64>,
+    scale: Option<f64>,
+    generator: Option<String>,
+    amplitude: Option<f64>,
+    frequency: Option<f64>,
+    f0: Option<f64>,
+    f1: Option<f64>,
+    duration: Option<f64>,
+    seed: Option<u64>,
+    pga: Option<f64>,
+    omega_g: Option<f64>,
+    zeta_g: Option<f64>,
+    rise: Option<f64>,
+    hold: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawIntegrator {
+    #[serde(default = "default_scheme")]
+    scheme: String,
+    beta: Option<f64>,
+    gamma: Option<f64>,
+    alpha: Option<f64>,
+    dt: f64,
+    duration: Option<f64>,
+}
+
+fn default_scheme() -> String {
+    "newmark".into()
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSubstructure {
+    coupling_dofs: Vec<usize>,
+    substeps: usize,
+    inner_steps: Option<usize>,
+    #[serde(default)]
+    specimen: Vec<RawSpecimen>,
+    actuator: Option<RawActuator>,
+    sensors: Option<RawSensors>,
+    error_force: Option<RawErrorForce>,
+}
+
+/// One `[[substructure.specimen]]`; `kind` selects the variant.
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+enum RawSpecimen {
+    LinearSdof {
+        dof: usize,
+        mass: Option<f64>,
+        stiffness: f64,
+        #[serde(default)]
+        damping: f64,
+    },
+    LinearMdof {
+        dofs: Vec<usize>,
+        mass: Option<MatrixInput>,
+        stiffness: MatrixInput,
+        damping: Option<MatrixInput>,
+        influence: Option<Vec<f64>>,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+enum RawActuator {
+    Ideal {
+        #[serde(default)]
+        delay: f64,
+    },
+    Delay {
+        delay: f64,
+    },
+    FirstOrder {
+        time_constant: f64,
+        #[serde(default)]
+        delay: f64,
+    },
+    SecondOrder {
+        frequency: f64,
+        zeta: f64,
+        #[serde(default)]
+        delay: f64,
+    },
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSensors {
+    #[serde(default)]
+    force_noise: f64,
+    #[serde(default)]
+    displacement_noise: f64,
+    adc_bits: Option<u32>,
+    force_range: Option<f64>,
+    displacement_range: Option<f64>,
+    lowpass_hz: Option<f64>,
+    #[serde(default = "default_seed")]
+    seed: u64,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+enum RawErrorForce {
+    None {},
+    Pid {
+        #[serde(default = "one")]
+        p: f64,
+        #[serde(default)]
+        i: f64,
+        #[serde(default)]
+        d: f64,
+    },
+    PidResidual {
+        #[serde(default = "one")]
+        p: f64,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOutput {
+    dir: Option<String>,
+    #[serde(default = "yes")]
+    plots: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl Default for RawOutput {
+    fn default() -> Self {
+        Self { dir: None, plots: true }
+    }
+}
+
+/// A matrix in a config: an array of rows, a number (1×1), or a path to a `.mtx` file.
+#[derive(Debug, Clone)]
+enum MatrixInput {
+    Rows(Vec<Vec<f64>>),
+    File(String),
+}
+
+impl<'de> Deserialize<'de> for MatrixInput {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = MatrixInput;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a matrix: an array of rows (arrays of numbers), a number, or the path of a .mtx file")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<MatrixInput, E> {
+                Ok(MatrixInput::File(v.to_string()))
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> std::result::Result<MatrixInput, E> {
+                Ok(MatrixInput::Rows(vec![vec![v]]))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> std::result::Result<MatrixInput, E> {
+                self.visit_f64(v as f64)
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> std::result::Result<MatrixInput, E> {
+                self.visit_f64(v as f64)
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> std::result::Result<MatrixInput, A::Error> {
+                let mut rows = Vec::new();
+                while let Some(row) = seq.next_element::<Vec<f64>>()? {
+                    rows.push(row);
+                }
+                Ok(MatrixInput::Rows(rows))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// One number for all, or one per item.
+#[derive(Debug, Clone)]
+struct OneOrMany(Vec<f64>);
+
+impl<'de> Deserialize<'de> for OneOrMany {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = OneOrMany;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a number or an array of numbers")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> std::result::Result<OneOrMany, E> {
+                Ok(OneOrMany(vec![v]))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> std::result::Result<OneOrMany, E> {
+                Ok(OneOrMany(vec![v as f64]))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> std::result::Result<OneOrMany, E> {
+                Ok(OneOrMany(vec![v as f64]))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> std::result::Result<OneOrMany, A::Error> {
+                let mut v = Vec::new();
+                while let Some(x) = seq.next_element::<f64>()? {
+                    v.push(x);
+                }
+                Ok(OneOrMany(v))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// A matrix from its config form; `what` is the key path.
+fn matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<DMatrix<f64>> {
+    match input {
+        MatrixInput::File(path) => {
+            let resolved = base.join(path);
+            read_matrix_market(&resolved).map_err(|e| Error::invalid(what, e.to_string()))
+        }
+        MatrixInput::Rows(rows) => {
+            let n_rows = rows.len();
+            let n_cols = rows.first().map_or(0, Vec::len);
+            if n_rows == 0 || n_cols == 0 {
+                return Err(Error::invalid(what, "matrix is empty"));
+            }
+            for (i, row) in rows.iter().enumerate() {
+                if row.len() != n_cols {
+                    return Err(Error::invalid(
+                        what,
+                        format!("row {} has {} entries but row 1 has {n_cols}", i + 1, row.len()),
+                    ));
+                }
+                if let Some(j) = row.iter().position(|x| !x.is_finite()) {
+                    return Err(Error::invalid(
+                        what,
+                        format!("entry ({}, {}) is not finite ({})", i + 1, j + 1, row[j]),
+                    ));
+                }
+            }
+            Ok(DMatrix::from_fn(n_rows, n_cols, |i, j| rows[i][j]))
+        }
+    }
+}
+
+/// 1-based DOF number → 0-based index, with a range check.
+fn dof_index(what: &str, dof: usize, n: usize) -> Result<usize> {
+    if (1..=n).contains(&dof) {
+        Ok(dof - 1)
+    } else {
+        Err(Error::invalid(
+            what,
+            format!("DOF {dof} is out of range (the model has DOFs 1..={n})"),
+        ))
+    }
+}
+
+/// Error if any of the named optional keys is present (`why` explains).
+fn forbid(prefix: &str, keys: &[(&str, bool)], why: &str) -> Result<()> {
+    match keys.iter().find(|(_, present)| *present) {
+        Some((key, _)) => Err(Error::invalid(format!("{prefix}{key}"), why.to_string())),
+        None => Ok(()),
+    }
+}
+
+/// Deterministic per-channel seed (SplitMix64 of the user seed and the channel number).
+fn channel_seed(seed: u64, channel: u64) -> u64 {
+    let mut z = seed
+        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        .wrapping_add(channel.wrapping_add(1).wrapping_mul(0xBF58_476D_1CE4_E5B9));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Building: raw → validated.
+
+impl RawConfig {
+    fn build(self, name: &str, base: &Path) -> Result<TestDefinition> {
+        let model = self.structure.build(base)?;
+        let (name_s, scheme, dt, duration) = self.integrator.build()?;
+        let ground_motion = self.ground_motion.build(dt, duration, base)?;
+        let steps = ground_motion.accel.len() - 1;
+        if steps == 0 {
+            return Err(Error::invalid(
+                "integrator.duration",
+                format!("the run must last at least one step (dt = {dt} s)"),
+            ));
+        }
+        let substructure = match self.substructure {
+            None => None,
+            Some(s) => Some(s.build(&model, &name_s, scheme, base)?),
+        };
+        Ok(TestDefinition {
+            source: name.to_string(),
+            model,
+            ground_motion,
+            integrator: IntegratorDefinition {
+                name: name_s,
+                scheme,
+                dt,
+                steps,
+            },
+            substructure,
+            output: OutputSettings {
+                dir: self.output.dir.map(PathBuf::from),
+                plots: self.output.plots,
+            },
+        })
+    }
+}
+
+impl RawStructure {
+    fn build(&self, base: &Path) -> Result<StructuralModel> {
+        let matrices = self.mass.is_some() || self.stiffness.is_some();
+        let forms = [
+            ("mass + stiffness", matrices),
+            ("[structure.shear_building]", self.shear_building.is_some()),
+            ("[structure.sdof]", self.sdof.is_some()),
+            ("[structure.tmd]", self.tmd.is_some()),
+        ];
+        let given: Vec<&str> = forms.iter().filter(|f| f.1).map(|f| f.0).collect();
+        match given.len() {
+            0 => {
+                return Err(Error::invalid(
+                    "structure",
+                    "no model given: set mass and stiffness, or one of [structure.shear_building], \
+                     [structure.sdof], [structure.tmd]",
+                ));
+            }
+            1 => {}
+            _ => {
+                return Err(Error::invalid(
+                    "structure",
+                    format!("give only one model form, found {}", given.join(" and ")),
+                ));
+            }
+        }
+        let damping_options = [
+            ("damping", self.damping.is_some()),
+            ("rayleigh", self.rayleigh.is_some()),
+            ("modal", self.modal.is_some()),
+        ];
+        let damping_given: Vec<&str> = damping_options.iter().filter(|f| f.1).map(|f| f.0).collect();
+        if damping_given.len() > 1 {
+            return Err(Error::invalid(
+                format!("structure.{}", damping_given[1]),
+                format!("cannot be combined with structure.{}", damping_given[0]),
+            ));
+        }
+        let influence = self.influence.clone().map(DVector::from_vec);
+
+        let model = if let Some(s) = &self.sdof {
+            forbid(
+                "structure.",
+                &damping_options,
+                "not allowed with [structure.sdof] (give its damping there)",
+            )?;
+            let m = sdof(s.mass, s.damping, s.stiffness).map_err(|e| prefixed(e, "structure.sdof."))?;
+            StructuralModel::new(m.mass, m.damping, m.stiffness, influence)?
+        } else if let Some(t) = &self.tmd {
+            forbid(
+                "structure.",
+                &damping_options,
+                "not allowed with [structure.tmd] (it sets damping by zeta and zeta_s)",
+            )?;
+            let p = TmdSystem {
+                mass: t.mass,
+                frequency: t.frequency,
+                zeta: t.zeta,
+                eta_m: t.eta_m,
+                eta_f: t.eta_f,
+                zeta_s: t.zeta_s,
+            };
+            let m = tmd_two_dof(&p).map_err(|e| prefixed(e, "structure."))?;
+            StructuralModel::new(m.mass, m.damping, m.stiffness, influence)?
+        } else if let Some(b) = &self.shear_building {
+            let m = shear_building(&ShearBuilding {
+                stories: b.stories,
+                story_mass: b.story_mass,
+                first_period: b.first_period,
+            })?;
+            let damping = match &self.damping {
+                Some(c) => matrix(c, "structure.damping", base)?,
+                None => m.damping,
+            };
+            StructuralModel::new(m.mass, damping, m.stiffness, influence)?
+        } else {
+            let (mass, stiffness) = match (&self.mass, &self.stiffness) {
+                (Some(m), Some(k)) => (
+                    matrix(m, "structure.mass", base)?,
+                    matrix(k, "structure.stiffness", base)?,
+                ),
+                (Some(_), None) => {
+                    return Err(Error::invalid(
+                        "structure.stiffness",
+                        "missing (structure.mass is given)",
+                    ));
+                }
+                _ => {
+                    return Err(Error::invalid(
+                        "structure.mass",
+                        "missing (structure.stiffness is given)",
+                    ));
+                }
+            };
+            let damping = match &self.damping {
+                Some(c) => matrix(c, "structure.damping", base)?,
+                None => DMatrix::zeros(mass.nrows(), mass.ncols()),
+            };
+            StructuralModel::new(mass, damping, stiffness, influence)?
+        };
+
+        let spec = if let Some(r) = &self.rayleigh {
+            Some(r.spec()?)
+        } else {
+            self.modal
+                .as_ref()
+                .map(|m| DampingSpec::Modal { zeta: m.zeta.0.clone() })
+        };
+        match spec {
+            Some(spec) => model.with_damping(&spec),
+            None => Ok(model),
+        }
+    }
+}
+
+impl RawRayleigh {
+    fn spec(&self) -> Result<DampingSpec> {
+        match (self.alpha, self.beta, self.zeta) {
+            (None, None, Some(zeta)) => {
+                let modes = match self.modes.as_deref() {
+                    None => (1, 2),
+                    Some([i, j]) => (*i, *j),
+                    Some(other) => {
+                        return Err(Error::invalid(
+                            "structure.rayleigh.modes",
+                            format!("must list two mode numbers, got {}", other.len()),
+                        ));
+                    }
+                };
+                Ok(DampingSpec::RayleighRatio { zeta, modes })
+            }
+            (alpha, beta, None) if alpha.is_some() || beta.is_some() => {
+                if self.modes.is_some() {
+                    return Err(Error::invalid(
+                        "structure.rayleigh.modes",
+                        "only used with zeta (not with alpha, beta)",
+                    ));
+                }
+                Ok(DampingSpec::Rayleigh {
+                    alpha: alpha.unwrap_or(0.0),
+                    beta: beta.unwrap_or(0.0),
+                })
+            }
+            (_, _, Some(_)) => Err(Error::invalid(
+                "structure.rayleigh",
+                "give either alpha and beta, or zeta (with modes), not both",
+            )),
+            _ => Err(Error::invalid(
+                "structure.rayleigh",
+                "give alpha and beta, or zeta (with modes = [i, j], default [1, 2])",
+            )),
+        }
+    }
+}
+
+impl RawIntegrator {
+    /// `(name, scheme, dt, duration)`.
+    fn build(&self) -> Result<(String, Scheme, f64, Option<f64>)> {
+        let dt = require_positive("integrator.dt", self.dt)?;
+        if let Some(d) = self.duration {
+            require_positive("integrator.duration", d)?;
+        }
+        let name = self.scheme.as_str();
+        let is_newmark = name == "newmark";
+        let is_alpha = matches!(name, "hht" | "alpha_os");
+        if !is_newmark {
+            forbid(
+                "integrator.",
+                &[("beta", self.beta.is_some()), ("gamma", self.gamma.is_some())],
+                &format!("only used with scheme = \"newmark\" (scheme \"{name}\" fixes its own parameters)"),
+            )?;
+        }
+        if !is_alpha && self.alpha.is_some() {
+            return Err(Error::invalid(
+                "integrator.alpha",
+                format!("only used with scheme = \"hht\" or \"alpha_os\", not \"{name}\""),
+            ));
+        }
+        let beta = self.beta.unwrap_or(0.25);
+        let gamma = self.gamma.unwrap_or(0.5);
+        if is_newmark {
+            require_non_negative("integrator.beta", beta)?;
+            require_non_negative("integrator.gamma", gamma)?;
+        }
+        let scheme = Scheme::from_name(name, beta, gamma, self.alpha.unwrap_or(-0.1))?;
+        if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha } = scheme {
+            check_hilber_alpha(alpha)?;
+        }
+        Ok((name.to_string(), scheme, dt, self.duration))
+    }
+}
+
+impl RawGroundMotion {
+    fn build(&self, dt: f64, duration: Option<f64>, base: &Path) -> Result<GroundMotion> {
+        let g = "ground_motion.";
+        let scale = self.scale.unwrap_or(1.0);
+        if !scale.is_finite() {
+            return Err(Error::invalid(
+                "ground_motion.scale",
+                format!("must be finite, got {scale}"),
+            ));
+        }
+        let generator_keys = [
+            ("amplitude", self.amplitude.is_some()),
+            ("frequency", self.frequency.is_some()),
+            ("f0", self.f0.is_some()),
+            ("f1", self.f1.is_some()),
+            ("duration", self.duration.is_some()),
+            ("seed", self.seed.is_some()),
+            ("pga", self.pga.is_some()),
+            ("omega_g", self.omega_g.is_some()),
+            ("zeta_g", self.zeta_g.is_some()),
+            ("rise", self.rise.is_some()),
+            ("hold", self.hold.is_some()),
+        ];
+        let (record, description) = match (&self.file, &self.generator) {
+            (Some(_), Some(_)) => {
+                return Err(Error::invalid(
+                    "ground_motion",
+                    "give either file or generator, not both",
+                ));
+            }
+            (None, None) => {
+                return Err(Error::invalid(
+                    "ground_motion",
+                    "give a record file (file = \"ag.csv\") or a generator (generator = \"sine_sweep\")",
+                ));
+            }
+            (Some(file), None) => {
+                forbid(g, &generator_keys, "only used with generator = ...")?;
+                let path = base.join(file);
+                let record = excitation::read_record(&path, self.dt)
+                    .map_err(|e| Error::invalid("ground_motion.file", e.to_string()))?;
+                (record, format!("record {}", path.display()))
+            }
+            (None, Some(kind)) => {
+                if self.dt.is_some() {
+                    return Err(Error::invalid(
+                        "ground_motion.dt",
+                        "only used with a single-column file (generators sample at integrator.dt)",
+                    ));
+                }
+                let length = match (self.duration, duration) {
+                    (Some(d), _) | (None, Some(d)) => d,
+                    (None, None) => {
+                        return Err(Error::invalid(
+                            "ground_motion.duration",
+                            "required for a generator (or set integrator.duration)",
+                        ));
+                    }
+                };
+                self.generate(kind, length, dt, &generator_keys)?
+            }
+        };
+        let description = if scale == 1.0 {
+            description
+        } else {
+            format!("{description}, scaled by {scale}")
+        };
+        let accel = record
+            .scaled(scale)?
+            .resample(dt, duration)
+            .map_err(|e| prefixed(e, "ground_motion: "))?;
+        Ok(GroundMotion { accel, description })
+    }
+
+    fn generate(&self, kind: &str, duration: f64, dt: f64, keys: &[(&str, bool)]) -> Result<(Record, String)> {
+        let g = "ground_motion.";
+        let allowed: &[&str] = match kind {
+            "harmonic" => &["amplitude", "frequency", "duration"],
+            "sine_sweep" => &["amplitude", "f0", "f1", "duration"],
+            "kanai_tajimi" => &["pga", "omega_g", "zeta_g", "seed", "rise", "hold", "duration"],
+            other => {
+                return Err(Error::invalid(
+                    "ground_motion.generator",
+                    format!("unknown generator '{other}' (expected harmonic, sine_sweep or kanai_tajimi)"),
+                ));
+            }
+        };
+        let extra: Vec<(&str, bool)> = keys.iter().filter(|(k, _)| !allowed.contains(k)).copied().collect();
+        forbid(
+            g,
+            &extra,
+            &format!("not used by generator = \"{kind}\" (it uses {})", allowed.join(", ")),
+        )?;
+        let need = |key: &str, v: Option<f64>| {
+            v.ok_or_else(|| Error::invalid(format!("{g}{key}"), format!("required for generator = \"{kind}\"")))
+        };
+        let gen_err = |e: Error| match e {
+            Error::InvalidInput { what, reason } => {
+                let key = what.rsplit('.').next().unwrap_or(&what).to_string();
+                let key = match key.as_str() {
+                    "frequency_hz" => "frequency".to_string(),
+                    "f0_hz" => "f0".to_string(),
+                    "f1_hz" => "f1".to_string(),
+                    "pga_target" => "pga".to_string(),
+                    "envelope" => "rise".to_string(),
+                    _ => key,
+                };
+                Error::invalid(format!("{g}{key}"), reason)
+            }
+            other => other,
+        };
+        match kind {
+            "harmonic" => {
+                let a = need("amplitude", self.amplitude)?;
+                let f = need("frequency", self.frequency)?;
+                let r = excitation::harmonic(a, f, duration, dt).map_err(gen_err)?;
+                Ok((r, format!("harmonic {f} Hz, {a} m/s², {duration} s")))
+            }
+            "sine_sweep" => {
+                let a = need("amplitude", self.amplitude)?;
+                let f0 = need("f0", self.f0)?;
+                let f1 = need("f1", self.f1)?;
+                let r = excitation::sine_sweep(a, f0, f1, duration, dt).map_err(gen_err)?;
+                Ok((r, format!("linear sine sweep {f0}–{f1} Hz, {a} m/s², {duration} s")))
+            }
+            _ => {
+                let envelope = match (self.rise, self.hold) {
+                    (None, None) => Envelope::None,
+                    (Some(rise), Some(hold)) => Envelope::Trapezoid { rise, hold },
+                    (Some(_), None) => return Err(Error::invalid("ground_motion.hold", "required with rise")),
+                    (None, Some(_)) => return Err(Error::invalid("ground_motion.rise", "required with hold")),
+                };
+                let params = KanaiTajimi {
+                    pga_target: self.pga,
+                    omega_g: self.omega_g.unwrap_or(15.6),
+                    zeta_g: self.zeta_g.unwrap_or(0.6),
+                    duration,
+                    dt,
+                    seed: self.seed.unwrap_or(1),
+                    envelope,
+                };
+                let r = excitation::kanai_tajimi(params).map_err(gen_err)?;
+                let pga = r.pga();
+                Ok((
+                    r,
+                    format!(
+                        "Kanai-Tajimi noise (omega_g {} rad/s, zeta_g {}, seed {}), PGA {pga:.3} m/s², {duration} s",
+                        params.omega_g, params.zeta_g, params.seed
+                    ),
+                ))
+            }
+        }
+    }
+}
+
+impl RawSpecimen {
+    /// The library's description; `n` is the number of model DOFs, `what` the key prefix.
+    fn to_spec(&self, n: usize, what: &str, base: &Path) -> Result<SpecimenSpec> {
+        match self {
+            RawSpecimen::LinearSdof {
+                dof,
+                mass,
+                stiffness,
+                damping,
+            } => {
+                if let Some(m) = mass {
+                    require_positive(&format!("{what}.mass"), *m)?;
+                }
+                require_non_negative(&format!("{what}.stiffness"), *stiffness)?;
+                require_non_negative(&format!("{what}.damping"), *damping)?;
+                Ok(SpecimenSpec::LinearSdof {
+                    dof: dof_index(&format!("{what}.dof"), *dof, n)?,
+                    mass: *mass,
+                    stiffness: *stiffness,
+                    damping: *damping,
+                })
+            }
+            RawSpecimen::LinearMdof {
+                dofs,
+                mass,
+                stiffness,
+                damping,
+                influence,
+            } => {
+                let key = format!("{what}.dofs");
+                if dofs.is_empty() {
+                    return Err(Error::invalid(key, "must list at least one DOF"));
+                }
+                let mut idx = Vec::with_capacity(dofs.len());
+                for &d in dofs {
+                    let i = dof_index(&key, d, n)?;
+                    if idx.contains(&i) {
+                        return Err(Error::invalid(key, format!("DOF {d} is listed twice")));
+                    }
+                    idx.push(i);
+                }
+                let k = matrix(stiffness, &format!("{what}.stiffness"), base)?;
+                let size = k.nrows();
+                let m = match mass {
+                    Some(m) => matrix(m, &format!("{what}.mass"), base)?,
+                    None => DMatrix::zeros(size, size),
+                };
+                let c = match damping {
+                    Some(c) => matrix(c, &format!("{what}.damping"), base)?,
+                    None => DMatrix::zeros(size, size),
+                };
+                for (key, mat) in [("stiffness", &k), ("mass", &m), ("damping", &c)] {
+                    if mat.nrows() != mat.ncols() || mat.nrows() < dofs.len() || mat.nrows() != size {
+                        return Err(Error::invalid(
+                            format!("{what}.{key}"),
+                            format!(
+                                "is {}x{}; it must be square over the {} attached DOFs followed by the internal \
+                                 DOFs, and all specimen matrices must have one size (stiffness is {size}x{size})",
+                                mat.nrows(),
+                                mat.ncols(),
+                                dofs.len()
+                            ),
+                        ));
+                    }
+                }
+                if let Some(inf) = influence
+                    && inf.len() != size
+                {
+                    return Err(Error::invalid(
+                        format!("{what}.influence"),
+                        format!("has {} entries, the specimen has {size} DOFs", inf.len()),
+                    ));
+                }
+                Ok(SpecimenSpec::LinearMdof {
+                    dofs: idx,
+                    mass: m,
+                    damping: c,
+                    stiffness: k,
+                    influence: influence.clone().map(DVector::from_vec),
+                })
+            }
+        }
+    }
+}
+
+impl RawActuator {
+    fn spec(&self) -> ActuatorSpec {
+        match *self {
+            RawActuator::Ideal { delay } | RawActuator::Delay { delay } => ActuatorSpec {
+                dynamics: Dynamics::Ideal,
+                delay,
+            },
+            RawActuator::FirstOrder { time_constant, delay } => ActuatorSpec {
+                dynamics: Dynamics::FirstOrder { time_constant },
+                delay,
+            },
+            RawActuator::SecondOrder { frequency, zeta, delay } => ActuatorSpec {
+                dynamics: Dynamics::SecondOrder {
+                    frequency_hz: frequency,
+                    zeta,
+                },
+                delay,
+            },
+        }
+    }
+}
+
+impl RawSensors {
+    /// `(force sensors, displacement sensors)`, one per coupling DOF.
+    fn specs(&self, n_c: usize) -> Result<(Vec<SensorSpec>, Vec<SensorSpec>)> {
+        let p = "substructure.sensors.";
+        require_non_negative(&format!("{p}force_noise"), self.force_noise)?;
+        require_non_negative(&format!("{p}displacement_noise"), self.displacement_noise)?;
+        if let Some(f) = self.lowpass_hz {
+            require_positive(&format!("{p}lowpass_hz"), f)?;
+        }
+        match self.adc_bits {
+            Some(bits) => {
+                if !(2..=32).contains(&bits) {
+                    return Err(Error::invalid(
+                        format!("{p}adc_bits"),
+                        format!("must be in 2..=32, got {bits}"),
+                    ));
+                }
+                if self.force_range.is_none() && self.displacement_range.is_none() {
+                    return Err(Error::invalid(
+                        format!("{p}adc_bits"),
+                        "needs force_range and/or displacement_range (the converter's range)",
+                    ));
+                }
+            }
+            None => forbid(
+                p,
+                &[
+                    ("force_range", self.force_range.is_some()),
+                    ("displacement_range", self.displacement_range.is_some()),
+                ],
+                "only used with adc_bits",
+            )?,
+        }
+        let sensor = |noise: f64, range: Option<f64>, key: &str, channel: u64| -> Result<SensorSpec> {
+            if let Some(r) = range {
+                require_positive(&format!("{p}{key}"), r)?;
+            }
+            Ok(SensorSpec {
+                noise_std: noise,
+                lowpass_hz: self.lowpass_hz,
+                adc_bits: range.and(self.adc_bits),
+                adc_range: range.unwrap_or(0.0),
+                seed: channel_seed(self.seed, channel),
+            })
+        };
+        let mut force = Vec::with_capacity(n_c);
+        let mut disp = Vec::with_capacity(n_c);
+        for i in 0..n_c as u64 {
+            force.push(sensor(self.force_noise, self.force_range, "force_range", 2 * i)?);
+            disp.push(sensor(
+                self.displacement_noise,
+                self.displacement_range,
+                "displacement_range",
+                2 * i + 1,
+            )?);
+        }
+        Ok((force, disp))
+    }
+}
+
+impl RawErrorForce {
+    fn spec(&self) -> ErrorForceSpec {
+        match *self {
+            RawErrorForce::None {} => ErrorForceSpec::None,
+            RawErrorForce::Pid { p, i, d } => ErrorForceSpec::Pid { p, i, d },
+            RawErrorForce::PidResidual { p } => ErrorForceSpec::PidResidual { p },
+        }
+    }
+}
+
+impl RawSubstructure {
+    fn build(
+        &self,
+        model: &StructuralModel,
+        scheme_name: &str,
+        scheme: Scheme,
+        base: &Path,
+    ) -> Result<SubstructureDefinition> {
+        let p = "substructure.";
+        let (beta, gamma) = match scheme {
+            Scheme::Newmark { beta, gamma } if beta > 0.0 => (beta, gamma),
+            _ => {
+                return Err(Error::invalid(
+                    "integrator.scheme",
+                    format!(
+                        "the substructure algorithm needs an implicit Newmark scheme (beta > 0); \
+                         '{scheme_name}' cannot be used with [substructure]"
+                    ),
+                ));
+            }
+        };
+        let n = model.n_dofs();
+        let key = format!("{p}coupling_dofs");
+        if self.coupling_dofs.is_empty() {
+            return Err(Error::invalid(key, "must list at least one DOF"));
+        }
+        let mut coupling = Vec::with_capacity(self.coupling_dofs.len());
+        for &d in &self.coupling_dofs {
+            let i = dof_index(&key, d, n)?;
+            if coupling.contains(&i) {
+                return Err(Error::invalid(key, format!("DOF {d} is listed twice")));
+            }
+            coupling.push(i);
+        }
+        if self.substeps == 0 {
+            return Err(Error::invalid(format!("{p}substeps"), "must be at least 1"));
+        }
+        if self.specimen.is_empty() {
+            return Err(Error::invalid(
+                format!("{p}specimen"),
+                "no specimen given (add a [[substructure.specimen]] table)",
+            ));
+        }
+        let mut specimens = Vec::with_capacity(self.specimen.len());
+        let mut attached = vec![false; coupling.len()];
+        for (k, raw) in self.specimen.iter().enumerate() {
+            let what = format!("{p}specimen[{}]", k + 1);
+            let spec = raw.to_spec(n, &what, base)?;
+            for dof in spec.dofs() {
+                let Some(i) = coupling.iter().position(|&c| c == dof) else {
+                    let key = if matches!(spec, SpecimenSpec::LinearSdof { .. }) {
+                        "dof"
+                    } else {
+                        "dofs"
+                    };
+                    return Err(Error::invalid(
+                        format!("{what}.{key}"),
+                        format!("DOF {} is not one of substructure.coupling_dofs", dof + 1),
+                    ));
+                };
+                attached[i] = true;
+            }
+            // Build once to check the specimen's own consistency (mass on attached DOFs, stability).
+            spec.build().map_err(|e| match e {
+                Error::InvalidInput { what: w, reason } => {
+                    Error::invalid(format!("{what}.{}", w.trim_start_matches("specimen.")), reason)
+                }
+                other => other,
+            })?;
+            specimens.push(spec);
+        }
+        if let Some(i) = attached.iter().position(|a| !a) {
+            return Err(Error::invalid(
+                key,
+                format!("DOF {} has no specimen attached", coupling[i] + 1),
+            ));
+        }
+        let actuator = self
+            .actuator
+            .as_ref()
+            .map_or_else(ActuatorSpec::ideal, RawActuator::spec);
+        actuator.validate().map_err(|e| prefixed(e, p))?;
+        let inner_steps = match self.inner_steps {
+            Some(0) => return Err(Error::invalid(format!("{p}inner_steps"), "must be at least 1")),
+            Some(k) => k,
+            None if actuator.dynamics == Dynamics::Ideal && actuator.delay == 0.0 => 1,
+            None => 10,
+        };
+        let (force_sensors, displacement_sensors) = match &self.sensors {
+            Some(s) => s.specs(coupling.len())?,
+            None => (
+                vec![SensorSpec::ideal(); coupling.len()],
+                vec![SensorSpec::ideal(); coupling.len()],
+            ),
+        };
+        let error_force = self
+            .error_force
+            .as_ref()
+            .map_or(ErrorForceSpec::None, RawErrorForce::spec);
+        error_force.validate()?;
+        Ok(SubstructureDefinition {
+            coupling_dofs: coupling,
+            substeps: self.substeps,
+            inner_steps,
+            specimens,
+            actuator,
+            force_sensors,
+            displacement_sensors,
+            error_force,
+            beta,
+            gamma,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BASE: &str = r#"
+[structure]
+mass = [[1000.0, 0.0, 0.0], [0.0, 1000.0, 0.0], [0.0, 0.0, 1000.0]]
+stiffness = [[2e6, -1e6, 0.0], [-1e6, 2e6, -1e6], [0.0, -1e6, 1e6]]
+
+[structure.rayleigh]
+zeta = 0.05
+
+[ground_motion]
+generator = "harmonic"
+amplitude = 1.0
+frequency = 2.0
+duration = 1.0
+
+[integrator]
+scheme = "newmark"
+dt = 0.01
+
+[substructure]
+coupling_dofs = [3, 1]
+substeps = 4
+
+[[substructure.specimen]]
+kind = "linear_sdof"
+dof = 3
+mass = 50.0
+stiffness = 2000.0
+damping = 60.0
+
+[[substructure.specimen]]
+kind = "linear_sdof"
+dof = 1
+stiffness = 1.0e5
+
+[substructure.actuator]
+kind = "second_order"
+frequency = 50.0
+zeta = 0.7
+
+[substructure.sensors]
+force_noise = 1.0
+seed = 3
+"#;
+
+    fn parse(text: &str) -> Result<TestDefinition> {
+        TestDefinition::from_toml(text, "cfg.toml", Path::new("/nonexistent-dir"))
+    }
+
+    fn err(text: &str) -> String {
+        match parse(text) {
+            Ok(_) => panic!("config was accepted:\n{text}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    /// BASE with `from` replaced by `to` (which must occur).
+    fn edit(from: &str, to: &str) -> String {
+        assert!(BASE.contains(from), "{from}");
+        BASE.replacen(from, to, 1)
+    }
+
+    #[test]
+    fn base_config_is_valid_and_zero_based() {
+        let d = parse(BASE).unwrap();
+        assert_eq!(d.source, "cfg.toml");
+        assert_eq!(d.model.n_dofs(), 3);
+        assert!(d.model.damping[(0, 0)] > 0.0, "Rayleigh damping applied");
+        assert_eq!(d.integrator.steps, 100);
+        assert_eq!(d.ground_motion.accel.len(), 101);
+        let s = d.substructure.unwrap();
+        assert_eq!(s.coupling_dofs, vec![2, 0]);
+        assert_eq!(s.specimens[0].dofs(), vec![2]);
+        assert_eq!(s.inner_steps, 10, "default for a non-ideal actuator");
+        assert_eq!((s.beta, s.gamma), (0.25, 0.5));
+        assert_eq!(s.force_sensors.len(), 2);
+        assert_eq!(s.force_sensors[0].noise_std, 1.0);
+        let seeds = [
+            s.force_sensors[0].seed,
+            s.force_sensors[1].seed,
+            s.displacement_sensors[0].seed,
+            s.displacement_sensors[1].seed,
+        ];
+        for i in 0..4 {
+            for j in 0..i {
+                assert_ne!(seeds[i], seeds[j], "per-channel seeds differ");
+            }
+        }
+        assert_eq!(s.error_force, ErrorForceSpec::None);
+        assert_eq!(d.output, OutputSettings { dir: None, plots: true });
+    }
+
+    #[test]
+    fn builders_and_defaults() {
+        let d = parse(
+            "[structure.tmd]\n[ground_motion]\ngenerator = \"sine_sweep\"\namplitude = 1\nf0 = 0.2\nf1 = 3\n\
+             [integrator]\nscheme = \"exact\"\ndt = 0.01\nduration = 2.0\n",
+        )
+        .unwrap();
+        assert_eq!(d.model.n_dofs(), 2);
+        assert_eq!(d.integrator.scheme, Scheme::Exact);
+        assert_eq!(d.integrator.steps, 200, "generator duration from integrator.duration");
+        let d = parse(
+            "[structure.shear_building]\nstories = 5\nstory_mass = 1e4\nfirst_period = 0.5\n[structure.modal]\n\
+             zeta = [0.02, 0.03, 0.04, 0.05, 0.06]\n[ground_motion]\ngenerator = \"kanai_tajimi\"\nduration = 1\n\
+             pga = 2\n[integrator]\nscheme = \"hht\"\nalpha = -0.1\ndt = 0.02\n[output]\ndir = \"out\"\nplots = false\n",
+        )
+        .unwrap();
+        assert_eq!(d.model.n_dofs(), 5);
+        assert_eq!(d.integrator.scheme, Scheme::Hht { alpha: -0.1 });
+        assert!((d.ground_motion.accel.iter().fold(0.0f64, |m, a| m.max(a.abs())) - 2.0).abs() < 1e-12);
+        assert_eq!(d.output.dir, Some(PathBuf::from("out")));
+        assert!(!d.output.plots);
+    }
+
+    #[test]
+    fn ideal_actuator_defaults_to_one_inner_step() {
+        let text = edit(
+            "kind = \"second_order\"\nfrequency = 50.0\nzeta = 0.7",
+            "kind = \"ideal\"",
+        );
+        assert_eq!(parse(&text).unwrap().substructure.unwrap().inner_steps, 1);
+        let text = edit(
+            "kind = \"second_order\"\nfrequency = 50.0\nzeta = 0.7",
+            "kind = \"ideal\"\ndelay = 0.002",
+        );
+        assert_eq!(parse(&text).unwrap().substructure.unwrap().inner_steps, 10);
+    }
+
+    #[test]
+    fn malformed_toml_names_file_and_line() {
+        let e = err(&edit("substeps = 4", "substeps = [4"));
+        assert!(e.starts_with("cfg.toml: line 23: "), "{e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn unknown_keys_are_named() {
+        let e = err(&edit("substeps = 4", "substeps = 4\nsubstepz = 5"));
+        assert!(e.starts_with("cfg.toml: line 22: unknown field `substepz`"), "{e}");
+        let e = err(&edit("stiffness = 1.0e5", "stiffness = 1.0e5\nmas = 3.0"));
+        assert!(e.contains("unknown field `mas`"), "{e}");
+        let e = err(&format!("{BASE}\n[outptu]\ndir = \"x\"\n"));
+        assert!(e.contains("unknown field `outptu`"), "{e}");
+    }
+
+    #[test]
+    fn unknown_scheme_and_kinds() {
+        let e = err(&edit("scheme = \"newmark\"", "scheme = \"leapfrog\""));
+        assert!(
+            e.starts_with("cfg.toml: integrator.scheme: unknown scheme 'leapfrog'"),
+            "{e}"
+        );
+        let e = err(&edit("kind = \"linear_sdof\"\ndof = 1", "kind = \"bouc_wen\"\ndof = 1"));
+        assert!(
+            e.contains("unknown variant `bouc_wen`, expected `linear_sdof` or `linear_mdof`"),
+            "{e}"
+        );
+        let e = err(&edit("kind = \"second_order\"", "kind = \"third_order\""));
+        assert!(e.contains("unknown variant `third_order`"), "{e}");
+        let e = err(&edit("generator = \"harmonic\"", "generator = \"chirp\""));
+        assert_eq!(
+            e,
+            "cfg.toml: ground_motion.generator: unknown generator 'chirp' (expected harmonic, sine_sweep or kanai_tajimi)"
+        );
+    }
+
+    #[test]
+    fn matrix_errors() {
+        let e = err(&edit(
+            "stiffness = [[2e6, -1e6, 0.0], [-1e6, 2e6, -1e6], [0.0, -1e6, 1e6]]",
+            "stiffness = [[2e6, -1e6], [-1e6, 2e6]]",
+        ));
+        assert_eq!(
+            e,
+            "cfg.toml: structure.stiffness: is 2x2 but the model has 3 DOFs (the mass matrix is 3x3)"
+        );
+        let e = err(&edit("[-1e6, 2e6, -1e6], [0.0", "[-1e6, 2e6, -1e6], [5.0"));
+        assert!(
+            e.starts_with("cfg.toml: structure.stiffness: is not symmetric: entry (3, 1)"),
+            "{e}"
+        );
+        let e = err(&edit("[0.0, 0.0, 1000.0]]", "[0.0, 0.0, -1000.0]]"));
+        assert_eq!(e, "cfg.toml: structure.mass: is not positive definite");
+        let e = err(&edit("[0.0, 0.0, 1000.0]]", "[0.0, 1000.0]]"));
+        assert_eq!(e, "cfg.toml: structure.mass: row 3 has 2 entries but row 1 has 3");
+        let e = err(&edit("[0.0, 0.0, 1000.0]]", "[0.0, 0.0, nan]]"));
+        assert_eq!(e, "cfg.toml: structure.mass: entry (3, 3) is not finite (NaN)");
+    }
+
+    #[test]
+    fn missing_files_are_named() {
+        let e = err(&edit(
+            "mass = [[1000.0, 0.0, 0.0], [0.0, 1000.0, 0.0], [0.0, 0.0, 1000.0]]",
+            "mass = \"M.mtx\"",
+        ));
+        assert!(
+            e.starts_with("cfg.toml: structure.mass: /nonexistent-dir/M.mtx: cannot read file"),
+            "{e}"
+        );
+        let e = err(&edit(
+            "generator = \"harmonic\"\namplitude = 1.0\nfrequency = 2.0\nduration = 1.0",
+            "file = \"records/ag.csv\"",
+        ));
+        assert!(
+            e.starts_with("cfg.toml: ground_motion.file: /nonexistent-dir/records/ag.csv: cannot read file"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn nan_in_a_record_names_file_and_line() {
+        let dir = std::env::temp_dir().join(format!("substep-config-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("ag.csv"), "t,ag\n0,0\n0.01,0.5\n0.02,NaN\n0.03,0\n").unwrap();
+        let text = edit(
+            "generator = \"harmonic\"\namplitude = 1.0\nfrequency = 2.0\nduration = 1.0",
+            "file = \"ag.csv\"",
+        );
+        let e = TestDefinition::from_toml(&text, "cfg.toml", &dir)
+            .unwrap_err()
+            .to_string();
+        let _ = std::fs::remove_dir_all(&dir);
+        assert!(e.starts_with("cfg.toml: ground_motion.file: "), "{e}");
+        assert!(e.ends_with("ag.csv: line 4: value is not finite (NaN)"), "{e}");
+    }
+
+    #[test]
+    fn time_step_and_substeps() {
+        let e = err(&edit("dt = 0.01", "dt = 0.0"));
+        assert_eq!(e, "cfg.toml: integrator.dt: must be a finite number > 0, got 0");
+        let e = err(&edit("dt = 0.01", "dt = -0.01"));
+        assert_eq!(e, "cfg.toml: integrator.dt: must be a finite number > 0, got -0.01");
+        let e = err(&edit("substeps = 4", "substeps = 0"));
+        assert_eq!(e, "cfg.toml: substructure.substeps: must be at least 1");
+        let e = err(&edit("substeps = 4", "substeps = 4\ninner_steps = 0"));
+        assert_eq!(e, "cfg.toml: substructure.inner_steps: must be at least 1");
+    }
+
+    #[test]
+    fn coupling_dof_checks() {
+        let e = err(&edit("coupling_dofs = [3, 1]", "coupling_dofs = [3, 7]"));
+        assert_eq!(
+            e,
+            "cfg.toml: substructure.coupling_dofs: DOF 7 is out of range (the model has DOFs 1..=3)"
+        );
+        let e = err(&edit("coupling_dofs = [3, 1]", "coupling_dofs = [3, 0]"));
+        assert_eq!(
+            e,
+            "cfg.toml: substructure.coupling_dofs: DOF 0 is out of range (the model has DOFs 1..=3)"
+        );
+        let e = err(&edit("coupling_dofs = [3, 1]", "coupling_dofs = [3, 1, 3]"));
+        assert_eq!(e, "cfg.toml: substructure.coupling_dofs: DOF 3 is listed twice");
+        let e = err(&edit("coupling_dofs = [3, 1]", "coupling_dofs = [3, 1, 2]"));
+        assert_eq!(
+            e,
+            "cfg.toml: substructure.coupling_dofs: DOF 2 has no specimen attached"
+        );
+        let e = err(&edit("dof = 1\n", "dof = 2\n"));
+        assert_eq!(
+            e,
+            "cfg.toml: substructure.specimen[2].dof: DOF 2 is not one of substructure.coupling_dofs"
+        );
+    }
+
+    #[test]
+    fn specimen_values() {
+        let e = err(&edit("mass = 50.0", "mass = -50.0"));
+        assert_eq!(
+            e,
+            "cfg.toml: substructure.specimen[1].mass: must be a finite number > 0, got -50"
+        );
+        let e = err(&edit("damping = 60.0", "damping = -60.0"));
+        assert_eq!(
+            e,
+            "cfg.toml: substructure.specimen[1].damping: must be a finite number >= 0, got -60"
+        );
+        let mdof = "kind = \"linear_mdof\"\ndofs = [3]\nmass = [[0.0, 0.0], [0.0, 50.0]]\n\
+                    stiffness = [[2000.0, -2000.0], [-2000.0, 2000.0]]\ndamping = [[60.0, -60.0], [-60.0, 60.0]]";
+        let ok = edit(
+            "kind = \"linear_sdof\"\ndof = 3\nmass = 50.0\nstiffness = 2000.0\ndamping = 60.0",
+            mdof,
+        );
+        assert!(parse(&ok).is_ok());
+        let bad = ok.replace("[0.0, 50.0]]", "[0.0, -50.0]]");
+        let e = err(&bad);
+        assert!(e.starts_with("cfg.toml: substructure.specimen[1].mass: "), "{e}");
+        let bad = ok.replace(
+            "[[0.0, 0.0], [0.0, 50.0]]",
+            "[[0.0, 0.0, 0.0], [0.0, 50.0, 0.0], [0.0, 0.0, 1.0]]",
+        );
+        let e = err(&bad);
+        assert!(e.starts_with("cfg.toml: substructure.specimen[1].mass: is 3x3;"), "{e}");
+    }
+
+    #[test]
+    fn actuator_and_sensor_values() {
+        let e = err(&edit("zeta = 0.7", "zeta = 0.0"));
+        assert!(
+            e.starts_with("cfg.toml: substructure.actuator.zeta: must be > 0"),
+            "{e}"
+        );
+        let e = err(&edit("zeta = 0.7", "zeta = -0.2"));
+        assert!(
+            e.starts_with("cfg.toml: substructure.actuator.zeta: must be > 0"),
+            "{e}"
+        );
+        let e = err(&edit("frequency = 50.0\n", ""));
+        assert!(e.contains("missing field `frequency`"), "{e}");
+        let e = err(&edit("force_noise = 1.0", "force_noise = -1.0"));
+        assert_eq!(
+            e,
+            "cfg.toml: substructure.sensors.force_noise: must be a finite number >= 0, got -1"
+        );
+        let e = err(&edit("force_noise = 1.0", "adc_bits = 12"));
+        assert!(
+            e.starts_with("cfg.toml: substructure.sensors.adc_bits: needs force_range"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn scheme_must_suit_the_substructure() {
+        let e = err(&edit("scheme = \"newmark\"", "scheme = \"central_difference\""));
+        assert!(
+            e.starts_with("cfg.toml: integrator.scheme: the substructure algorithm needs an implicit Newmark scheme"),
+            "{e}"
+        );
+        let e = err(&edit("scheme = \"newmark\"", "scheme = \"newmark\"\nbeta = 0.0"));
+        assert!(e.starts_with("cfg.toml: integrator.scheme: "), "{e}");
+        let e = err(&edit("scheme = \"newmark\"", "scheme = \"fox_goodwin\"\nbeta = 0.3"));
+        assert!(
+            e.starts_with("cfg.toml: integrator.beta: only used with scheme = \"newmark\""),
+            "{e}"
+        );
+        let e = err(&edit("scheme = \"newmark\"", "scheme = \"hht\"\nalpha = -0.5"));
+        assert!(
+            e.starts_with("cfg.toml: integrator.alpha: Hilber's alpha must lie in [-1/3, 0]"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn ground_motion_keys() {
+        let e = err(&edit("frequency = 2.0", "frequency = 2.0\nf0 = 1.0"));
+        assert!(
+            e.starts_with("cfg.toml: ground_motion.f0: not used by generator = \"harmonic\""),
+            "{e}"
+        );
+        let e = err(&edit("frequency = 2.0\n", ""));
+        assert_eq!(
+            e,
+            "cfg.toml: ground_motion.frequency: required for generator = \"harmonic\""
+        );
+        let e = err(&edit("frequency = 2.0", "frequency = 80.0"));
+        assert!(
+            e.starts_with("cfg.toml: ground_motion.frequency: must be below the Nyquist"),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,355 @@
+//! MatrixMarket (`.mtx`) reader for dense real matrices.
+//!
+//! Supported: `%%MatrixMarket matrix coordinate|array real|integer|double general|symmetric|skew-symmetric`
+//! (keywords in any case). `coordinate` lists `i j value` with 1-based indices; `array` lists all
+//! values column by column (for `symmetric` only the lower triangle, for `skew-symmetric` only
+//! the strict lower triangle). A symmetric coordinate file may list an off-diagonal pair in
+//! either triangle, but only once; duplicate entries are an error. Lines starting with `%` are
+//! comments. `pattern` and `complex` files are refused.
+//!
+//! Every error names the file and, where it has one, the line: `K.mtx: line 7: row index 4 is
+//! out of range 1..=3`.
+
+use crate::error::{Error, Result};
+use nalgebra::DMatrix;
+use std::path::Path;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Layout {
+    Coordinate,
+    Array,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Symmetry {
+    General,
+    Symmetric,
+    SkewSymmetric,
+}
+
+/// Read a `.mtx` file into a dense matrix; the path as given names the file in messages.
+pub fn read_matrix_market(path: impl AsRef<Path>) -> Result<DMatrix<f64>> {
+    let path = path.as_ref();
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| Error::file(&name, format!("cannot read file: {e}")))?;
+    parse_matrix_market(&text, &name)
+}
+
+/// Parse the text of a `.mtx` file; `name` names it in messages.
+pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
+    let fail = |line: usize, reason: String| Error::file(name, format!("line {line}: {reason}"));
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim_start_matches('\u{feff}')));
+
+    let (_, header) = lines
+        .next()
+        .ok_or_else(|| Error::file(name, "empty file (expected a '%%MatrixMarket' header)"))?;
+    let (layout, symmetry) = parse_header(header).map_err(|r| fail(1, r))?;
+
+    // Size line: the first line that is neither a comment nor blank.
+    let mut data = lines.filter(|(_, l)| {
+        let t = l.trim();
+        !t.is_empty() && !t.starts_with('%')
+    });
+    let (size_line, size) = data
+        .next()
+        .ok_or_else(|| Error::file(name, "no size line after the header"))?;
+    let dims: Vec<&str> = size.split_whitespace().collect();
+    let expected_fields = if layout == Layout::Coordinate { 3 } else { 2 };
+    let what = if layout == Layout::Coordinate {
+        "rows, columns, entries"
+    } else {
+        "rows, columns"
+    };
+    if dims.len() != expected_fields {
+        return Err(fail(
+            size_line,
+            format!(
+                "size line must hold {expected_fields} integers ({what}), found '{}'",
+                size.trim()
+            ),
+        ));
+    }
+    let parse_count = |s: &str| -> Result<usize> {
+        s.parse::<usize>()
+            .map_err(|_| fail(size_line, format!("cannot parse '{s}' as a non-negative integer")))
+    };
+    let rows = parse_count(dims[0])?;
+    let cols = parse_count(dims[1])?;
+    if rows == 0 || cols == 0 {
+        return Err(fail(size_line, format!("matrix size {rows}x{cols} is empty")));
+    }
+    if symmetry != Symmetry::General && rows != cols {
+        return Err(fail(
+            size_line,
+            format!("a symmetric matrix must be square, the size line says {rows}x{cols}"),
+        ));
+    }
+    // Refuse absurd sizes before allocating (dense storage).
+    const MAX_ENTRIES: usize = 100_000_000;
+    if rows.checked_mul(cols).is_none_or(|n| n > MAX_ENTRIES) {
+        return Err(fail(
+            size_line,
+            format!("matrix size {rows}x{cols} is too large for a dense matrix"),
+        ));
+    }
+    let mut m = DMatrix::zeros(rows, cols);
+
+    let value = |line: usize, s: &str| -> Result<f64> {
+        let v: f64 = s
+            .parse()
+            .map_err(|_| fail(line, format!("cannot parse '{s}' as a number")))?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(fail(line, format!("value is not finite ({s})")))
+        }
+    };
+
+    match layout {
+        Layout::Coordinate => {
+            let nnz = parse_count(dims[2])?;
+            let max_nnz = match symmetry {
+                Symmetry::General => rows * cols,
+                Symmetry::Symmetric => rows * (rows + 1) / 2,
+                Symmetry::SkewSymmetric => rows * (rows - 1) / 2,
+            };
+            if nnz > max_nnz {
+                return Err(fail(
+                    size_line,
+                    format!("{nnz} entries declared but a {rows}x{cols} matrix of this kind holds at most {max_nnz}"),
+                ));
+            }
+            let mut set = vec![false; rows * cols];
+            let mut count = 0;
+            for (line, l) in data {
+                let f: Vec<&str> = l.split_whitespace().collect();
+                if f.len() != 3 {
+                    return Err(fail(
+                        line,
+                        format!("expected 3 fields (row, column, value), found {}", f.len()),
+                    ));
+                }
+                if count == nnz {
+                    return Err(fail(
+                        line,
+                        format!("more entries than the {nnz} declared in the size line (line {size_line})"),
+                    ));
+                }
+                let index = |s: &str, what: &str, n: usize| -> Result<usize> {
+                    match s.parse::<usize>() {
+                        Ok(i) if (1..=n).contains(&i) => Ok(i - 1),
+                        Ok(i) => Err(fail(line, format!("{what} index {i} is out of range 1..={n}"))),
+                        Err(_) => Err(fail(line, format!("cannot parse '{s}' as a {what} index"))),
+                    }
+                };
+                let i = index(f[0], "row", rows)?;
+                let j = index(f[1], "column", cols)?;
+                let v = value(line, f[2])?;
+                if symmetry == Symmetry::SkewSymmetric && i == j {
+                    return Err(fail(
+                        line,
+                        format!("diagonal entry ({}, {}) in a skew-symmetric file", i + 1, j + 1),
+                    ));
+                }
+                let mut put = |r: usize, c: usize, v: f64| -> Result<()> {
+                    if std::mem::replace(&mut set[r + c * rows], true) {
+                        let note = if symmetry == Symmetry::General {
+                            ""
+                        } else {
+                            " (a symmetric file lists each off-diagonal pair once)"
+                        };
+                        return Err(fail(line, format!("entry ({}, {}) is given twice{note}", r + 1, c + 1)));
+                    }
+                    m[(r, c)] = v;
+                    Ok(())
+                };
+                put(i, j, v)?;
+                if i != j {
+                    match symmetry {
+                        Symmetry::General => {}
+                        Symmetry::Symmetric => put(j, i, v)?,
+                        Symmetry::SkewSymmetric => put(j, i, -v)?,
+                    }
+                }
+                count += 1;
+            }
+            if count != nnz {
+                return Err(Error::file(
+                    name,
+                    format!("the size line (line {size_line}) declares {nnz} entries but {count} were found"),
+                ));
+            }
+        }
+        Layout::Array => {
+            // Positions in storage order (column-major, lower triangle for symmetric kinds).
+            let positions: Vec<(usize, usize)> = (0..cols)
+                .flat_map(|j| (0..rows).map(move |i| (i, j)))
+                .filter(|&(i, j)| match symmetry {
+                    Symmetry::General => true,
+                    Symmetry::Symmetric => i >= j,
+                    Symmetry::SkewSymmetric => i > j,
+                })
+                .collect();
+            let mut count = 0;
+            for (line, l) in data {
+                for field in l.split_whitespace() {
+                    let Some(&(i, j)) = positions.get(count) else {
+                        return Err(fail(
+                            line,
+                            format!("more values than the {} a {rows}x{cols} array holds", positions.len()),
+                        ));
+                    };
+                    let v = value(line, field)?;
+                    m[(i, j)] = v;
+                    match symmetry {
+                        Symmetry::General => {}
+                        Symmetry::Symmetric => m[(j, i)] = v,
+                        Symmetry::SkewSymmetric => m[(j, i)] = -v,
+                    }
+                    count += 1;
+                }
+            }
+            if count != positions.len() {
+                return Err(Error::file(
+                    name,
+                    format!(
+                        "a {rows}x{cols} array needs {} values but {count} were found",
+                        positions.len()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(m)
+}
+
+fn parse_header(header: &str) -> std::result::Result<(Layout, Symmetry), String> {
+    let words: Vec<String> = header.split_whitespace().map(str::to_ascii_lowercase).collect();
+    let expected = "expected '%%MatrixMarket matrix coordinate|array real|integer general|symmetric|skew-symmetric'";
+    if words.first().map(String::as_str) != Some("%%matrixmarket") {
+        return Err(format!(
+            "not a MatrixMarket file: {expected}, found '{}'",
+            header.trim()
+        ));
+    }
+    if words.len() != 5 {
+        return Err(format!("bad header '{}': {expected}", header.trim()));
+    }
+    if words[1] != "matrix" {
+        return Err(format!("object '{}' is not supported (only 'matrix')", words[1]));
+    }
+    let layout = match words[2].as_str() {
+        "coordinate" => Layout::Coordinate,
+        "array" => Layout::Array,
+        other => return Err(format!("format '{other}' is not supported (coordinate or array)")),
+    };
+    match words[3].as_str() {
+        "real" | "integer" | "double" => {}
+        other => {
+            return Err(format!(
+                "field '{other}' is not supported (real or integer; pattern and complex matrices cannot be used)"
+            ));
+        }
+    }
+    let symmetry = match words[4].as_str() {
+        "general" => Symmetry::General,
+        "symmetric" => Symmetry::Symmetric,
+        "skew-symmetric" => Symmetry::SkewSymmetric,
+        other => {
+            return Err(format!(
+                "symmetry '{other}' is not supported (general, symmetric or skew-symmetric)"
+            ));
+        }
+    };
+    Ok((layout, symmetry))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::dmatrix;
+
+    fn parse(text: &str) -> Result<DMatrix<f64>> {
+        parse_matrix_market(text, "K.mtx")
+    }
+    fn err(text: &str) -> String {
+        parse(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn coordinate_general_and_integer() {
+        let m = parse("%%MatrixMarket matrix coordinate real general\n% comment\n2 3 3\n1 1 1.5\n2 3 -2e3\n1 2 4\n")
+            .unwrap();
+        assert_eq!(m, dmatrix![1.5, 4.0, 0.0; 0.0, 0.0, -2000.0]);
+        let m = parse("%%MatrixMarket matrix coordinate integer general\n1 1 1\n1 1 7\n").unwrap();
+        assert_eq!(m, dmatrix![7.0]);
+    }
+
+    #[test]
+    fn coordinate_symmetric_mirrors_either_triangle() {
+        let lower = parse("%%MatrixMarket matrix coordinate real symmetric\n2 2 3\n1 1 2\n2 1 -1\n2 2 1\n").unwrap();
+        let upper = parse("%%MatrixMarket matrix coordinate real symmetric\n2 2 3\n1 1 2\n1 2 -1\n2 2 1\n").unwrap();
+        assert_eq!(lower, dmatrix![2.0, -1.0; -1.0, 1.0]);
+        assert_eq!(lower, upper);
+        let skew = parse("%%MatrixMarket matrix coordinate real skew-symmetric\n2 2 1\n2 1 3\n").unwrap();
+        assert_eq!(skew, dmatrix![0.0, -3.0; 3.0, 0.0]);
+    }
+
+    #[test]
+    fn array_general_and_symmetric() {
+        let m = parse("%%MatrixMarket matrix array real general\n2 2\n1\n2\n3\n4\n").unwrap();
+        assert_eq!(m, dmatrix![1.0, 3.0; 2.0, 4.0]);
+        let s = parse("%%MatrixMarket matrix array real symmetric\n2 2\n4 -1\n3\n").unwrap();
+        assert_eq!(s, dmatrix![4.0, -1.0; -1.0, 3.0]);
+    }
+
+    #[test]
+    fn errors_name_file_and_line() {
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate complex general\n1 1 1\n1 1 1 0\n"),
+            "K.mtx: line 1: field 'complex' is not supported (real or integer; pattern and complex matrices cannot be used)"
+        );
+        assert!(err("1 2 3\n").starts_with("K.mtx: line 1: not a MatrixMarket file"));
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate real general\n3 3 2\n1 1 1\n4 1 2\n"),
+            "K.mtx: line 4: row index 4 is out of range 1..=3"
+        );
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate real general\n2 2 3\n1 1 1\n2 2 1\n"),
+            "K.mtx: the size line (line 2) declares 3 entries but 2 were found"
+        );
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate real general\n2 2 1\n1 1 1\n2 2 1\n"),
+            "K.mtx: line 4: more entries than the 1 declared in the size line (line 2)"
+        );
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate real general\n2 2 1\n\n1 1 nan\n"),
+            "K.mtx: line 4: value is not finite (nan)"
+        );
+        assert_eq!(
+            err("%%MatrixMarket matrix array real general\n2 2\n1 2 3\n"),
+            "K.mtx: a 2x2 array needs 4 values but 3 were found"
+        );
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate real symmetric\n2 2 2\n2 1 1\n1 2 1\n"),
+            "K.mtx: line 4: entry (1, 2) is given twice (a symmetric file lists each off-diagonal pair once)"
+        );
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate real general\n2 2 2\n1 1 1\n1 1 2\n"),
+            "K.mtx: line 4: entry (1, 1) is given twice"
+        );
+        assert_eq!(
+            err("%%MatrixMarket matrix coordinate real general\n2 x 1\n"),
+            "K.mtx: line 2: cannot parse 'x' as a non-negative integer"
+        );
+        assert!(
+            read_matrix_market("/nonexistent/M.mtx")
+                .unwrap_err()
+                .to_string()
+                .starts_with("/nonexistent/M.mtx: cannot read file")
+        );
+    }
+}

@@ -1,0 +1,13 @@
+//! Input and output around the numerical core: MatrixMarket matrices, TOML test definitions
+//! (documented in `docs/config.md`) and the stepping of a defined test ([`run`]).
+//!
+//! Conventions: SI units; DOF numbers are 1-based in files and messages, 0-based in the
+//! library types; every error is one line naming the file and line or the config key.
+
+pub mod config;
+pub mod matrix_market;
+pub mod run;
+
+pub use config::{GroundMotion, IntegratorDefinition, OutputSettings, SubstructureDefinition, TestDefinition};
+pub use matrix_market::{parse_matrix_market, read_matrix_market};
+pub use run::{Reference, Simulation};

@@ -1,0 +1,282 @@
+//! Running a [`TestDefinition`]: [`Simulation`] advances the test one step at a time (monolithic
+//! integration, or controller + virtual lab for a substructure test) and [`Reference`] integrates
+//! the assembled monolithic model alongside, when every specimen is linear.
+//!
+//! Both are built once (all allocation happens in the constructors) and then stepped; the
+//! caller records whatever it needs between steps.
+
+use super::config::TestDefinition;
+use crate::error::{Error, Result};
+use crate::integrate::{Integrator, Kinematics, Scheme};
+use crate::specimen::assemble_monolithic;
+use crate::substructure::{StepRecord, SubstepController, SubstepObserver, SubstructureTest};
+use crate::transfer::VirtualLab;
+use nalgebra::{DMatrix, DVector};
+
+/// The largest assembled model integrated with the exact scheme as a reference; larger models
+/// use Newmark with the run's β, γ and time step.
+pub const EXACT_REFERENCE_MAX_DOFS: usize = 200;
+
+enum Engine {
+    Monolithic {
+        integrator: Box<dyn Integrator>,
+        mass_influence: DVector<f64>,
+        load: DVector<f64>,
+    },
+    Substructured(Box<SubstructureTest>),
+}
+
+/// A test in progress.
+pub struct Simulation {
+    engine: Engine,
+    accel: Vec<f64>,
+    dt: f64,
+    step: usize,
+}
+
+impl Simulation {
+    /// Build the integrator, or the controller and the virtual lab, at rest at `t = 0`.
+    pub fn new(def: &TestDefinition) -> Result<Self> {
+        let model = &def.model;
+        if def.ground_motion.accel.len() < 2 {
+            return Err(Error::invalid("ground_motion", "needs at least two samples (one step)"));
+        }
+        let accel = def.ground_motion.accel.clone();
+        let dt = def.integrator.dt;
+        let mass_influence = model.effective_mass_vector();
+        let load0 = -&mass_influence * accel[0];
+        let engine = match &def.substructure {
+            None => Engine::Monolithic {
+                integrator: def.integrator.scheme.build(model, dt, &load0)?,
+                load: load0,
+                mass_influence,
+            },
+            Some(s) => {
+                let controller = SubstepController::new(model, &s.settings(dt), &load0)?;
+                let n_c = s.coupling_dofs.len();
+                let lab = VirtualLab::from_specs(
+                    &s.coupling_dofs,
+                    &s.specimens,
+                    &vec![s.actuator; n_c],
+                    &s.force_sensors,
+                    &s.displacement_sensors,
+                    dt / s.substeps as f64,
+                    s.inner_steps,
+                )?;
+                Engine::Substructured(Box::new(SubstructureTest::new(model, controller, Box::new(lab))?))
+            }
+        };
+        Ok(Self {
+            engine,
+            accel,
+            dt,
+            step: 0,
+        })
+    }
+
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+    /// Steps done so far.
+    pub fn steps_done(&self) -> usize {
+        self.step
+    }
+    /// Steps of the whole run.
+    pub fn steps_total(&self) -> usize {
+        self.accel.len() - 1
+    }
+    /// Time of the current state [s].
+    pub fn time(&self) -> f64 {
+        self.step as f64 * self.dt
+    }
+    /// Ground acceleration at step `i` [m/s²].
+    pub fn ground_acceleration(&self, i: usize) -> f64 {
+        self.accel[i]
+    }
+
+    /// Current displacement, velocity and acceleration of the numerical DOFs (relative).
+    pub fn state(&self) -> &Kinematics {
+        match &self.engine {
+            Engine::Monolithic { integrator, .. } => integrator.state(),
+            Engine::Substructured(test) => test.controller.state(),
+        }
+    }
+
+    /// Coupling data of the last step (substructured runs only).
+    pub fn coupling(&self) -> Option<StepRecord<'_>> {
+        match &self.engine {
+            Engine::Monolithic { .. } => None,
+            Engine::Substructured(test) => Some(test.record()),
+        }
+    }
+
+    /// The substructure test (controller and experimental side), if there is one.
+    pub fn substructure_test(&self) -> Option<&SubstructureTest> {
+        match &self.engine {
+            Engine::Monolithic { .. } => None,
+            Engine::Substructured(test) => Some(test),
+        }
+    }
+
+    /// Advance one step; `observer` sees every sub-step of a substructured run. A non-finite
+    /// state gives [`Error::Diverged`]; stepping past the end is an error.
+    pub fn step(&mut self, observer: &mut impl SubstepObserver) -> Result<()> {
+        let i = self.step;
+        if i + 1 >= self.accel.len() {
+            return Err(Error::invalid("simulation", "the run is already complete"));
+        }
+        let (ag_i, ag_next) = (self.accel[i], self.accel[i + 1]);
+        match &mut self.engine {
+            Engine::Monolithic {
+                integrator,
+                mass_influence,
+                load,
+            } => {
+                load.copy_from(mass_influence);
+                load.scale_mut(-ag_next);
+                integrator.step(load);
+                if !integrator.state().is_finite() {
+                    return Err(Error::Diverged {
+                        step: i + 1,
+                        time: (i + 1) as f64 * self.dt,
+                        reason: "the response is no longer finite (NaN or overflow)".into(),
+                    });
+                }
+            }
+            Engine::Substructured(test) => test.step(ag_i, ag_next, observer)?,
+        }
+        self.step = i + 1;
+        Ok(())
+    }
+}
+
+/// One linear specimen inside the assembled model: global DOFs (attached, then internal), its
+/// stiffness and damping rows of the attached DOFs, and the coupling index of each attached DOF.
+struct SpecimenRows {
+    global: Vec<usize>,
+    coupling_index: Vec<usize>,
+    k_rows: DMatrix<f64>,
+    c_rows: DMatrix<f64>,
+}
+
+/// The monolithic reference of a substructure test with linear specimens: numerical model plus
+/// specimens assembled ([`assemble_monolithic`]) and integrated exactly (first-order hold) if it
+/// has at most [`EXACT_REFERENCE_MAX_DOFS`] DOFs, else with the run's Newmark scheme.
+pub struct Reference {
+    integrator: Box<dyn Integrator>,
+    scheme: &'static str,
+    n_numerical: usize,
+    n_assembled: usize,
+    mass_influence: DVector<f64>,
+    load: DVector<f64>,
+    specimens: Vec<SpecimenRows>,
+    force: Vec<f64>,
+}
+
+impl Reference {
+    /// `None` for monolithic runs and when a specimen is not linear.
+    pub fn new(def: &TestDefinition) -> Result<Option<Self>> {
+        let Some(s) = &def.substructure else {
+            return Ok(None);
+        };
+        let mut parts = Vec::with_capacity(s.specimens.len());
+        for spec in &s.specimens {
+            match spec.linear_matrices() {
+                Some(m) => parts.push(m),
+                None => return Ok(None),
+            }
+        }
+        let assembled = assemble_monolithic(&def.model, &s.specimens)?;
+        let n = def.model.n_dofs();
+        let n_assembled = assembled.n_dofs();
+        let (scheme, name) = if n_assembled <= EXACT_REFERENCE_MAX_DOFS {
+            (Scheme::Exact, "exact")
+        } else {
+            (
+                Scheme::Newmark {
+                    beta: s.beta,
+                    gamma: s.gamma,
+                },
+                "newmark",
+            )
+        };
+        let mass_influence = assembled.effective_mass_vector();
+        let load = -&mass_influence * def.ground_motion.accel.first().copied().unwrap_or(0.0);
+        let integrator = scheme.build(&assembled, def.integrator.dt, &load)?;
+        // Same DOF numbering as assemble_monolithic: internal DOFs appended in specimen order.
+        let mut next = n;
+        let specimens = parts
+            .iter()
+            .map(|p| {
+                let n_a = p.dofs.len();
+                let n_p = p.stiffness.nrows();
+                let global: Vec<usize> = p.dofs.iter().copied().chain(next..next + n_p - n_a).collect();
+                next += n_p - n_a;
+                let coupling_index = p
+                    .dofs
+                    .iter()
+                    .map(|d| {
+                        s.coupling_dofs.iter().position(|c| c == d).ok_or_else(|| {
+                            Error::invalid(
+                                "substructure.specimen",
+                                format!("DOF {} is not one of substructure.coupling_dofs", d + 1),
+                            )
+                        })
+                    })
+                    .collect::<Result<_>>()?;
+                Ok(SpecimenRows {
+                    global,
+                    coupling_index,
+                    k_rows: p.stiffness.rows(0, n_a).into_owned(),
+                    c_rows: p.damping.rows(0, n_a).into_owned(),
+                })
+            })
+            .collect::<Result<_>>()?;
+        Ok(Some(Self {
+            integrator,
+            scheme: name,
+            n_numerical: n,
+            n_assembled,
+            mass_influence,
+            load,
+            specimens,
+            force: vec![0.0; s.coupling_dofs.len()],
+        }))
+    }
+
+    /// `exact` or `newmark`.
+    pub fn scheme(&self) -> &'static str {
+        self.scheme
+    }
+    /// DOFs of the assembled model.
+    pub fn n_dofs(&self) -> usize {
+        self.n_assembled
+    }
+
+    /// Advance to the next step, ground acceleration `ag_next` at its end.
+    pub fn step(&mut self, ag_next: f64) {
+        self.load.copy_from(&self.mass_influence);
+        self.load.scale_mut(-ag_next);
+        self.integrator.step(&self.load);
+        let s = self.integrator.state();
+        self.force.iter_mut().for_each(|f| *f = 0.0);
+        for p in &self.specimens {
+            for (li, &ci) in p.coupling_index.iter().enumerate() {
+                let mut acc = 0.0;
+                for (lj, &g) in p.global.iter().enumerate() {
+                    acc += p.k_rows[(li, lj)] * s.u[g] + p.c_rows[(li, lj)] * s.v[g];
+                }
+                self.force[ci] -= acc;
+            }
+        }
+    }
+
+    /// Displacements of the numerical DOFs [m].
+    pub fn u(&self) -> &[f64] {
+        &self.integrator.state().u.as_slice()[..self.n_numerical]
+    }
+    /// Force of the specimens on the structure at each coupling DOF [N].
+    pub fn coupling_force(&self) -> &[f64] {
+        &self.force
+    }
+}
