@@ -179,7 +179,11 @@ impl ExplicitNewmark {
 
 impl Integrator for ExplicitNewmark {
     fn name(&self) -> &'static str {
-        if self.gamma == 0.5 { "central_difference" } else { "explicit_newmark" }
+        if self.gamma == 0.5 {
+            "central_difference"
+        } else {
+            "explicit_newmark"
+        }
     }
     fn dt(&self) -> f64 {
         self.dt
