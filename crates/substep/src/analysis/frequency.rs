@@ -22,13 +22,19 @@ pub fn exact_amplification(case: &AnalysisCase, r: f64) -> Result<f64> {
 }
 
 fn exact_amplification_of(m: &crate::model::StructuralModel, r: f64) -> f64 {
+    continuous_response(m, 0, r).norm()
+}
+
+/// Continuous frequency response `U_out / A_g` of a linear model to harmonic ground
+/// acceleration at circular frequency `omega`: `(−ω² M + iω C + K) U = −M ι`.
+pub fn continuous_response(m: &crate::model::StructuralModel, output: usize, omega: f64) -> Complex<f64> {
     let n = m.n_dofs();
     let z = DMatrix::from_fn(n, n, |i, j| {
-        Complex::new(m.stiffness[(i, j)] - r * r * m.mass[(i, j)], r * m.damping[(i, j)])
+        Complex::new(m.stiffness[(i, j)] - omega * omega * m.mass[(i, j)], omega * m.damping[(i, j)])
     });
     let mi = m.effective_mass_vector();
     let rhs = DVector::from_fn(n, |i, _| Complex::new(-mi[i], 0.0));
-    z.lu().solve(&rhs).map_or(f64::NAN, |u| u[0].norm())
+    z.lu().solve(&rhs).map_or(Complex::new(f64::NAN, f64::NAN), |u| u[output])
 }
 
 /// The substructure algorithm's discrete amplification at frequency ratio `r`.

@@ -23,8 +23,8 @@ use crate::excitation::{self, Envelope, KanaiTajimi, Record};
 use crate::integrate::{Scheme, check_hilber_alpha};
 use crate::model::{DampingSpec, ShearBuilding, StructuralModel, TmdSystem, sdof, shear_building, tmd_two_dof};
 use crate::specimen::SpecimenSpec;
-use crate::substructure::{ErrorForceSpec, SubstepSettings};
-use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec};
+use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings, SubstructureTest};
+use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab};
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::fmt;
@@ -85,6 +85,23 @@ pub struct SubstructureDefinition {
 }
 
 impl SubstructureDefinition {
+    /// The substructure test of this definition (controller + virtual lab) for `model` at
+    /// rest, time step `dt` and initial load `load0`.
+    pub fn build_test(&self, model: &StructuralModel, dt: f64, load0: &DVector<f64>) -> Result<SubstructureTest> {
+        let controller = SubstepController::new(model, &self.settings(dt), load0)?;
+        let n_c = self.coupling_dofs.len();
+        let lab = VirtualLab::from_specs(
+            &self.coupling_dofs,
+            &self.specimens,
+            &vec![self.actuator; n_c],
+            &self.force_sensors,
+            &self.displacement_sensors,
+            dt / self.substeps as f64,
+            self.inner_steps,
+        )?;
+        SubstructureTest::new(model, controller, Box::new(lab))
+    }
+
     /// Settings of the sub-step controller for time step `dt`.
     pub fn settings(&self, dt: f64) -> SubstepSettings {
         SubstepSettings {

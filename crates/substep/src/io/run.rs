@@ -9,8 +9,7 @@ use super::config::TestDefinition;
 use crate::error::{Error, Result};
 use crate::integrate::{Integrator, Kinematics, Scheme};
 use crate::specimen::assemble_monolithic;
-use crate::substructure::{StepRecord, SubstepController, SubstepObserver, SubstructureTest};
-use crate::transfer::VirtualLab;
+use crate::substructure::{StepRecord, SubstepObserver, SubstructureTest};
 use nalgebra::{DMatrix, DVector};
 
 /// The largest assembled model integrated with the exact scheme as a reference; larger models
@@ -51,20 +50,7 @@ impl Simulation {
                 load: load0,
                 mass_influence,
             },
-            Some(s) => {
-                let controller = SubstepController::new(model, &s.settings(dt), &load0)?;
-                let n_c = s.coupling_dofs.len();
-                let lab = VirtualLab::from_specs(
-                    &s.coupling_dofs,
-                    &s.specimens,
-                    &vec![s.actuator; n_c],
-                    &s.force_sensors,
-                    &s.displacement_sensors,
-                    dt / s.substeps as f64,
-                    s.inner_steps,
-                )?;
-                Engine::Substructured(Box::new(SubstructureTest::new(model, controller, Box::new(lab))?))
-            }
+            Some(s) => Engine::Substructured(Box::new(s.build_test(model, dt, &load0)?)),
         };
         Ok(Self {
             engine,
