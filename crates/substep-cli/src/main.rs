@@ -3,6 +3,7 @@
 //! Exit codes: 0 success, 1 a run that diverged (or outputs that could not be written),
 //! 2 bad input (config, files, parameters). Errors are printed as one line `error: ...`.
 
+mod analyze;
 mod bench;
 mod output;
 mod plots;
@@ -34,6 +35,8 @@ struct Cli {
 enum Command {
     /// Run a test definition (TOML, see docs/config.md); without CONFIG, the embedded default example
     Run(RunArgs),
+    /// Accuracy and stability analysis of the sub-step algorithm: stability, accuracy, verify, plan
+    Analyze(analyze::AnalyzeArgs),
     /// Measure µs per step of the integrator and the sub-step controller
     Bench(bench::BenchArgs),
 }
@@ -68,6 +71,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         None => run::run(&RunArgs::default()),
         Some(Command::Run(args)) => run::run(&args),
+        Some(Command::Analyze(args)) => analyze::analyze(&args),
         Some(Command::Bench(args)) => bench::bench(&args),
     };
     match result {

@@ -271,7 +271,7 @@ fn bad_input_gives_one_line_and_exit_code_2() {
         (
             "unknown_specimen_kind",
             edit("kind = \"linear_sdof\"", "kind = \"magic\""),
-            "unknown variant `magic`, expected `linear_sdof` or `linear_mdof`",
+            "unknown variant `magic`, expected one of `linear_sdof`, `linear_mdof`, `bouc_wen`, `friction`, `replay`",
         ),
         (
             "unknown_actuator_kind",

@@ -30,11 +30,16 @@ fn exact_amplification_of(m: &crate::model::StructuralModel, r: f64) -> f64 {
 pub fn continuous_response(m: &crate::model::StructuralModel, output: usize, omega: f64) -> Complex<f64> {
     let n = m.n_dofs();
     let z = DMatrix::from_fn(n, n, |i, j| {
-        Complex::new(m.stiffness[(i, j)] - omega * omega * m.mass[(i, j)], omega * m.damping[(i, j)])
+        Complex::new(
+            m.stiffness[(i, j)] - omega * omega * m.mass[(i, j)],
+            omega * m.damping[(i, j)],
+        )
     });
     let mi = m.effective_mass_vector();
     let rhs = DVector::from_fn(n, |i, _| Complex::new(-mi[i], 0.0));
-    z.lu().solve(&rhs).map_or(Complex::new(f64::NAN, f64::NAN), |u| u[output])
+    z.lu()
+        .solve(&rhs)
+        .map_or(Complex::new(f64::NAN, f64::NAN), |u| u[output])
 }
 
 /// The substructure algorithm's discrete amplification at frequency ratio `r`.

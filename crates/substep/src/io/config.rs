@@ -22,7 +22,7 @@ use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::excitation::{self, Envelope, KanaiTajimi, Record};
 use crate::integrate::{Scheme, check_hilber_alpha};
 use crate::model::{DampingSpec, ShearBuilding, StructuralModel, TmdSystem, sdof, shear_building, tmd_two_dof};
-use crate::specimen::SpecimenSpec;
+use crate::specimen::{BoucWenParams, FrictionModel, Pinching, SpecimenSpec};
 use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings, SubstructureTest};
 use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab};
 use nalgebra::{DMatrix, DVector};
@@ -323,6 +323,46 @@ enum RawSpecimen {
         stiffness: MatrixInput,
         damping: Option<MatrixInput>,
         influence: Option<Vec<f64>>,
+    },
+    /// Bouc–Wen hysteretic spring; optional keys default as in `BoucWenParams::new`.
+    BoucWen {
+        dof: usize,
+        stiffness: f64,
+        alpha: f64,
+        yield_displacement: f64,
+        a: Option<f64>,
+        beta: Option<f64>,
+        gamma: Option<f64>,
+        n: Option<f64>,
+        #[serde(default)]
+        damping: f64,
+        #[serde(default)]
+        delta_a: f64,
+        #[serde(default)]
+        delta_nu: f64,
+        #[serde(default)]
+        delta_eta: f64,
+        /// Baber–Noori pinching strength `ζ_s` (shape parameters at their defaults).
+        pinching: Option<f64>,
+    },
+    /// Friction damper: `model = "stick_slip"` (default, needs `stiffness`) or `"smooth"` (`v_ref`).
+    Friction {
+        dof: usize,
+        slip_force: f64,
+        model: Option<String>,
+        stiffness: Option<f64>,
+        v_ref: Option<f64>,
+        #[serde(default)]
+        damping: f64,
+    },
+    /// Replay of a measured force record [N]: `file` (two columns t, f) or `values` + `dt`.
+    Replay {
+        dof: usize,
+        file: Option<String>,
+        values: Option<Vec<f64>>,
+        dt: Option<f64>,
+        #[serde(default = "one")]
+        scale: f64,
     },
 }
 
@@ -927,10 +967,129 @@ impl RawGroundMotion {
     }
 }
 
+/// `specimen.<key>` from a specimen constructor becomes `<what>.<key>`.
+fn rekey(e: Error, what: &str) -> Error {
+    match e {
+        Error::InvalidInput { what: key, reason } => {
+            let rest = key.strip_prefix("specimen").unwrap_or(&key);
+            Error::invalid(format!("{what}{rest}"), reason)
+        }
+        other => other,
+    }
+}
+
 impl RawSpecimen {
     /// The library's description; `n` is the number of model DOFs, `what` the key prefix.
     fn to_spec(&self, n: usize, what: &str, base: &Path) -> Result<SpecimenSpec> {
         match self {
+            RawSpecimen::BoucWen {
+                dof,
+                stiffness,
+                alpha,
+                yield_displacement,
+                a,
+                beta,
+                gamma,
+                n: sharpness,
+                damping,
+                delta_a,
+                delta_nu,
+                delta_eta,
+                pinching,
+            } => {
+                let mut p = BoucWenParams::new(*stiffness, *alpha, *yield_displacement);
+                p.a = a.unwrap_or(p.a);
+                p.beta = beta.unwrap_or(p.beta);
+                p.gamma = gamma.unwrap_or(p.gamma);
+                p.n = sharpness.unwrap_or(p.n);
+                p.damping = *damping;
+                p.delta_a = *delta_a;
+                p.delta_nu = *delta_nu;
+                p.delta_eta = *delta_eta;
+                p.pinching = pinching.map(Pinching::new);
+                let spec = SpecimenSpec::BoucWen {
+                    dof: dof_index(&format!("{what}.dof"), *dof, n)?,
+                    params: p,
+                };
+                spec.build().map_err(|e| rekey(e, what))?;
+                Ok(spec)
+            }
+            RawSpecimen::Friction {
+                dof,
+                slip_force,
+                model,
+                stiffness,
+                v_ref,
+                damping,
+            } => {
+                let model = match model.as_deref().unwrap_or("stick_slip") {
+                    "stick_slip" => FrictionModel::StickSlip {
+                        stiffness: stiffness.ok_or_else(|| {
+                            Error::invalid(
+                                format!("{what}.stiffness"),
+                                "is required for model = \"stick_slip\" (pre-slip stiffness, N/m)",
+                            )
+                        })?,
+                    },
+                    "smooth" => FrictionModel::Smooth {
+                        v_ref: v_ref.ok_or_else(|| {
+                            Error::invalid(
+                                format!("{what}.v_ref"),
+                                "is required for model = \"smooth\" (reference velocity, m/s)",
+                            )
+                        })?,
+                    },
+                    other => {
+                        return Err(Error::invalid(
+                            format!("{what}.model"),
+                            format!("unknown friction model '{other}' (expected stick_slip or smooth)"),
+                        ));
+                    }
+                };
+                let spec = SpecimenSpec::Friction {
+                    dof: dof_index(&format!("{what}.dof"), *dof, n)?,
+                    slip_force: *slip_force,
+                    model,
+                    damping: *damping,
+                };
+                spec.build().map_err(|e| rekey(e, what))?;
+                Ok(spec)
+            }
+            RawSpecimen::Replay {
+                dof,
+                file,
+                values,
+                dt,
+                scale,
+            } => {
+                let (dt, values) = match (file, values) {
+                    (Some(f), None) => {
+                        let path = base.join(f);
+                        let rec = excitation::read_record(&path, *dt)?;
+                        (rec.dt, rec.accel)
+                    }
+                    (None, Some(v)) => {
+                        let dt = dt.ok_or_else(|| Error::invalid(format!("{what}.dt"), "is required with values"))?;
+                        (dt, v.clone())
+                    }
+                    _ => {
+                        return Err(Error::invalid(
+                            what.to_string(),
+                            "give either file or values (with dt) for a replay",
+                        ));
+                    }
+                };
+                if !scale.is_finite() {
+                    return Err(Error::invalid(format!("{what}.scale"), "must be finite"));
+                }
+                let spec = SpecimenSpec::Replay {
+                    dof: dof_index(&format!("{what}.dof"), *dof, n)?,
+                    dt,
+                    values: values.iter().map(|v| v * scale).collect(),
+                };
+                spec.build().map_err(|e| rekey(e, what))?;
+                Ok(spec)
+            }
             RawSpecimen::LinearSdof {
                 dof,
                 mass,
@@ -1375,9 +1534,12 @@ seed = 3
             e.starts_with("cfg.toml: integrator.scheme: unknown scheme 'leapfrog'"),
             "{e}"
         );
-        let e = err(&edit("kind = \"linear_sdof\"\ndof = 1", "kind = \"bouc_wen\"\ndof = 1"));
+        let e = err(&edit(
+            "kind = \"linear_sdof\"\ndof = 1",
+            "kind = \"hydraulic_damper\"\ndof = 1",
+        ));
         assert!(
-            e.contains("unknown variant `bouc_wen`, expected `linear_sdof` or `linear_mdof`"),
+            e.contains("unknown variant `hydraulic_damper`, expected one of `linear_sdof`"),
             "{e}"
         );
         let e = err(&edit("kind = \"second_order\"", "kind = \"third_order\""));

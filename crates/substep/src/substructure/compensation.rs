@@ -78,26 +78,42 @@ impl ErrorForceCompensation {
         }
     }
 
-    /// State that carries over between steps: `[Σe, e_i]` per DOF for PID, nothing otherwise
-    /// (the residual variant's only memory is `f_u`, which the controller already holds).
+    /// State that carries over between steps and matters: `Σe` per DOF when `I ≠ 0`, `e_i`
+    /// when `D ≠ 0`; nothing otherwise (the residual variant's only memory is `f_u`, which the
+    /// controller already holds). Unused accumulators would add spurious eigenvalues 1 to the
+    /// amplification matrix.
     pub fn state_len(&self) -> usize {
+        let (with_i, with_d) = self.used_states();
+        self.integral.len() * (with_i as usize + with_d as usize)
+    }
+    fn used_states(&self) -> (bool, bool) {
         match self.spec {
-            ErrorForceSpec::Pid { .. } => 2 * self.integral.len(),
-            _ => 0,
+            ErrorForceSpec::Pid { i, d, .. } => (i != 0.0, d != 0.0),
+            _ => (false, false),
         }
     }
     pub fn write_state(&self, out: &mut [f64]) {
-        if self.state_len() > 0 {
-            let n = self.integral.len();
+        let (with_i, with_d) = self.used_states();
+        let n = self.integral.len();
+        let mut at = 0;
+        if with_i {
             out[..n].copy_from_slice(&self.integral);
-            out[n..2 * n].copy_from_slice(&self.previous);
+            at = n;
+        }
+        if with_d {
+            out[at..at + n].copy_from_slice(&self.previous);
         }
     }
     pub fn read_state(&mut self, s: &[f64]) {
-        if self.state_len() > 0 {
-            let n = self.integral.len();
+        let (with_i, with_d) = self.used_states();
+        let n = self.integral.len();
+        let mut at = 0;
+        if with_i {
             self.integral.copy_from_slice(&s[..n]);
-            self.previous.copy_from_slice(&s[n..2 * n]);
+            at = n;
+        }
+        if with_d {
+            self.previous.copy_from_slice(&s[at..at + n]);
         }
     }
 }

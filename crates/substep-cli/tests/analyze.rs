@@ -1,0 +1,224 @@
+//! `substep analyze` end to end: the CSV contracts, the verification verdict, the planner and
+//! bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use substep::analysis::AnalysisCase;
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("substep-analyze-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn substep(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_substep"))
+        .args(args)
+        .output()
+        .expect("the substep binary runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn read_lines(p: &Path) -> Vec<String> {
+    std::fs::read_to_string(p).unwrap().lines().map(String::from).collect()
+}
+
+fn examples() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples")
+}
+
+#[test]
+fn stability_writes_the_contract_csv_limits_and_maps() {
+    let dir = temp_dir("stability");
+    let out = substep(&[
+        "analyze",
+        "stability",
+        "--eta-m",
+        "0.5",
+        "--zeta",
+        "0.05",
+        "--zeta-s",
+        "0.05",
+        "--eta-f",
+        "1.0",
+        "--k-sub",
+        "1,2",
+        "--omega",
+        "0.1:1.5:15",
+        "--vary",
+        "zeta_s=0:0.2:5",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines = read_lines(&dir.join("stability.csv"));
+    assert_eq!(lines[0], "k_sub,Omega,zeta_s,rho");
+    assert_eq!(lines.len(), 1 + 2 * 15 * 5);
+    // every row is the library's spectral radius at that point
+    for line in lines[1..].iter().step_by(17) {
+        let f: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
+        let case = AnalysisCase {
+            eta_m: 0.5,
+            zeta_s: f[2],
+            omega_dt: f[1],
+            k_sub: f[0] as usize,
+            ..AnalysisCase::typical_tmd()
+        };
+        let rho = case.spectral_radius().unwrap();
+        assert!((rho - f[3]).abs() < 1e-12, "{line}: {rho}");
+    }
+    let limits = read_lines(&dir.join("stability_limit.csv"));
+    assert_eq!(limits[0], "k_sub,zeta_s,Omega_cr");
+    assert_eq!(limits.len(), 1 + 2 * 5);
+    // an undamped TMD with k_sub = 1 on the large mass ratio system has a finite limit
+    let undamped = limits.iter().find(|l| l.starts_with("1,0.05,")).unwrap();
+    let w: f64 = undamped.split(',').nth(2).unwrap().parse().unwrap();
+    assert!(w > 0.1 && w < 1.5, "{undamped}");
+    for k in [1, 2] {
+        let png = std::fs::read(dir.join(format!("stability_k{k}.png"))).unwrap();
+        assert!(png.starts_with(b"\x89PNG"));
+    }
+}
+
+#[test]
+fn accuracy_writes_one_row_per_peak() {
+    let dir = temp_dir("accuracy");
+    let out = substep(&[
+        "analyze",
+        "accuracy",
+        "--k-sub",
+        "1,2",
+        "--eta-t",
+        "0.01,0.05",
+        "--out",
+        dir.to_str().unwrap(),
+        "--no-plots",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines = read_lines(&dir.join("accuracy.csv"));
+    assert_eq!(
+        lines[0],
+        "k_sub,eta_T,eta_p,peak,freq_ratio,h,freq_ratio_exact,h_exact,amplitude_error,period_error"
+    );
+    assert_eq!(lines.len(), 1 + 2 * 2 * 2);
+    for l in &lines[1..] {
+        let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+        assert!((f[8] - (f[5] / f[7] - 1.0)).abs() < 1e-12, "{l}");
+        assert!((f[9] - (f[6] / f[4] - 1.0)).abs() < 1e-12, "{l}");
+        // errors shrink with η_T: at 1 % they are small
+        if f[1] == 0.01 {
+            assert!(f[8].abs() < 0.1 && f[9].abs() < 0.01, "{l}");
+        }
+    }
+}
+
+#[test]
+fn verify_agrees_with_the_time_domain() {
+    let dir = temp_dir("verify");
+    let out = substep(&["analyze", "verify", "--out", dir.to_str().unwrap(), "--quiet"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let md = std::fs::read_to_string(dir.join("verify.md")).unwrap();
+    assert!(md.contains("All checks agree: **yes**"), "{md}");
+    assert!(!md.contains("| NO |"));
+    let csv = read_lines(&dir.join("verify.csv"));
+    assert!(csv.len() > 20);
+}
+
+#[test]
+fn plan_recommends_a_stable_setting() {
+    let dir = temp_dir("plan");
+    let cfg = examples().join("tmd_substructure.toml");
+    let out = substep(&[
+        "analyze",
+        "plan",
+        cfg.to_str().unwrap(),
+        "--k-sub",
+        "1,4",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(stdout.contains("recommendation: dt = "), "{stdout}");
+    let lines = read_lines(&dir.join("plan.csv"));
+    assert_eq!(
+        lines[0],
+        "dt,k_sub,delay,rho,margin,class,peak,freq_hz,freq_hz_exact,amplitude_error,period_error"
+    );
+    assert_eq!(lines.len(), 1 + 3 * 2 * 2);
+}
+
+#[test]
+fn plan_refuses_a_nonlinear_specimen() {
+    let dir = temp_dir("plan-nonlinear");
+    let cfg = dir.join("bw.toml");
+    std::fs::write(
+        &cfg,
+        r#"
+[structure.sdof]
+mass = 1000.0
+stiffness = 4.0e4
+damping = 100.0
+[ground_motion]
+generator = "harmonic"
+amplitude = 1.0
+frequency = 1.0
+duration = 1.0
+[integrator]
+dt = 0.01
+[substructure]
+coupling_dofs = [1]
+substeps = 2
+[[substructure.specimen]]
+kind = "bouc_wen"
+dof = 1
+stiffness = 1.0e4
+alpha = 0.1
+yield_displacement = 0.01
+"#,
+    )
+    .unwrap();
+    let out = substep(&["analyze", "plan", cfg.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("substructure.specimen[1]") && err.contains("bouc_wen"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_grids_are_refused_with_a_reason() {
+    let cases: [(&[&str], &str); 6] = [
+        (&["analyze", "stability", "--omega", "1:0.5:10"], "inverted"),
+        (&["analyze", "stability", "--omega", "0.1:1:0"], "empty"),
+        (
+            &["analyze", "stability", "--vary", "foo=0:1:3"],
+            "unknown parameter 'foo'",
+        ),
+        (
+            &[
+                "analyze",
+                "stability",
+                "--omega",
+                "0.1:3:5000",
+                "--vary",
+                "zeta_s=0:1:5000",
+            ],
+            "too many",
+        ),
+        (&["analyze", "stability", "--k-sub", "0"], "--k-sub"),
+        (&["analyze", "accuracy", "--eta-t", "0.7"], "--eta-t"),
+    ];
+    for (args, needle) in cases {
+        let out = substep(args);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.starts_with("error: ") && err.contains(needle), "{args:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+    }
+}
