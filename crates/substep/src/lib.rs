@@ -16,6 +16,7 @@ pub mod model;
 pub use error::{Error, Result};
 pub mod analysis;
 pub mod linalg;
+pub mod site;
 pub mod specimen;
 pub mod substructure;
 pub mod transfer;
