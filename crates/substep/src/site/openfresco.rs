@@ -16,7 +16,7 @@
 //! [`OpenFrescoSite`] convert.
 
 use super::server::{ServeOptions, ServeReport, ServerHandle};
-use super::transport::{LinkError, POLL, read_full, write_all};
+use super::transport::{LinkError, POLL, quick_ack, read_full, write_all};
 use crate::error::{Error, Result};
 use crate::specimen::SpecimenSpec;
 use crate::substructure::ExperimentalSubstructure;
@@ -732,6 +732,7 @@ fn serve_connection(
         // The first 8 bytes (the action) may take as long as the client likes (or the idle
         // timeout); the rest of the message must follow within the I/O timeout.
         let idle = options.idle_timeout.map(|t| Instant::now() + t);
+        quick_ack(&stream);
         let got = read_full(&mut stream, &mut rx[..8], idle, stop).and_then(|_| {
             read_full(&mut stream, &mut rx[8..], Some(Instant::now() + io), stop).map_err(|e| match e {
                 LinkError::Closed { got } => LinkError::Closed { got: got + 8 },

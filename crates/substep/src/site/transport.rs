@@ -142,3 +142,34 @@ pub(crate) fn read_frame(
     })?;
     Ok(header)
 }
+
+/// Ask the kernel to acknowledge received data at once (Linux `TCP_QUICKACK`; the kernel
+/// leaves quick-ack mode by itself, so call it before every read).
+///
+/// Needed for peers that do not set `TCP_NODELAY` and send a message that gets no reply
+/// followed by one that does (OpenSees' genericClient: commit `5`, then trial `3`): Nagle's
+/// algorithm on their side holds the second message until our delayed ACK (~40 ms) arrives.
+#[cfg(target_os = "linux")]
+pub(crate) fn quick_ack(stream: &TcpStream) {
+    use std::os::fd::AsRawFd;
+    unsafe extern "C" {
+        fn setsockopt(fd: i32, level: i32, name: i32, value: *const std::ffi::c_void, len: u32) -> i32;
+    }
+    const IPPROTO_TCP: i32 = 6;
+    const TCP_QUICKACK: i32 = 12;
+    let one: i32 = 1;
+    // SAFETY: the descriptor is owned by `stream` and open for the duration of the call; the
+    // option value points to a live `i32` whose size is passed as the length.
+    unsafe {
+        setsockopt(
+            stream.as_raw_fd(),
+            IPPROTO_TCP,
+            TCP_QUICKACK,
+            (&one as *const i32).cast(),
+            std::mem::size_of::<i32>() as u32,
+        );
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+pub(crate) fn quick_ack(_stream: &TcpStream) {}
