@@ -18,7 +18,7 @@ use substep::site::openfresco::{ElementSpec, OpenFrescoServer, OpenFrescoSite, S
 use substep::site::protocol::{HEADER_LEN, Header, MAX_PAYLOAD, Session, decode_frame};
 use substep::site::{
     ClientOptions, Hello, Message, Mode, RemoteSite, RemoteStepSite, RemoteStepTest, ServeOptions, SiteClient,
-    SiteServer, StepReply, StepRequest, Transport,
+    SiteServer, StepReply, StepRequest, Transport, VirtualLabSpec,
 };
 use substep::specimen::SpecimenSpec;
 use substep::substructure::{
@@ -90,8 +90,19 @@ fn lab(dtau: f64) -> VirtualLab {
     .unwrap()
 }
 
+/// The server's lab: built from the client's handshake (coupling DOFs, Δτ).
+fn lab_spec() -> VirtualLabSpec {
+    VirtualLabSpec {
+        specimens: specimens(),
+        actuator: actuator(),
+        force_sensor: SensorSpec::ideal(),
+        displacement_sensor: SensorSpec::ideal(),
+        inner_steps: 2,
+    }
+}
+
 fn lab_factory(h: &Hello) -> substep::Result<Box<dyn ExperimentalSubstructure>> {
-    Ok(Box::new(lab(h.dtau)))
+    Ok(Box::new(lab_spec().build(h)?))
 }
 
 fn controller(model: &StructuralModel, ag0: f64) -> SubstepController {
@@ -368,8 +379,18 @@ fn udp_lost_replies_are_retried_and_duplicates_ignored() {
 #[test]
 fn handshake_is_rejected_with_a_reason() {
     let (options, log) = serve_options(false);
-    // the site has 2 coupling DOFs; a client with 1 is rejected
     let server = SiteServer::spawn(tcp_listener(), lab_factory, &options).unwrap();
+    let addr = server.local_addr();
+    let reject = |hello: &Hello, transport: Transport, addr: SocketAddr| -> String {
+        let err = SiteClient::connect(addr, transport, hello.clone(), &client_options(1000))
+            .err()
+            .expect("must be rejected")
+            .to_string();
+        println!("{err}");
+        assert!(err.contains(&addr.to_string()), "{err}");
+        err
+    };
+    // the client couples only at model DOF 2, but the site has a specimen on DOF 1 too
     let hello = Hello {
         n_coupling: 1,
         substeps: 2,
@@ -377,21 +398,36 @@ fn handshake_is_rejected_with_a_reason() {
         dt: 0.01,
         dtau: 0.005,
         gain_cc: vec![1e-6],
+        coupling_dofs: vec![1],
     };
-    let err = SiteClient::connect(
-        server.local_addr(),
-        Transport::Tcp,
-        hello.clone(),
-        &client_options(1000),
+    let err = reject(&hello, Transport::Tcp, addr);
+    assert!(
+        err.contains("rejected the connection") && err.contains("specimen[2].dof"),
+        "{err}"
+    );
+    // the client couples at model DOF 3 where the site has no specimen
+    let two = Hello {
+        n_coupling: 2,
+        gain_cc: vec![1e-6, 0.0, 0.0, 1e-6],
+        coupling_dofs: vec![0, 2],
+        ..hello.clone()
+    };
+    let err = reject(&two, Transport::Tcp, addr);
+    assert!(err.contains("model DOF 3 where this site has no specimen"), "{err}");
+    // a factory that ignores the handshake: the coupling DOF counts are checked
+    let fixed = SiteServer::spawn(
+        tcp_listener(),
+        |_: &Hello| -> substep::Result<Box<dyn ExperimentalSubstructure>> { Ok(Box::new(lab(0.001))) },
+        &options,
     )
-    .err()
-    .expect("must be rejected")
-    .to_string();
-    println!("{err}");
-    assert!(err.contains(&server.local_addr().to_string()), "{err}");
-    assert!(err.contains("rejected") && err.contains("2 coupling DOFs"), "{err}");
+    .unwrap();
+    let err = reject(&hello, Transport::Tcp, fixed.local_addr());
+    assert!(
+        err.contains("the site has 2 coupling DOFs, the client asked for 1"),
+        "{err}"
+    );
     // a factory error is passed on as the reason
-    let server2 = SiteServer::spawn(
+    let failing = SiteServer::spawn(
         tcp_listener(),
         |_: &Hello| -> substep::Result<Box<dyn ExperimentalSubstructure>> {
             Err(substep::Error::invalid("specimen.stiffness", "must be >= 0"))
@@ -399,31 +435,19 @@ fn handshake_is_rejected_with_a_reason() {
         &options,
     )
     .unwrap();
-    let err = SiteClient::connect(
-        server2.local_addr(),
-        Transport::Tcp,
-        hello.clone(),
-        &client_options(1000),
-    )
-    .err()
-    .unwrap()
-    .to_string();
+    let err = reject(&hello, Transport::Tcp, failing.local_addr());
     assert!(err.contains("specimen.stiffness: must be >= 0"), "{err}");
-    // UDP cannot carry a StepResult of 3000 × 2 × 3 f64
+    // UDP cannot carry a StepResult of 3000 × 2 × 3 f64 (refused before anything is sent)
     let big = Hello {
-        n_coupling: 2,
         substeps: 3000,
         mode: Mode::PerStep,
-        gain_cc: vec![0.0; 4],
-        ..hello
+        ..two
     };
-    let err = SiteClient::connect(server.local_addr(), Transport::Udp, big, &client_options(1000))
-        .err()
-        .unwrap()
-        .to_string();
+    let err = reject(&big, Transport::Udp, addr);
     assert!(err.contains("UDP"), "{err}");
     drop(server);
-    assert!(log.lock().unwrap().iter().any(|l| l.contains("rejected")));
+    let rejected = log.lock().unwrap().iter().filter(|l| l.contains("rejected")).count();
+    assert_eq!(rejected, 4);
 }
 
 #[test]
@@ -470,6 +494,7 @@ fn sample_messages() -> (Session, Vec<Message>) {
             dt: 0.01,
             dtau: 0.01 / 3.0,
             gain_cc: vec![1e-6, 2e-7, 2e-7, 3e-6],
+            coupling_dofs: vec![4, 0],
         }),
         Message::Accept { n_coupling: 2 },
         Message::Reject {

@@ -26,7 +26,7 @@ mod transport;
 
 pub use client::{ClientOptions, RemoteSite, RemoteStepSite, RemoteStepTest, SiteClient, Transport, run_remote_step};
 pub use protocol::{Hello, Message, MessageType, Mode, StepReply, StepRequest};
-pub use server::{ServeOptions, ServeReport, ServerHandle, SiteServer};
+pub use server::{ServeOptions, ServeReport, ServerHandle, SiteServer, VirtualLabSpec};
 
 use crate::error::Result;
 use crate::substructure::ExperimentalSubstructure;

@@ -15,13 +15,13 @@
 //!
 //! | type | code | payload |
 //! |---|---|---|
-//! | `Hello` | 1 | u32 version, u32 n, u32 k, u32 mode (0 per sub-step, 1 per step), f64 Δt, f64 Δτ, f64 G_cc[n·n] (column-major) |
-//! | `Accept` | 2 | u32 n (the site's coupling DOFs) |
+//! | `Hello` | 1 | `u32 version, u32 n, u32 k, u32 mode (0 per sub-step, 1 per step), f64 Δt, f64 Δτ, f64 G_cc[n·n] (column-major), u32 coupling_dof[n] (0-based model DOFs)` |
+//! | `Accept` | 2 | `u32 n` (the site's coupling DOFs) |
 //! | `Reject` | 3 | string reason |
-//! | `Substep` | 4 | f64 command[n], f64 a_g start, f64 a_g end, f64 Δτ |
-//! | `Measured` | 5 | f64 force[n], f64 displacement[n] |
-//! | `Step` | 6 | f64 x̂_c^{(i)}[n], f64 x̂_c[n], f64 f^{(0)}[n], f64 a_g(t_i), f64 a_g(t_{i+1}) |
-//! | `StepResult` | 7 | f64 command[k·n], f64 force[k·n], f64 displacement[k·n] (sub-step-major) |
+//! | `Substep` | 4 | `f64 command[n], f64 ag_start, f64 ag_end, f64 Δτ` |
+//! | `Measured` | 5 | `f64 force[n], f64 displacement[n]` |
+//! | `Step` | 6 | `f64 x̂_c_prev[n], f64 x̂_c[n], f64 f0[n], f64 ag(t_i), f64 ag(t_i+1)` |
+//! | `StepResult` | 7 | `f64 command[k·n], f64 force[k·n], f64 displacement[k·n]` (sub-step-major) |
 //! | `Heartbeat` | 8 | empty |
 //! | `Stop` | 9 | string reason |
 //! | `Error` | 10 | string reason |
@@ -40,14 +40,14 @@ use crate::error::{Error, Result};
 pub const MAGIC: [u8; 4] = *b"SSTP";
 pub const VERSION: u16 = 1;
 pub const HEADER_LEN: usize = 16;
-/// Largest payload accepted on any transport [bytes].
+/// Largest payload accepted on any transport, in bytes.
 pub const MAX_PAYLOAD: usize = 1 << 24;
-/// Largest UDP datagram (header + payload) [bytes].
+/// Largest UDP datagram (header + payload), in bytes.
 pub const MAX_DATAGRAM: usize = 65_507;
 /// Limits checked in the handshake.
 pub const MAX_COUPLING: usize = 1024;
 pub const MAX_SUBSTEPS: usize = 1 << 20;
-/// Longest reason string [bytes].
+/// Longest reason string, in bytes.
 pub const MAX_REASON: usize = 4096;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -112,7 +112,7 @@ pub struct Header {
     pub version: u16,
     pub kind: MessageType,
     pub seq: u32,
-    /// Payload length [bytes].
+    /// Payload length, in bytes.
     pub len: u32,
 }
 
@@ -196,11 +196,14 @@ pub struct Hello {
     pub n_coupling: usize,
     pub substeps: usize,
     pub mode: Mode,
-    /// Time step Δt [s] and sub-step length Δτ [s].
+    /// Time step Δt and sub-step length Δτ, in seconds.
     pub dt: f64,
     pub dtau: f64,
     /// `G_cc`, `n_c × n_c`, column-major [m/N] (used by the site in per-step mode).
     pub gain_cc: Vec<f64>,
+    /// The model DOF (0-based) of each coupling DOF, in the controller's order: the site
+    /// attaches its specimens by these (see [`super::VirtualLabSpec`]).
+    pub coupling_dofs: Vec<usize>,
 }
 
 impl Hello {
@@ -214,6 +217,7 @@ impl Hello {
             dt: controller.dt(),
             dtau: controller.dt() / k as f64,
             gain_cc: controller.gain_cc().as_slice().to_vec(),
+            coupling_dofs: controller.coupling_dofs().to_vec(),
         }
     }
 
@@ -249,6 +253,30 @@ impl Hello {
         if let Some(i) = self.gain_cc.iter().position(|g| !g.is_finite()) {
             return Err(perr(format!("Hello.gain_cc[{i}]"), "is not finite"));
         }
+        if self.coupling_dofs.len() != self.n_coupling {
+            return Err(perr(
+                "Hello.coupling_dofs",
+                format!(
+                    "has {} entries, expected n_c = {}",
+                    self.coupling_dofs.len(),
+                    self.n_coupling
+                ),
+            ));
+        }
+        for (i, &d) in self.coupling_dofs.iter().enumerate() {
+            if d > u32::MAX as usize {
+                return Err(perr(
+                    format!("Hello.coupling_dofs[{i}]"),
+                    format!("{d} does not fit a u32"),
+                ));
+            }
+            if self.coupling_dofs[..i].contains(&d) {
+                return Err(perr(
+                    format!("Hello.coupling_dofs[{i}]"),
+                    format!("model DOF {d} is listed twice"),
+                ));
+            }
+        }
         if self.session().step_result_len() > MAX_PAYLOAD {
             return Err(perr(
                 "Hello",
@@ -277,14 +305,14 @@ pub struct Session {
 }
 
 impl Session {
-    /// Payload length of a `StepResult` [bytes].
+    /// Payload length of a `StepResult`, in bytes.
     pub fn step_result_len(&self) -> usize {
         3 * self.n_coupling * self.substeps * 8
     }
-    /// Largest payload of any message of this session [bytes] (for UDP limits).
+    /// Largest payload of any message of this session, in bytes (for UDP limits).
     pub fn max_payload(&self) -> usize {
         let n = self.n_coupling;
-        (16 + 8 * (2 + n * n))
+        (16 + 8 * (2 + n * n) + 4 * n)
             .max(self.step_result_len())
             .max(8 * (3 * n + 2))
             .max(4 + MAX_REASON)
@@ -403,6 +431,9 @@ impl Message {
                 put_u32(out, h.mode.code());
                 put_f64s(out, &[h.dt, h.dtau]);
                 put_f64s(out, &h.gain_cc);
+                for &d in &h.coupling_dofs {
+                    put_u32(out, d as u32);
+                }
             }
             Message::Accept { n_coupling } => put_u32(out, *n_coupling as u32),
             Message::Reject { reason } | Message::Stop { reason } | Message::Error { reason } => put_str(out, reason),
@@ -485,10 +516,11 @@ impl Message {
                 if n == 0 || n > MAX_COUPLING {
                     return Err(perr("Hello.n_coupling", format!("is {n}, must be 1..={MAX_COUPLING}")));
                 }
-                expect_len(32 + 8 * n * n, format!("n_c = {n}"))?;
+                expect_len(32 + 8 * n * n + 4 * n, format!("n_c = {n}"))?;
                 let dt = r.f64("Hello.dt")?;
                 let dtau = r.f64("Hello.dtau")?;
                 let gain_cc = r.f64s("Hello.gain_cc", n * n)?;
+                let coupling_dofs = (0..n).map(|_| r.u32() as usize).collect();
                 let h = Hello {
                     n_coupling: n,
                     substeps: k,
@@ -496,6 +528,7 @@ impl Message {
                     dt,
                     dtau,
                     gain_cc,
+                    coupling_dofs,
                 };
                 h.validate()?;
                 Message::Hello(h)

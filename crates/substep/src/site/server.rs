@@ -12,7 +12,9 @@ use super::protocol::{
 use super::transport::{LinkError, POLL, read_frame, write_all};
 use super::{CommandRamp, LogFn, SiteFactory, substep_ground_acceleration};
 use crate::error::{Error, Result};
+use crate::specimen::SpecimenSpec;
 use crate::substructure::ExperimentalSubstructure;
+use crate::transfer::{ActuatorSpec, SensorSpec, VirtualLab};
 use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -768,5 +770,65 @@ impl UdpServer {
             }
         }
         false
+    }
+}
+
+/// A virtual lab to host: specimens attached to model DOFs, and the actuator and sensors used
+/// for every coupling DOF. Built per connection from the client's handshake: the actuator
+/// order follows the client's coupling DOFs and the sub-step length is the client's `Δτ`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VirtualLabSpec {
+    pub specimens: Vec<SpecimenSpec>,
+    pub actuator: ActuatorSpec,
+    pub force_sensor: SensorSpec,
+    pub displacement_sensor: SensorSpec,
+    /// Inner intervals per sub-step (≥ 1).
+    pub inner_steps: usize,
+}
+
+impl VirtualLabSpec {
+    /// Specimens behind ideal actuators and sensors.
+    pub fn ideal(specimens: Vec<SpecimenSpec>) -> Self {
+        Self {
+            specimens,
+            actuator: ActuatorSpec::ideal(),
+            force_sensor: SensorSpec::ideal(),
+            displacement_sensor: SensorSpec::ideal(),
+            inner_steps: 1,
+        }
+    }
+
+    /// The lab for a client. Every coupling DOF of the client must carry a specimen and every
+    /// specimen must sit on a coupling DOF of the client.
+    pub fn build(&self, hello: &Hello) -> Result<VirtualLab> {
+        let mut at: Vec<usize> = self.specimens.iter().flat_map(|s| s.dofs()).collect();
+        at.sort_unstable();
+        at.dedup();
+        if let Some(d) = hello.coupling_dofs.iter().find(|d| !at.contains(d)) {
+            let list: Vec<String> = at.iter().map(|d| (d + 1).to_string()).collect();
+            return Err(Error::invalid(
+                "site",
+                format!(
+                    "the client couples at model DOF {} where this site has no specimen (specimens at DOFs {})",
+                    d + 1,
+                    list.join(", ")
+                ),
+            ));
+        }
+        let n = hello.n_coupling;
+        VirtualLab::from_specs(
+            &hello.coupling_dofs,
+            &self.specimens,
+            &vec![self.actuator; n],
+            &vec![self.force_sensor; n],
+            &vec![self.displacement_sensor; n],
+            hello.dtau,
+            self.inner_steps,
+        )
+    }
+
+    /// A factory for [`SiteServer::serve`].
+    pub fn factory(self) -> impl FnMut(&Hello) -> Result<Box<dyn ExperimentalSubstructure>> + Send + 'static {
+        move |hello: &Hello| Ok(Box::new(self.build(hello)?) as Box<dyn ExperimentalSubstructure>)
     }
 }
