@@ -7,8 +7,9 @@
 //!   where it is) and **per step** (the site executes the `k_sub` sub-steps of a step itself —
 //!   the distributed sub-step scheme — and returns every sub-step's command, force and
 //!   displacement, one round trip per step).
-//! * [`server`]: [`SiteServer`] hosts any [`ExperimentalSubstructure`] (for example a
-//!   [`crate::transfer::VirtualLab`] built from specimen descriptions) over TCP or UDP.
+//! * [`server`]: [`SiteServer`] hosts any [`ExperimentalSubstructure`] over TCP or UDP, built
+//!   per connection by a factory from the client's handshake — e.g. [`VirtualLabSpec`], a
+//!   [`crate::transfer::VirtualLab`] whose specimens are attached to the client's coupling DOFs.
 //! * [`client`]: [`RemoteSite`] (per sub-step) implements [`ExperimentalSubstructure`] so a
 //!   [`crate::substructure::SubstructureTest`] can run against a remote site unchanged;
 //!   [`RemoteStepSite`] / [`RemoteStepTest`] drive the per-step mode.

@@ -26,7 +26,9 @@ use std::time::{Duration, Instant};
 pub struct ServeOptions {
     /// Return after the first client's session ends (instead of serving forever).
     pub once: bool,
-    /// A client silent for longer than this is dropped (`None`: wait forever).
+    /// A client silent for longer than this is dropped (`None`: wait forever). Set it for UDP:
+    /// a UDP client that vanishes without `Stop` otherwise keeps its session (and the site)
+    /// busy for good.
     pub idle_timeout: Option<Duration>,
     /// Time allowed for the handshake, for the rest of a frame once its header arrived, and
     /// for each write.
