@@ -18,6 +18,7 @@ pub mod model;
 pub use error::{Error, Result};
 pub mod analysis;
 pub mod linalg;
+pub mod site;
 pub mod specimen;
 pub mod substructure;
 pub mod transfer;

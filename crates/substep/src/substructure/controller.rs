@@ -155,6 +155,11 @@ impl SubstepController {
     pub fn predictor_c(&self) -> &[f64] {
         self.predictor_c.as_slice()
     }
+    /// Coupling part of the previous step's predictor `x̂_c^{(i)}` [m], where the command ramp
+    /// of the current step starts (for a site that runs the sub-steps itself).
+    pub fn predictor_c_prev(&self) -> &[f64] {
+        self.predictor_c_prev.as_slice()
+    }
 
     /// Step 1: predictor `x̂ = K̂⁻¹ (F̂_i + f_l,i+1 + Sᵀ f_u,i)`.
     pub fn begin_step(&mut self, load_next: &DVector<f64>) {
