@@ -15,6 +15,7 @@ pub mod model;
 
 pub use error::{Error, Result};
 pub mod analysis;
+pub mod compensate;
 pub mod ident;
 pub mod linalg;
 pub mod specimen;
