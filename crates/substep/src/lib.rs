@@ -17,6 +17,8 @@ pub mod model;
 
 pub use error::{Error, Result};
 pub mod analysis;
+pub mod compensate;
+pub mod ident;
 pub mod linalg;
 pub mod site;
 pub mod specimen;
