@@ -12,6 +12,7 @@ pub mod error;
 pub mod excitation;
 pub mod integrate;
 pub mod model;
+pub mod realtime;
 
 pub use error::{Error, Result};
 pub mod analysis;
