@@ -586,6 +586,7 @@ fn memory_lock_and_fifo_requests_are_reported_not_fatal() {
     let options = RealtimeOptions {
         lock_memory: true,
         fifo_priority: Some(20),
+        numerical_fifo_priority: Some(10),
         ..exact_options()
     };
     let (result, _) = realtime(&model, test, &ag, options);
@@ -593,6 +594,7 @@ fn memory_lock_and_fifo_requests_are_reported_not_fatal() {
     println!("mlockall: {}, SCHED_FIFO: {}", report.memory_lock, report.fifo);
     assert_ne!(report.memory_lock, RtSetting::NotRequested);
     assert_ne!(report.fifo, RtSetting::NotRequested);
+    assert_ne!(report.numerical_fifo, RtSetting::NotRequested);
     assert_eq!(report.substeps, 20 * k);
 }
 
@@ -631,10 +633,17 @@ fn bench_overlap_1000() {
     let fifo = std::env::var("SUBSTEP_BENCH_FIFO").ok().and_then(|s| s.parse().ok());
     let options = RealtimeOptions {
         fifo_priority: fifo,
+        numerical_fifo_priority: fifo.map(|p: i32| p - 10),
         lock_memory: fifo.is_some(),
+        histogram_bin: Duration::from_nanos(100),
+        histogram_bins: 100_000,
         ..RealtimeOptions::default()
     };
     let b = substep::realtime::bench_overlap_with(1000, 10, steps, options).unwrap();
     println!("{b}");
-    assert!(b.max_rel_diff.iter().all(|&e| e <= 1e-12) || b.report.hold_substeps > 0);
+    // u and v agree to 1e-12; the acceleration of this stiff model is more sensitive to
+    // round-off (a 1-ulp change of the load moves it by ~3e-11 relative; docs/realtime.md).
+    if b.report.hold_substeps == 0 {
+        assert!(b.max_rel_diff[0] <= 1e-12 && b.max_rel_diff[1] <= 1e-12 && b.max_rel_diff[2] <= 1e-9);
+    }
 }

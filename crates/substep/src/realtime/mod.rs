@@ -116,6 +116,9 @@ pub struct RealtimeOptions {
     pub lock_memory: bool,
     /// SCHED_FIFO priority (1–99) for the real-time thread.
     pub fifo_priority: Option<i32>,
+    /// SCHED_FIFO priority for the numerical thread (below the real-time thread's; it computes
+    /// for part of each step and then waits, so it cannot starve the machine).
+    pub numerical_fifo_priority: Option<i32>,
     /// Record every `record_every`-th step (and the initial state); 0 records nothing.
     pub record_every: usize,
     /// DOFs (0-based) whose `u`, `v`, `a` are recorded; `None` = all.
@@ -142,6 +145,7 @@ impl Default for RealtimeOptions {
         Self {
             lock_memory: false,
             fifo_priority: None,
+            numerical_fifo_priority: None,
             record_every: 1,
             record_dofs: None,
             ring_capacity: 256,
@@ -233,6 +237,10 @@ pub struct RealtimeReport {
     pub latency_p50: Duration,
     pub latency_p99: Duration,
     pub latency_max: Duration,
+    /// Where the latest wake-up of an algorithm sub-step happened: (step, sub-step `j`, 1-based),
+    /// the step counted from the run's first step (`0` = `t_0 → t_1`) plus the test's
+    /// `steps_done` at the start.
+    pub latency_max_at: (usize, usize),
     /// Wake-up lateness per slot (actual wake-up − deadline).
     pub histogram: LatencyHistogram,
     /// Completion per slot (end of command + measurement + step-boundary work − deadline).
@@ -243,6 +251,7 @@ pub struct RealtimeReport {
     pub records_dropped: u64,
     pub memory_lock: RtSetting,
     pub fifo: RtSetting,
+    pub numerical_fifo: RtSetting,
     pub wall_time: Duration,
 }
 
@@ -275,13 +284,19 @@ impl fmt::Display for RealtimeReport {
             "missed deadlines: {}, late steps: {}, hold sub-steps: {}, re-based: {}",
             self.missed, self.late_steps, self.hold_substeps, self.rebased
         )?;
-        writeln!(f, "wake-up lateness: {}", self.wake_summary())?;
+        writeln!(
+            f,
+            "wake-up lateness: {} (latest sub-step: step {} j = {})",
+            self.wake_summary(),
+            self.latency_max_at.0,
+            self.latency_max_at.1
+        )?;
         writeln!(f, "completion:       {}", self.completion_summary())?;
         writeln!(f, "numerical step:   {}", self.numerical_summary())?;
         writeln!(
             f,
-            "records: {} written, {} dropped; mlockall: {}; SCHED_FIFO: {}",
-            self.records_written, self.records_dropped, self.memory_lock, self.fifo
+            "records: {} written, {} dropped; mlockall: {}; SCHED_FIFO: {} (numerical thread: {})",
+            self.records_written, self.records_dropped, self.memory_lock, self.fifo, self.numerical_fifo
         )?;
         writeln!(f, "wake-up lateness histogram (µs: count):")?;
         let width = if self.histogram.max() > Duration::from_micros(200) {

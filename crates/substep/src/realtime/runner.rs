@@ -90,13 +90,15 @@ impl RealtimeRunner {
         if options.ring_capacity == 0 {
             return Err(Error::invalid("realtime.ring_capacity", "must be at least 1"));
         }
-        if let Some(p) = options.fifo_priority
-            && !(1..=99).contains(&p)
-        {
-            return Err(Error::invalid(
-                "realtime.fifo_priority",
-                format!("must be in 1..=99, got {p}"),
-            ));
+        for (what, priority) in [
+            ("realtime.fifo_priority", options.fifo_priority),
+            ("realtime.numerical_fifo_priority", options.numerical_fifo_priority),
+        ] {
+            if let Some(p) = priority
+                && !(1..=99).contains(&p)
+            {
+                return Err(Error::invalid(what, format!("must be in 1..=99, got {p}")));
+            }
         }
         let dt = test.controller.dt();
         if dt < 1e-6 * test.controller.substeps() as f64 {
@@ -195,6 +197,7 @@ impl RealtimeRunner {
             record_tx,
             record_every: opts.record_every,
             delays: &opts.numerical_delay,
+            fifo_priority: opts.numerical_fifo_priority,
             shared: &shared,
             hist: hist(),
         };
@@ -229,6 +232,8 @@ impl RealtimeRunner {
                     missed: 0,
                     late_steps: 0,
                     rebased: 0,
+                    worst: Duration::ZERO,
+                    worst_at: (0, 0),
                     fifo: RtSetting::NotRequested,
                 },
             };
@@ -256,7 +261,7 @@ impl RealtimeRunner {
         if memory_lock == RtSetting::Applied {
             os::unlock_memory();
         }
-        let (numerical_hist, numerical_result) = numerical_out;
+        let (numerical_hist, numerical_fifo, numerical_result) = numerical_out;
         let (stats, rt_result) = rt_out;
         let wall_time = started.elapsed();
         let report = RealtimeReport {
@@ -271,6 +276,7 @@ impl RealtimeRunner {
             latency_p50: stats.wake.percentile(0.5),
             latency_p99: stats.wake.percentile(0.99),
             latency_max: stats.wake.max(),
+            latency_max_at: stats.worst_at,
             histogram: stats.wake,
             completion: stats.completion,
             numerical: numerical_hist,
@@ -278,6 +284,7 @@ impl RealtimeRunner {
             records_dropped: records.overflows(),
             memory_lock,
             fifo: stats.fifo,
+            numerical_fifo,
             wall_time,
         };
         let error = match shared.first_error.load(Ordering::Acquire) {
@@ -373,19 +380,21 @@ struct Numerical<'a> {
     record_tx: Producer<'a, StepRecordOwned>,
     record_every: usize,
     delays: &'a [(usize, Duration)],
+    fifo_priority: Option<i32>,
     shared: &'a Shared,
     hist: LatencyHistogram,
 }
 
 impl Numerical<'_> {
-    fn run(mut self) -> (LatencyHistogram, Result<()>) {
+    fn run(mut self) -> (LatencyHistogram, RtSetting, Result<()>) {
         let shared = self.shared;
         let _done = SetOnDrop(&shared.numerical_done, None);
+        let fifo = self.fifo_priority.map_or(RtSetting::NotRequested, os::set_fifo);
         let result = self.steps();
         if result.is_err() {
             self.shared.fail(FROM_NUMERICAL);
         }
-        (self.hist, result)
+        (self.hist, fifo, result)
     }
 
     fn steps(&mut self) -> Result<()> {
@@ -481,6 +490,9 @@ struct RtStats {
     missed: usize,
     late_steps: usize,
     rebased: usize,
+    /// The latest wake-up of an algorithm sub-step and where it was (step, sub-step).
+    worst: Duration,
+    worst_at: (usize, usize),
     fifo: RtSetting,
 }
 
@@ -578,6 +590,10 @@ impl RealTime<'_> {
                 let wake = Instant::now();
                 let late = wake.saturating_duration_since(start);
                 self.stats.wake.record(late);
+                if late > self.stats.worst {
+                    self.stats.worst = late;
+                    self.stats.worst_at = (self.offset + n, j);
+                }
                 if late > max_lag {
                     self.t0 += late;
                     start += late;
