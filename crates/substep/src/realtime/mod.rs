@@ -47,7 +47,9 @@
 //! for the following step during the `k` sub-steps (a whole `Δt`). The state update itself is
 //! the controller's own `finish_step`, and the commands repeat `next_command` operation for
 //! operation, so the run equals the offline [`SubstructureTest`] run up to the round-off of the
-//! split predictor (about `1e-15` relative per step; the tests require `1e-12` over the run).
+//! split predictor (about `1e-15` relative per step; the tests require `1e-12` over the run; on
+//! stiff models the Newmark acceleration amplifies round-off in `u` by `a0 = 4/Δt²`, see
+//! `docs/realtime.md`).
 //!
 //! # Deadlines and the late-step policy
 //!
@@ -163,19 +165,19 @@ impl Default for RealtimeOptions {
 /// One recorded step, owned (the ring's slots are reused; the sink gets a reference).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct StepRecordOwned {
-    /// Step number (as [`SubstructureTest::steps_done`] counts) and time `step · Δt` [s].
+    /// Step number (as [`SubstructureTest::steps_done`] counts) and time `step · Δt` (s).
     pub step: usize,
     pub time: f64,
-    /// The recorded DOFs (0-based; same in every record) and their `u` [m], `v` [m/s], `a` [m/s²].
+    /// The recorded DOFs (0-based; same in every record) and their `u` (m), `v` (m/s), `a` (m/s²).
     pub dofs: Vec<usize>,
     pub u: Vec<f64>,
     pub v: Vec<f64>,
     pub a: Vec<f64>,
-    /// Per coupling DOF [N]: measured force `f_c = f^{(k)}`, error force, compensation force.
+    /// Per coupling DOF (N): measured force `f_c = f^{(k)}`, error force, compensation force.
     pub coupling_force: Vec<f64>,
     pub error_force: Vec<f64>,
     pub compensation_force: Vec<f64>,
-    /// Last command `d^{(k)}` and measured displacement at the end of the step [m].
+    /// Last command `d^{(k)}` and measured displacement at the end of the step (m).
     pub command: Vec<f64>,
     pub measured_displacement: Vec<f64>,
     /// Hold sub-steps inserted before this step's sub-steps (late policy).

@@ -23,10 +23,25 @@ impl fmt::Display for RtSetting {
     }
 }
 
-/// `mlockall(MCL_CURRENT | MCL_FUTURE)` for the whole process.
+/// `mlockall(MCL_CURRENT | MCL_FUTURE)` for the whole process. Not attempted for a non-root
+/// user under a finite `RLIMIT_MEMLOCK`: with `MCL_FUTURE`, allocations beyond the limit would
+/// fail later (and abort the program) instead of failing here.
 pub(crate) fn lock_memory() -> RtSetting {
     #[cfg(unix)]
     {
+        let mut limit = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        // SAFETY: `limit` is a valid out-pointer; `geteuid` has no preconditions.
+        let (rc, euid) = unsafe { (libc::getrlimit(libc::RLIMIT_MEMLOCK, &mut limit), libc::geteuid()) };
+        if euid != 0 && (rc != 0 || limit.rlim_cur != libc::RLIM_INFINITY) {
+            return RtSetting::Failed(format!(
+                "mlockall: not attempted, RLIMIT_MEMLOCK is {} kB for this user (raise `memlock` in \
+                 /etc/security/limits.d or run with CAP_IPC_LOCK)",
+                limit.rlim_cur / 1024
+            ));
+        }
         // SAFETY: plain system call without pointers.
         let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
         if rc == 0 {
