@@ -14,6 +14,7 @@ pub mod excitation;
 pub mod integrate;
 pub mod io;
 pub mod model;
+pub mod realtime;
 
 pub use error::{Error, Result};
 pub mod analysis;

@@ -260,3 +260,85 @@ impl SubstepController {
         self.substep = 0;
     }
 }
+
+// -------------------------------------------------------------------------------------------------
+// Overlapped stepping for the real-time runner (`crate::realtime`).
+//
+// Added for the real-time runner; the methods above are unchanged. A real-time loop runs the
+// sub-steps (`k_sub` commands and measurements on the coupling DOFs) on its own thread from a
+// copy of the coupling state, while another thread keeps this controller and does the n-sized
+// work of the next step during the sub-steps of the current one. The split rests on the next
+// predictor being affine in `f^{(k−1)}` and `f_u` of the current step:
+//
+//     x̂_{i+2} = W_{i+2} + H f^{(k−1)} + G_{:,c} f_u,i+1,
+//     W_{i+2} = K̂⁻¹ (F̂(ū, v̄, ā) + f_l,i+2),   H = K̂⁻¹ (α M + β′ C) G_{:,c},
+//
+// where `ū = x̂_{i+1}` and `v̄`, `ā` are the Newmark kinematics of `ū` (what `u_{i+1}`, `v_{i+1}`,
+// `a_{i+1}` would be with `f^{(k−1)} = 0`), `α = a0 (1 + a2 a7 + a3)`, `β′ = a1 + a0 (a4 a7 + a5)`.
+
+impl SubstepController {
+    /// The Newmark core: matrices, constants and the factorised `K̂`.
+    pub fn newmark_core(&self) -> &NewmarkCore {
+        &self.core
+    }
+    /// The error-force compensation state (a real-time loop runs the same update on a copy).
+    pub fn compensation(&self) -> &ErrorForceCompensation {
+        &self.compensation
+    }
+    /// Coupling part of the previous step's predictor `x̂_c^{(i)}` (start of the current ramp).
+    pub fn predictor_c_prev(&self) -> &[f64] {
+        self.predictor_c_prev.as_slice()
+    }
+    /// The full predictor `x̂` of the current step.
+    pub fn predictor(&self) -> &DVector<f64> {
+        &self.predictor
+    }
+
+    /// `H = K̂⁻¹ (α M + β′ C) G_{:,c}` (n × n_c), the sensitivity of the next predictor to
+    /// `f^{(k−1)}` of the current step. Allocates; call once at set-up.
+    pub fn overlap_gain(&self) -> DMatrix<f64> {
+        let a = &self.core.c.a;
+        let alpha = a[0] * (1.0 + a[2] * a[7] + a[3]);
+        let beta = a[1] + a[0] * (a[4] * a[7] + a[5]);
+        let mut h = &self.core.mass * &self.gain_columns * alpha;
+        h.gemm(beta, &self.core.damping, &self.gain_columns, 1.0);
+        self.core.k_hat.solve_mut(&mut h);
+        h
+    }
+
+    /// The part of the next predictor that is known once the current step has begun:
+    /// `out = W = K̂⁻¹ (F̂(ū, v̄, ā) + load_after)` with `ū` the current predictor and `v̄`, `ā` its
+    /// Newmark kinematics; `load_after` is `f_l` at the end of the *next* step. Call between
+    /// `begin_step*` and `finish_step`; does not allocate and does not change the step's result
+    /// (it uses the work state that `finish_step` overwrites).
+    pub fn overlap_known_predictor(&mut self, load_after: &DVector<f64>, out: &mut DVector<f64>) {
+        self.next.u.copy_from(&self.predictor);
+        self.core.update_kinematics(&self.state, &mut self.next);
+        self.core.effective_load(&self.next, out);
+        *out += load_after;
+        self.core.k_hat.solve_mut(out);
+    }
+
+    /// Take the sub-step results of the current step from a loop that ran the sub-steps on its
+    /// own copy of the coupling state: `before = f^{(k−1)}`, `last = f^{(k)}` and the last command
+    /// `d^{(k)}`. Then [`SubstepController::finish_step`] closes the step as if the sub-steps had
+    /// been run through [`SubstepController::next_command`] / [`SubstepController::feedback`].
+    pub fn set_substep_results(&mut self, before: &[f64], last: &[f64], last_command: &[f64]) {
+        self.force_before.copy_from_slice(before);
+        self.force_last.copy_from_slice(last);
+        self.command.copy_from_slice(last_command);
+        self.substep = self.k_sub;
+    }
+
+    /// Step 1 with a predictor assembled elsewhere (`x̂ = W + H f^{(k−1)} + G_{:,c} f_u`, see the
+    /// comment above this `impl`); otherwise as [`SubstepController::begin_step`].
+    pub fn begin_step_with_predictor(&mut self, predictor: &DVector<f64>) {
+        self.predictor.copy_from(predictor);
+        for (k, &c) in self.coupling.iter().enumerate() {
+            self.predictor_c[k] = self.predictor[c];
+        }
+        self.force_last.copy_from(&self.force);
+        self.force_before.copy_from(&self.force);
+        self.substep = 0;
+    }
+}

@@ -1,0 +1,718 @@
+//! [`RealtimeRunner`]: the threads, the schedule and the late-step policy (see the module docs).
+
+use super::histogram::LatencyHistogram;
+use super::os::{self, RtSetting};
+use super::overlap::{CouplingLoop, OverlapPredictor};
+use super::ring::{Consumer, Producer, SpscRing};
+use super::{LatePolicy, RealtimeOptions, RealtimeReport, StepRecordOwned};
+use crate::error::{Error, Result};
+use crate::model::StructuralModel;
+use crate::substructure::{ExperimentalSubstructure, StepRecord, SubstepController, SubstructureTest};
+use nalgebra::DVector;
+use std::fmt;
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::thread::{self, Thread};
+use std::time::{Duration, Instant};
+
+/// A failed run: the error (site failure, divergence) and the report up to it. The records up
+/// to the failure have been handed to the sink.
+#[derive(Debug)]
+pub struct RealtimeFailure {
+    pub error: Error,
+    pub report: RealtimeReport,
+}
+
+impl fmt::Display for RealtimeFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "real-time run stopped after {} steps: {}",
+            self.report.steps, self.error
+        )
+    }
+}
+
+impl std::error::Error for RealtimeFailure {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(&self.error)
+    }
+}
+
+/// What [`RealtimeRunner::run`] returns: the report and the test, or the failure (error and
+/// report).
+pub type RealtimeResult = std::result::Result<(RealtimeReport, SubstructureTest), Box<RealtimeFailure>>;
+
+/// Runs a [`SubstructureTest`] in real time (see the module docs of [`crate::realtime`]).
+pub struct RealtimeRunner {
+    test: SubstructureTest,
+    mass_influence: DVector<f64>,
+    ground_accel: Vec<f64>,
+    options: RealtimeOptions,
+}
+
+impl RealtimeRunner {
+    /// `model` is the numerical substructure the test's controller was built from (for the
+    /// ground-motion load `−M ι a_g`); `ground_accel[i]` is `a_g` at `t_i = i Δt` from the
+    /// test's current state on, so the run has `ground_accel.len() − 1` steps.
+    pub fn new(
+        model: &StructuralModel,
+        test: SubstructureTest,
+        ground_accel: Vec<f64>,
+        options: RealtimeOptions,
+    ) -> Result<Self> {
+        let n = model.n_dofs();
+        if test.controller.newmark_core().mass != model.mass {
+            return Err(Error::invalid(
+                "realtime.model",
+                "is not the model the substructure test was built from",
+            ));
+        }
+        if ground_accel.len() < 2 {
+            return Err(Error::invalid(
+                "realtime.ground_accel",
+                "needs at least two samples (one step)",
+            ));
+        }
+        if let Some(i) = ground_accel.iter().position(|a| !a.is_finite()) {
+            return Err(Error::invalid(
+                "realtime.ground_accel",
+                format!("sample {i} is not finite"),
+            ));
+        }
+        if let Some(dofs) = &options.record_dofs
+            && let Some(&d) = dofs.iter().find(|&&d| d >= n)
+        {
+            return Err(Error::invalid(
+                "realtime.record_dofs",
+                format!("DOF {} is out of range (the model has DOFs 1..={n})", d + 1),
+            ));
+        }
+        if options.ring_capacity == 0 {
+            return Err(Error::invalid("realtime.ring_capacity", "must be at least 1"));
+        }
+        for (what, priority) in [
+            ("realtime.fifo_priority", options.fifo_priority),
+            ("realtime.numerical_fifo_priority", options.numerical_fifo_priority),
+        ] {
+            if let Some(p) = priority
+                && !(1..=99).contains(&p)
+            {
+                return Err(Error::invalid(what, format!("must be in 1..=99, got {p}")));
+            }
+        }
+        let dt = test.controller.dt();
+        if dt < 1e-6 * test.controller.substeps() as f64 {
+            return Err(Error::invalid(
+                "realtime",
+                "the sub-step length is below 1 µs; it cannot be paced in real time",
+            ));
+        }
+        Ok(Self {
+            test,
+            mass_influence: model.effective_mass_vector(),
+            ground_accel,
+            options,
+        })
+    }
+
+    /// Run all steps in real time, handing step records to `sink` (on the calling thread, in
+    /// step order). Returns the report and the test in its final state (the controller and the
+    /// experimental side have advanced; `SubstructureTest::steps_done` and `record` are not
+    /// updated by this runner). On failure the run stops, the records so far are flushed to the
+    /// sink, and the error comes with the report.
+    pub fn run<F>(
+        mut self,
+        mut sink: F,
+    ) -> std::result::Result<(RealtimeReport, SubstructureTest), Box<RealtimeFailure>>
+    where
+        F: FnMut(&StepRecordOwned) + Send,
+    {
+        let opts = &self.options;
+        let ag = &self.ground_accel[..];
+        let n_steps = ag.len() - 1;
+        let offset = self.test.steps_done();
+        let ctrl = &self.test.controller;
+        let (n, n_c, k, dt) = (ctrl.state().u.len(), ctrl.n_coupling(), ctrl.substeps(), ctrl.dt());
+        let dofs: Vec<usize> = opts.record_dofs.clone().unwrap_or_else(|| (0..n).collect());
+        let hist = || LatencyHistogram::new(opts.histogram_bin, opts.histogram_bins);
+
+        // Rings: records to the writer, and the two mailboxes between the loop threads.
+        let mut records = SpscRing::new(opts.ring_capacity, || StepRecordOwned::with_sizes(&dofs, n_c));
+        let mut to_rt = SpscRing::new(2, || PredictorMsg {
+            step: 0,
+            w_c: vec![0.0; n_c],
+        });
+        let mut to_numerical = SpscRing::new(2, || EndMsg {
+            step: 0,
+            before: vec![0.0; n_c],
+            last: vec![0.0; n_c],
+            command: vec![0.0; n_c],
+            displacement: vec![0.0; n_c],
+            holds: 0,
+        });
+        let (mut record_tx, mut record_rx) = records.split();
+        let (w_tx, w_rx) = to_rt.split();
+        let (end_tx, end_rx) = to_numerical.split();
+
+        if opts.record_every > 0 {
+            let initial = self.test.record();
+            let command = self.test.controller.command().to_vec();
+            record_tx.push_or_drop(|slot| slot.fill(&initial, &command, 0));
+        }
+
+        // Step 0's predictor the plain way; the overlap starts with step 1.
+        let mut load = DVector::zeros(n);
+        load.copy_from(&self.mass_influence);
+        load.scale_mut(-ag[1]);
+        self.test.controller.begin_step(&load);
+        let overlap = OverlapPredictor::new(&self.test.controller);
+        let coupling = CouplingLoop::new(&self.test.controller, &overlap);
+
+        let memory_lock = if opts.lock_memory {
+            os::lock_memory()
+        } else {
+            RtSetting::NotRequested
+        };
+        let shared = Shared::default();
+        let started = Instant::now();
+        let t0 = started
+            + opts
+                .start_delay
+                .unwrap_or_else(|| Duration::from_secs_f64(dt).max(Duration::from_millis(1)));
+        let mut records_written = 0u64;
+
+        let numerical = Numerical {
+            controller: &mut self.test.controller,
+            overlap,
+            mass_influence: &self.mass_influence,
+            load,
+            ag,
+            n_steps,
+            offset,
+            before: vec![0.0; n_c],
+            displacement: vec![0.0; n_c],
+            command: vec![0.0; n_c],
+            w_tx,
+            end_rx,
+            record_tx,
+            record_every: opts.record_every,
+            delays: &opts.numerical_delay,
+            fifo_priority: opts.numerical_fifo_priority,
+            shared: &shared,
+            hist: hist(),
+        };
+        let site: &mut dyn ExperimentalSubstructure = &mut *self.test.site;
+        let (numerical_out, rt_out) = thread::scope(|s| {
+            let numerical = thread::Builder::new()
+                .name("substep-numerical".into())
+                .spawn_scoped(s, move || numerical.run())
+                .expect("spawn the numerical thread");
+            let rt = RealTime {
+                site,
+                coupling,
+                ag,
+                n_steps,
+                offset,
+                dt,
+                k,
+                t0,
+                w_rx,
+                end_tx,
+                worker: numerical.thread().clone(),
+                shared: &shared,
+                opts,
+                force: vec![0.0; n_c],
+                displacement: vec![0.0; n_c],
+                stats: RtStats {
+                    wake: hist(),
+                    completion: hist(),
+                    steps: 0,
+                    substeps: 0,
+                    holds: 0,
+                    missed: 0,
+                    late_steps: 0,
+                    rebased: 0,
+                    worst: Duration::ZERO,
+                    worst_at: (0, 0),
+                    fifo: RtSetting::NotRequested,
+                },
+            };
+            let rt = thread::Builder::new()
+                .name("substep-realtime".into())
+                .spawn_scoped(s, move || rt.run())
+                .expect("spawn the real-time thread");
+            // The writer: this thread.
+            loop {
+                let done = shared.numerical_done.load(Ordering::Acquire);
+                let mut any = false;
+                while record_rx.try_pop_with(|r| sink(r)).is_some() {
+                    records_written += 1;
+                    any = true;
+                }
+                if done {
+                    break;
+                }
+                if !any {
+                    thread::sleep(Duration::from_millis(2));
+                }
+            }
+            (join(numerical.join()), join(rt.join()))
+        });
+        if memory_lock == RtSetting::Applied {
+            os::unlock_memory();
+        }
+        let (numerical_hist, numerical_fifo, numerical_result) = numerical_out;
+        let (stats, rt_result) = rt_out;
+        let wall_time = started.elapsed();
+        let report = RealtimeReport {
+            dt,
+            k_sub: k,
+            steps: stats.steps,
+            substeps: stats.substeps,
+            hold_substeps: stats.holds,
+            missed: stats.missed,
+            late_steps: stats.late_steps,
+            rebased: stats.rebased,
+            latency_p50: stats.wake.percentile(0.5),
+            latency_p99: stats.wake.percentile(0.99),
+            latency_max: stats.wake.max(),
+            latency_max_at: stats.worst_at,
+            histogram: stats.wake,
+            completion: stats.completion,
+            numerical: numerical_hist,
+            records_written,
+            records_dropped: records.overflows(),
+            memory_lock,
+            fifo: stats.fifo,
+            numerical_fifo,
+            wall_time,
+        };
+        let error = match shared.first_error.load(Ordering::Acquire) {
+            FROM_RT => rt_result.err(),
+            FROM_NUMERICAL => numerical_result.err(),
+            _ => None,
+        };
+        match error {
+            Some(error) => Err(Box::new(RealtimeFailure { error, report })),
+            None => Ok((report, self.test)),
+        }
+    }
+}
+
+fn join<T>(r: thread::Result<T>) -> T {
+    r.unwrap_or_else(|e| std::panic::resume_unwind(e))
+}
+
+const FROM_RT: u8 = 1;
+const FROM_NUMERICAL: u8 = 2;
+
+#[derive(Default)]
+struct Shared {
+    /// A thread failed; the other stops.
+    stop: AtomicBool,
+    /// Which thread failed first (`FROM_*`).
+    first_error: AtomicU8,
+    rt_done: AtomicBool,
+    numerical_done: AtomicBool,
+}
+
+impl Shared {
+    fn fail(&self, who: u8) {
+        let _ = self
+            .first_error
+            .compare_exchange(0, who, Ordering::AcqRel, Ordering::Acquire);
+        self.stop.store(true, Ordering::Release);
+    }
+}
+
+/// Sets a flag when dropped (also while unwinding), so that no thread waits for a dead one.
+struct SetOnDrop<'a>(&'a AtomicBool, Option<Thread>);
+
+impl Drop for SetOnDrop<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Release);
+        if let Some(t) = &self.1 {
+            t.unpark();
+        }
+    }
+}
+
+/// Numerical → real-time: coupling rows of `W` for step `step`.
+struct PredictorMsg {
+    step: usize,
+    w_c: Vec<f64>,
+}
+
+/// Real-time → numerical: the end of step `step`.
+struct EndMsg {
+    step: usize,
+    before: Vec<f64>,
+    last: Vec<f64>,
+    command: Vec<f64>,
+    displacement: Vec<f64>,
+    holds: usize,
+}
+
+fn diverged(step: usize, dt: f64) -> Error {
+    Error::Diverged {
+        step,
+        time: step as f64 * dt,
+        reason: "the response is no longer finite (NaN or overflow)".into(),
+    }
+}
+
+// ----------------------------------------------------------------------------------------------
+// Numerical thread
+
+struct Numerical<'a> {
+    controller: &'a mut SubstepController,
+    overlap: OverlapPredictor,
+    mass_influence: &'a DVector<f64>,
+    load: DVector<f64>,
+    ag: &'a [f64],
+    n_steps: usize,
+    offset: usize,
+    before: Vec<f64>,
+    displacement: Vec<f64>,
+    command: Vec<f64>,
+    w_tx: Producer<'a, PredictorMsg>,
+    end_rx: Consumer<'a, EndMsg>,
+    record_tx: Producer<'a, StepRecordOwned>,
+    record_every: usize,
+    delays: &'a [(usize, Duration)],
+    fifo_priority: Option<i32>,
+    shared: &'a Shared,
+    hist: LatencyHistogram,
+}
+
+impl Numerical<'_> {
+    fn run(mut self) -> (LatencyHistogram, RtSetting, Result<()>) {
+        let shared = self.shared;
+        let _done = SetOnDrop(&shared.numerical_done, None);
+        let fifo = self.fifo_priority.map_or(RtSetting::NotRequested, os::set_fifo);
+        let result = self.steps();
+        if result.is_err() {
+            self.shared.fail(FROM_NUMERICAL);
+        }
+        (self.hist, fifo, result)
+    }
+
+    fn steps(&mut self) -> Result<()> {
+        if self.n_steps > 1 {
+            self.precompute_and_post(1);
+        }
+        for n in 0..self.n_steps {
+            // Wait for the last forces of step n.
+            let holds = loop {
+                // Read the flags before popping: a message pushed before they were set is seen.
+                let finished = self.shared.stop.load(Ordering::Acquire) || self.shared.rt_done.load(Ordering::Acquire);
+                let got = self.end_rx.try_pop_with(|m| {
+                    debug_assert_eq!(m.step, n);
+                    self.controller.set_substep_results(&m.before, &m.last, &m.command);
+                    self.before.copy_from_slice(&m.before);
+                    self.command.copy_from_slice(&m.command);
+                    self.displacement.copy_from_slice(&m.displacement);
+                    m.holds
+                });
+                if let Some(h) = got {
+                    break h;
+                }
+                if finished {
+                    return Ok(());
+                }
+                thread::park_timeout(Duration::from_millis(5));
+            };
+            let received = Instant::now();
+            self.controller.finish_step();
+            let step = self.offset + n + 1;
+            if !self.controller.state().is_finite() {
+                return Err(diverged(step, self.controller.dt()));
+            }
+            if self.record_every > 0 && step.is_multiple_of(self.record_every) {
+                let c = &*self.controller;
+                let s = c.state();
+                let record = StepRecord {
+                    step,
+                    time: step as f64 * c.dt(),
+                    u: s.u.as_slice(),
+                    v: s.v.as_slice(),
+                    a: s.a.as_slice(),
+                    coupling_force: c.coupling_force(),
+                    error_force: c.error_force(),
+                    compensation_force: c.compensation_force(),
+                    measured_displacement: &self.displacement,
+                };
+                let command = &self.command;
+                self.record_tx.push_or_drop(|slot| slot.fill(&record, command, holds));
+            }
+            if n + 1 < self.n_steps {
+                let x = self.overlap.predictor(self.controller, &self.before);
+                self.controller.begin_step_with_predictor(x);
+            }
+            if n + 2 < self.n_steps {
+                self.precompute_and_post(n + 2);
+            }
+            self.hist.record(received.elapsed());
+        }
+        Ok(())
+    }
+
+    /// `W` of step `m` (whose predictor needs `f_l` at `t_{m+1}`), coupling rows to the
+    /// real-time thread. The controller is inside step `m − 1`.
+    fn precompute_and_post(&mut self, m: usize) {
+        if let Some(&(_, d)) = self.delays.iter().find(|(s, _)| *s == m) {
+            thread::sleep(d);
+        }
+        self.load.copy_from(self.mass_influence);
+        self.load.scale_mut(-self.ag[m + 1]);
+        self.overlap.precompute(self.controller, &self.load);
+        let w = self.overlap.known();
+        let coupling = self.controller.coupling_dofs();
+        let posted = self.w_tx.try_push_with(|msg| {
+            msg.step = m;
+            for (i, &c) in coupling.iter().enumerate() {
+                msg.w_c[i] = w[c];
+            }
+        });
+        debug_assert!(posted, "predictor mailbox full (protocol violated)");
+    }
+}
+
+// ----------------------------------------------------------------------------------------------
+// Real-time thread
+
+struct RtStats {
+    wake: LatencyHistogram,
+    completion: LatencyHistogram,
+    steps: usize,
+    substeps: usize,
+    holds: usize,
+    missed: usize,
+    late_steps: usize,
+    rebased: usize,
+    /// The latest wake-up of an algorithm sub-step and where it was (step, sub-step).
+    worst: Duration,
+    worst_at: (usize, usize),
+    fifo: RtSetting,
+}
+
+struct RealTime<'a> {
+    site: &'a mut dyn ExperimentalSubstructure,
+    coupling: CouplingLoop,
+    ag: &'a [f64],
+    n_steps: usize,
+    offset: usize,
+    dt: f64,
+    k: usize,
+    /// Origin of the schedule (moves when re-based).
+    t0: Instant,
+    w_rx: Consumer<'a, PredictorMsg>,
+    end_tx: Producer<'a, EndMsg>,
+    worker: Thread,
+    shared: &'a Shared,
+    opts: &'a RealtimeOptions,
+    force: Vec<f64>,
+    displacement: Vec<f64>,
+    stats: RtStats,
+}
+
+/// Why the sub-step loop stopped early without an error of its own.
+enum Halt {
+    Stopped,
+    Failed(Error),
+}
+
+impl From<Error> for Halt {
+    fn from(e: Error) -> Self {
+        Halt::Failed(e)
+    }
+}
+
+impl RealTime<'_> {
+    fn run(mut self) -> (RtStats, Result<()>) {
+        let shared = self.shared;
+        let _done = SetOnDrop(&shared.rt_done, Some(self.worker.clone()));
+        if let Some(p) = self.opts.fifo_priority {
+            self.stats.fifo = os::set_fifo(p);
+        }
+        if self.opts.lock_memory {
+            prefault_stack();
+        }
+        let result = match self.steps() {
+            Ok(()) | Err(Halt::Stopped) => Ok(()),
+            Err(Halt::Failed(e)) => {
+                self.shared.fail(FROM_RT);
+                self.worker.unpark();
+                Err(e)
+            }
+        };
+        (self.stats, result)
+    }
+
+    /// Offset [ns] from the step start of slot `j` (0-based) of the algorithm's sub-steps when
+    /// `holds` hold slots came first: `holds Δτ + j (k − holds) Δτ / k`.
+    fn slot_offset(&self, dt_ns: u128, holds: usize, j: usize) -> u64 {
+        let k = self.k as u128;
+        (holds as u128 * dt_ns / k + j as u128 * (k - holds as u128) * dt_ns / (k * k)) as u64
+    }
+
+    fn steps(&mut self) -> std::result::Result<(), Halt> {
+        let sleeper = spin_sleep::SpinSleeper::new(self.opts.spin_window.as_nanos().min(999_999_999) as u32);
+        let dt_ns = (self.dt * 1e9).round() as u128;
+        let max_lag = self.opts.max_lag.unwrap_or(Duration::from_nanos(dt_ns as u64));
+        let k = self.k;
+        let dtau = self.dt / k as f64;
+        for n in 0..self.n_steps {
+            let step_start = Duration::from_nanos((n as u128 * dt_ns) as u64);
+            let (ag_i, ag_next) = (self.ag[n], self.ag[n + 1]);
+            let mut holds = 0;
+            if n > 0 {
+                if !self.coupling.has_next() {
+                    sleeper.sleep_until(self.t0 + step_start);
+                    if !self.take_predictor() {
+                        self.stats.late_steps += 1;
+                        holds = self.late_step(&sleeper, step_start, dt_ns, (ag_i, ag_i))?;
+                    }
+                }
+                self.coupling.begin_next();
+            }
+            let dtau_slot = if holds == 0 {
+                dtau
+            } else {
+                (k - holds) as f64 * dtau / k as f64
+            };
+            for j in 1..=k {
+                if self.shared.stop.load(Ordering::Acquire) {
+                    return Err(Halt::Stopped);
+                }
+                let mut start = self.t0 + step_start + Duration::from_nanos(self.slot_offset(dt_ns, holds, j - 1));
+                sleeper.sleep_until(start);
+                let wake = Instant::now();
+                let late = wake.saturating_duration_since(start);
+                self.stats.wake.record(late);
+                if late > self.stats.worst {
+                    self.stats.worst = late;
+                    self.stats.worst_at = (self.offset + n, j);
+                }
+                if late > max_lag {
+                    self.t0 += late;
+                    start += late;
+                    self.stats.rebased += 1;
+                }
+                let end = self.t0 + step_start + Duration::from_nanos(self.slot_offset(dt_ns, holds, j));
+                let (r0, r1) = ((j - 1) as f64 / k as f64, j as f64 / k as f64);
+                let ag = (ag_i + r0 * (ag_next - ag_i), ag_i + r1 * (ag_next - ag_i));
+                let command = self.coupling.next_command();
+                self.site
+                    .substep(command, ag, dtau_slot, &mut self.force, &mut self.displacement)?;
+                self.coupling.feedback(&self.force);
+                self.stats.substeps += 1;
+                if j == k {
+                    self.end_step(n, holds)?;
+                }
+                let done = Instant::now();
+                self.stats.completion.record(done.saturating_duration_since(start));
+                if done > end {
+                    self.stats.missed += 1;
+                }
+            }
+            self.stats.steps += 1;
+        }
+        Ok(())
+    }
+
+    /// After the last sub-step of step `n`: compensation, the forces to the numerical thread,
+    /// and the next predictor if it is there.
+    fn end_step(&mut self, n: usize, holds: usize) -> std::result::Result<(), Halt> {
+        if self.force.iter().any(|f| !f.is_finite()) {
+            return Err(diverged(self.offset + n + 1, self.dt).into());
+        }
+        self.coupling.end_step();
+        let c = &self.coupling;
+        let d = &self.displacement;
+        let msg = |m: &mut EndMsg| {
+            m.step = n;
+            m.before.copy_from_slice(c.force_before());
+            m.last.copy_from_slice(c.force_last());
+            m.command.copy_from_slice(c.command());
+            m.displacement.copy_from_slice(d);
+            m.holds = holds;
+        };
+        // Never full by the protocol (at most two steps in flight); wait rather than lose it.
+        while !self.end_tx.try_push_with(msg) {
+            if self.shared.stop.load(Ordering::Acquire) {
+                return Err(Halt::Stopped);
+            }
+            thread::sleep(Duration::from_micros(20));
+        }
+        self.worker.unpark();
+        if n + 1 < self.n_steps {
+            self.take_predictor();
+        }
+        Ok(())
+    }
+
+    /// Take the next step's `W_c` if posted.
+    fn take_predictor(&mut self) -> bool {
+        let c = &mut self.coupling;
+        self.w_rx.try_pop_with(|m| c.take_predictor(&m.w_c)).is_some()
+    }
+
+    /// The late-step policy for the step starting at `step_start`; returns the number of hold
+    /// sub-steps sent.
+    fn late_step(
+        &mut self,
+        sleeper: &spin_sleep::SpinSleeper,
+        step_start: Duration,
+        dt_ns: u128,
+        ag_hold: (f64, f64),
+    ) -> std::result::Result<usize, Halt> {
+        let dtau = self.dt / self.k as f64;
+        let mut holds = 0;
+        if self.opts.late_policy == LatePolicy::HoldExtrapolate {
+            while holds + 1 < self.k {
+                if self.shared.stop.load(Ordering::Acquire) {
+                    return Err(Halt::Stopped);
+                }
+                let start =
+                    self.t0 + step_start + Duration::from_nanos((holds as u128 * dt_ns / self.k as u128) as u64);
+                let end = start + Duration::from_nanos((dt_ns / self.k as u128) as u64);
+                self.stats.wake.record(Instant::now().saturating_duration_since(start));
+                let command = self.coupling.hold_command(holds);
+                self.site
+                    .substep(command, ag_hold, dtau, &mut self.force, &mut self.displacement)?;
+                holds += 1;
+                self.stats.holds += 1;
+                let done = Instant::now();
+                self.stats.completion.record(done.saturating_duration_since(start));
+                if done > end {
+                    self.stats.missed += 1;
+                }
+                sleeper.sleep_until(end);
+                if self.take_predictor() {
+                    return Ok(holds);
+                }
+            }
+        }
+        // Wait for the predictor, then re-base so that the step starts now.
+        while !self.take_predictor() {
+            if self.shared.stop.load(Ordering::Acquire) {
+                return Err(Halt::Stopped);
+            }
+            thread::sleep(Duration::from_micros(20));
+        }
+        let due = self.t0 + step_start + Duration::from_nanos(self.slot_offset(dt_ns, holds, 0));
+        let now = Instant::now();
+        if now > due {
+            self.t0 += now - due;
+        }
+        self.stats.rebased += 1;
+        Ok(holds)
+    }
+}
+
+/// Touch some stack so that its pages are resident (and locked) before the loop.
+fn prefault_stack() {
+    let mut buf = [0u8; 64 * 1024];
+    std::hint::black_box(&mut buf);
+}
