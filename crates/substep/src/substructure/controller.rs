@@ -285,10 +285,6 @@ impl SubstepController {
     pub fn compensation(&self) -> &ErrorForceCompensation {
         &self.compensation
     }
-    /// Coupling part of the previous step's predictor `x̂_c^{(i)}` (start of the current ramp).
-    pub fn predictor_c_prev(&self) -> &[f64] {
-        self.predictor_c_prev.as_slice()
-    }
     /// The full predictor `x̂` of the current step.
     pub fn predictor(&self) -> &DVector<f64> {
         &self.predictor
