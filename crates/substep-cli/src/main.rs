@@ -8,6 +8,7 @@ mod bench;
 mod output;
 mod plots;
 mod run;
+mod site;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -39,6 +40,8 @@ enum Command {
     Analyze(analyze::AnalyzeArgs),
     /// Measure µs per step of the integrator and the sub-step controller
     Bench(bench::BenchArgs),
+    /// Host an experimental substructure for remote clients (`site serve SITE.toml`)
+    Site(site::SiteArgs),
 }
 
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -60,7 +63,7 @@ pub struct RunArgs {
 /// that cannot be written), 2 for bad input (any other library error: config, files, parameters).
 fn exit_code(e: &anyhow::Error) -> u8 {
     match e.downcast_ref::<substep::Error>() {
-        Some(substep::Error::Diverged { .. }) => 1,
+        Some(substep::Error::Diverged { .. } | substep::Error::Stopped { .. }) => 1,
         Some(_) => 2,
         None => 1,
     }
@@ -73,6 +76,7 @@ fn main() -> ExitCode {
         Some(Command::Run(args)) => run::run(&args),
         Some(Command::Analyze(args)) => analyze::analyze(&args),
         Some(Command::Bench(args)) => bench::bench(&args),
+        Some(Command::Site(args)) => site::site(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -86,6 +86,11 @@ impl HistoryWriter {
         self.w.write_all(line.as_bytes())
     }
 
+    /// Push buffered rows to the file (crash safety: the run loop calls this every ~0.5 s).
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.w.flush()
+    }
+
     pub fn finish(mut self) -> io::Result<()> {
         self.w.flush()
     }
@@ -117,6 +122,13 @@ impl SubstepWriter {
             dtau: dt / substeps as f64,
             error: None,
         })
+    }
+
+    pub fn flush(&mut self) -> io::Result<()> {
+        match self.error.take() {
+            Some(e) => Err(e),
+            None => self.w.flush(),
+        }
     }
 
     pub fn finish(mut self) -> io::Result<()> {

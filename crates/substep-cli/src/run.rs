@@ -512,6 +512,16 @@ pub fn run(args: &RunArgs) -> Result<()> {
         outputs.push(substeps_path.clone());
     }
 
+    // Until the run ends, summary.json says it is in progress: a killed process leaves a
+    // summary that does not claim completion, and history rows flushed up to the last ~0.5 s.
+    let running = serde_json::json!({
+        "completed": false,
+        "status": "running (a run that was killed leaves this summary; history.csv holds the steps flushed so far)",
+        "config": args.config.as_ref().map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string()),
+    });
+    std::fs::write(&summary_path, running.to_string() + "\n").with_context(|| cannot_write(&summary_path))?;
+    let mut last_flush = Instant::now();
+
     let mut recorder = Recorder::new(n, &coupling);
     let mut progress = Progress::new(steps, !args.quiet);
     let mut compute = Duration::ZERO;
@@ -531,6 +541,13 @@ pub fn run(args: &RunArgs) -> Result<()> {
             break;
         }
         progress.update(i);
+        if last_flush.elapsed() > Duration::from_millis(500) {
+            history.flush().with_context(|| cannot_write(&history_path))?;
+            if let Some(w) = &mut substep_writer {
+                w.flush().with_context(|| cannot_write(&substeps_path))?;
+            }
+            last_flush = Instant::now();
+        }
         let t0 = Instant::now();
         let result = match &mut substep_writer {
             Some(w) => sim.step(w),
@@ -563,7 +580,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     outputs.push(summary_path.clone());
 
     let (stopped_at_step, reason) = match &failure {
-        Some(substep::Error::Diverged { step, reason, .. }) => (Some(*step), Some(reason.clone())),
+        Some(substep::Error::Diverged { step, reason, .. } | substep::Error::Stopped { step, reason, .. }) => {
+            (Some(*step), Some(reason.clone()))
+        }
         Some(e) => (Some(done + 1), Some(e.to_string())),
         None => (None, None),
     };

@@ -20,6 +20,12 @@ pub enum Error {
     #[error("diverged at step {step} (t = {time:.6} s): {reason}")]
     Diverged { step: usize, time: f64, reason: String },
 
+    /// A test stopped in a controlled way: a safety limit was violated or the experimental
+    /// side failed (site disconnected, timed out, returned garbage). Records up to `step` are
+    /// intact.
+    #[error("stopped at step {step} (t = {time:.6} s): {reason}")]
+    Stopped { step: usize, time: f64, reason: String },
+
     /// A file could not be read or parsed.
     #[error("{path}: {reason}")]
     File { path: String, reason: String },

@@ -22,13 +22,19 @@ use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::excitation::{self, Envelope, KanaiTajimi, Record};
 use crate::integrate::{Scheme, check_hilber_alpha};
 use crate::model::{DampingSpec, ShearBuilding, StructuralModel, TmdSystem, sdof, shear_building, tmd_two_dof};
+use crate::site::openfresco::OpenFrescoSite;
+use crate::site::{ClientOptions, Mode, RemoteSite, RemoteStepSite, RemoteStepTest, Transport};
 use crate::specimen::{BoucWenParams, FrictionModel, Pinching, SpecimenSpec};
-use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings, SubstructureTest};
-use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab};
+use crate::substructure::{
+    ErrorForceSpec, ExperimentalSubstructure, LimitedSite, SafetyLimits, SubstepController, SubstepSettings,
+    SubstructureTest,
+};
+use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab, channel_seed};
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// A validated test definition.
 #[derive(Debug, Clone)]
@@ -82,24 +88,105 @@ pub struct SubstructureDefinition {
     /// Newmark β, γ of the integrator.
     pub beta: f64,
     pub gamma: f64,
+    /// A remote site instead of the virtual lab (the specimens, if any, then only feed the
+    /// reference solution).
+    pub remote: Option<RemoteDefinition>,
+    /// Safety limits with a controlled stop.
+    pub limits: Option<SafetyLimits>,
+}
+
+/// Protocol of a remote site.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RemoteProtocol {
+    /// The project's own protocol (`substep site serve` with `protocol = "substep"`).
+    Substep,
+    /// OpenFresco's generic TCP protocol (e.g. an `ECGenericTCP`-style site, or
+    /// `substep site serve` with `protocol = "openfresco"`).
+    OpenFresco,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RemoteDefinition {
+    pub address: String,
+    pub protocol: RemoteProtocol,
+    pub transport: Transport,
+    pub mode: Mode,
+    /// Reply timeout [s].
+    pub timeout: f64,
+}
+
+impl RemoteDefinition {
+    pub fn client_options(&self) -> ClientOptions {
+        let t = Duration::from_secs_f64(self.timeout);
+        ClientOptions {
+            timeout: t,
+            connect_timeout: t,
+            ..ClientOptions::default()
+        }
+    }
 }
 
 impl SubstructureDefinition {
+    /// The experimental side for `controller`: the virtual lab or the remote site (per
+    /// sub-step), wrapped in the safety limits when given.
+    pub fn build_site(&self, controller: &SubstepController, dt: f64) -> Result<Box<dyn ExperimentalSubstructure>> {
+        let n_c = self.coupling_dofs.len();
+        let site: Box<dyn ExperimentalSubstructure> = match &self.remote {
+            None => Box::new(VirtualLab::from_specs(
+                &self.coupling_dofs,
+                &self.specimens,
+                &vec![self.actuator; n_c],
+                &self.force_sensors,
+                &self.displacement_sensors,
+                dt / self.substeps as f64,
+                self.inner_steps,
+            )?),
+            Some(r) => match (r.protocol, r.mode) {
+                (RemoteProtocol::Substep, Mode::PerSubstep) => Box::new(RemoteSite::for_controller(
+                    r.address.as_str(),
+                    r.transport,
+                    controller,
+                    &r.client_options(),
+                )?),
+                (RemoteProtocol::OpenFresco, _) => {
+                    Box::new(OpenFrescoSite::connect(r.address.as_str(), n_c, &r.client_options())?)
+                }
+                (RemoteProtocol::Substep, Mode::PerStep) => {
+                    return Err(Error::invalid(
+                        "substructure.remote.mode",
+                        "per_step runs through build_remote_step_test (the site executes the sub-steps)",
+                    ));
+                }
+            },
+        };
+        Ok(match &self.limits {
+            Some(l) => Box::new(LimitedSite::new(site, l.clone())?),
+            None => site,
+        })
+    }
+
+    /// A per-step remote test (`mode = "per_step"`): the site runs the sub-steps of each step.
+    pub fn build_remote_step_test(
+        &self,
+        model: &StructuralModel,
+        dt: f64,
+        load0: &DVector<f64>,
+    ) -> Result<RemoteStepTest> {
+        let r = self
+            .remote
+            .as_ref()
+            .ok_or_else(|| Error::invalid("substructure.remote", "is required for a per-step remote test"))?;
+        let controller = SubstepController::new(model, &self.settings(dt), load0)?;
+        let site = RemoteStepSite::for_controller(r.address.as_str(), r.transport, &controller, &r.client_options())?;
+        RemoteStepTest::new(model, controller, site)
+    }
+
     /// The substructure test of this definition (controller + virtual lab) for `model` at
     /// rest, time step `dt` and initial load `load0`.
     pub fn build_test(&self, model: &StructuralModel, dt: f64, load0: &DVector<f64>) -> Result<SubstructureTest> {
         let controller = SubstepController::new(model, &self.settings(dt), load0)?;
-        let n_c = self.coupling_dofs.len();
-        let lab = VirtualLab::from_specs(
-            &self.coupling_dofs,
-            &self.specimens,
-            &vec![self.actuator; n_c],
-            &self.force_sensors,
-            &self.displacement_sensors,
-            dt / self.substeps as f64,
-            self.inner_steps,
-        )?;
-        SubstructureTest::new(model, controller, Box::new(lab))
+        let site = self.build_site(&controller, dt)?;
+        SubstructureTest::new(model, controller, site)
     }
 
     /// Settings of the sub-step controller for time step `dt`.
@@ -151,7 +238,7 @@ impl TestDefinition {
 }
 
 /// `FILE: line L: message` from a toml error (its message may span lines; they are joined).
-fn toml_error(e: &toml::de::Error, text: &str, name: &str) -> Error {
+pub(super) fn toml_error(e: &toml::de::Error, text: &str, name: &str) -> Error {
     let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
     match e.span() {
         Some(span) => {
@@ -163,7 +250,7 @@ fn toml_error(e: &toml::de::Error, text: &str, name: &str) -> Error {
 }
 
 /// Prefix the key path of an input error (`mass` → `structure.sdof.mass`).
-fn prefixed(e: Error, prefix: &str) -> Error {
+pub(super) fn prefixed(e: Error, prefix: &str) -> Error {
     match e {
         Error::InvalidInput { what, reason } if !what.starts_with(prefix) => {
             Error::invalid(format!("{prefix}{what}"), reason)
@@ -304,12 +391,35 @@ struct RawSubstructure {
     actuator: Option<RawActuator>,
     sensors: Option<RawSensors>,
     error_force: Option<RawErrorForce>,
+    remote: Option<RawRemote>,
+    limits: Option<RawLimits>,
+}
+
+/// `[substructure.remote]`: drive a site served by `substep site serve` (or an OpenFresco site).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRemote {
+    address: String,
+    protocol: Option<String>,
+    transport: Option<String>,
+    mode: Option<String>,
+    timeout: Option<f64>,
+}
+
+/// `[substructure.limits]`: one value for all coupling DOFs or one per DOF.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLimits {
+    displacement: Option<OneOrMany>,
+    velocity: Option<OneOrMany>,
+    force: Option<OneOrMany>,
+    ramp_time: Option<f64>,
 }
 
 /// One `[[substructure.specimen]]`; `kind` selects the variant.
 #[derive(Debug, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-enum RawSpecimen {
+pub(super) enum RawSpecimen {
     LinearSdof {
         dof: usize,
         mass: Option<f64>,
@@ -368,7 +478,7 @@ enum RawSpecimen {
 
 #[derive(Debug, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-enum RawActuator {
+pub(super) enum RawActuator {
     Ideal {
         #[serde(default)]
         delay: f64,
@@ -391,7 +501,7 @@ enum RawActuator {
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawSensors {
+pub(super) struct RawSensors {
     #[serde(default)]
     force_noise: f64,
     #[serde(default)]
@@ -450,7 +560,7 @@ impl Default for RawOutput {
 
 /// A matrix in a config: an array of rows, a number (1×1), or a path to a `.mtx` file.
 #[derive(Debug, Clone)]
-enum MatrixInput {
+pub(super) enum MatrixInput {
     Rows(Vec<Vec<f64>>),
     File(String),
 }
@@ -521,7 +631,7 @@ impl<'de> Deserialize<'de> for OneOrMany {
 }
 
 /// A matrix from its config form; `what` is the key path.
-fn matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<DMatrix<f64>> {
+pub(super) fn matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<DMatrix<f64>> {
     match input {
         MatrixInput::File(path) => {
             let resolved = base.join(path);
@@ -573,14 +683,6 @@ fn forbid(prefix: &str, keys: &[(&str, bool)], why: &str) -> Result<()> {
 }
 
 /// Deterministic per-channel seed (SplitMix64 of the user seed and the channel number).
-fn channel_seed(seed: u64, channel: u64) -> u64 {
-    let mut z = seed
-        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        .wrapping_add(channel.wrapping_add(1).wrapping_mul(0xBF58_476D_1CE4_E5B9));
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
 
 // ---------------------------------------------------------------------------------------------
 // Building: raw → validated.
@@ -980,7 +1082,7 @@ fn rekey(e: Error, what: &str) -> Error {
 
 impl RawSpecimen {
     /// The library's description; `n` is the number of model DOFs, `what` the key prefix.
-    fn to_spec(&self, n: usize, what: &str, base: &Path) -> Result<SpecimenSpec> {
+    pub(super) fn to_spec(&self, n: usize, what: &str, base: &Path) -> Result<SpecimenSpec> {
         match self {
             RawSpecimen::BoucWen {
                 dof,
@@ -1172,7 +1274,7 @@ impl RawSpecimen {
 }
 
 impl RawActuator {
-    fn spec(&self) -> ActuatorSpec {
+    pub(super) fn spec(&self) -> ActuatorSpec {
         match *self {
             RawActuator::Ideal { delay } | RawActuator::Delay { delay } => ActuatorSpec {
                 dynamics: Dynamics::Ideal,
@@ -1194,8 +1296,25 @@ impl RawActuator {
 }
 
 impl RawSensors {
+    /// The base force and displacement sensor (seed = the configured seed), from which
+    /// [`crate::transfer::channel_sensors`] derives one per coupling DOF exactly as
+    /// [`RawSensors::specs`] does.
+    pub(super) fn base_specs(&self) -> Result<(SensorSpec, SensorSpec)> {
+        let (f, d) = self.specs(1)?;
+        Ok((
+            SensorSpec {
+                seed: self.seed,
+                ..f[0]
+            },
+            SensorSpec {
+                seed: self.seed,
+                ..d[0]
+            },
+        ))
+    }
+
     /// `(force sensors, displacement sensors)`, one per coupling DOF.
-    fn specs(&self, n_c: usize) -> Result<(Vec<SensorSpec>, Vec<SensorSpec>)> {
+    pub(super) fn specs(&self, n_c: usize) -> Result<(Vec<SensorSpec>, Vec<SensorSpec>)> {
         let p = "substructure.sensors.";
         require_non_negative(&format!("{p}force_noise"), self.force_noise)?;
         require_non_negative(&format!("{p}displacement_noise"), self.displacement_noise)?;
@@ -1300,7 +1419,8 @@ impl RawSubstructure {
         if self.substeps == 0 {
             return Err(Error::invalid(format!("{p}substeps"), "must be at least 1"));
         }
-        if self.specimen.is_empty() {
+        let remote = self.remote.as_ref().map(RawRemote::build).transpose()?;
+        if self.specimen.is_empty() && remote.is_none() {
             return Err(Error::invalid(
                 format!("{p}specimen"),
                 "no specimen given (add a [[substructure.specimen]] table)",
@@ -1334,7 +1454,7 @@ impl RawSubstructure {
             })?;
             specimens.push(spec);
         }
-        if let Some(i) = attached.iter().position(|a| !a) {
+        if let Some(i) = attached.iter().position(|a| !a).filter(|_| remote.is_none()) {
             return Err(Error::invalid(
                 key,
                 format!("DOF {} has no specimen attached", coupling[i] + 1),
@@ -1364,7 +1484,6 @@ impl RawSubstructure {
             .map_or(ErrorForceSpec::None, RawErrorForce::spec);
         error_force.validate()?;
         Ok(SubstructureDefinition {
-            coupling_dofs: coupling,
             substeps: self.substeps,
             inner_steps,
             specimens,
@@ -1374,7 +1493,93 @@ impl RawSubstructure {
             error_force,
             beta,
             gamma,
+            limits: self.limits.as_ref().map(|l| l.build(coupling.len())).transpose()?,
+            coupling_dofs: coupling,
+            remote,
         })
+    }
+}
+
+impl RawRemote {
+    fn build(&self) -> Result<RemoteDefinition> {
+        let p = "substructure.remote.";
+        if self.address.parse::<std::net::SocketAddr>().is_err() && !self.address.contains(':') {
+            return Err(Error::invalid(
+                format!("{p}address"),
+                format!("'{}' is not host:port", self.address),
+            ));
+        }
+        let protocol = match self.protocol.as_deref().unwrap_or("substep") {
+            "substep" => RemoteProtocol::Substep,
+            "openfresco" => RemoteProtocol::OpenFresco,
+            other => {
+                return Err(Error::invalid(
+                    format!("{p}protocol"),
+                    format!("unknown protocol '{other}' (expected substep or openfresco)"),
+                ));
+            }
+        };
+        let transport = match self.transport.as_deref().unwrap_or("tcp") {
+            "tcp" => Transport::Tcp,
+            "udp" => Transport::Udp,
+            other => {
+                return Err(Error::invalid(
+                    format!("{p}transport"),
+                    format!("unknown transport '{other}' (expected tcp or udp)"),
+                ));
+            }
+        };
+        let mode = match self.mode.as_deref().unwrap_or("per_substep") {
+            "per_substep" => Mode::PerSubstep,
+            "per_step" => Mode::PerStep,
+            other => {
+                return Err(Error::invalid(
+                    format!("{p}mode"),
+                    format!("unknown mode '{other}' (expected per_substep or per_step)"),
+                ));
+            }
+        };
+        if protocol == RemoteProtocol::OpenFresco && (transport != Transport::Tcp || mode != Mode::PerSubstep) {
+            return Err(Error::invalid(
+                p.trim_end_matches('.'),
+                "the openfresco protocol runs over tcp, per sub-step",
+            ));
+        }
+        let timeout = require_positive(&format!("{p}timeout"), self.timeout.unwrap_or(2.0))?;
+        Ok(RemoteDefinition {
+            address: self.address.clone(),
+            protocol,
+            transport,
+            mode,
+            timeout,
+        })
+    }
+}
+
+impl RawLimits {
+    fn build(&self, n_c: usize) -> Result<SafetyLimits> {
+        let expand = |key: &str, v: &Option<OneOrMany>| -> Result<Option<Vec<f64>>> {
+            match v {
+                None => Ok(None),
+                Some(OneOrMany(x)) if x.len() == 1 => Ok(Some(vec![x[0]; n_c])),
+                Some(OneOrMany(x)) if x.len() == n_c => Ok(Some(x.clone())),
+                Some(OneOrMany(x)) => Err(Error::invalid(
+                    format!("substructure.limits.{key}"),
+                    format!(
+                        "has {} entries; give one value or one per coupling DOF ({n_c})",
+                        x.len()
+                    ),
+                )),
+            }
+        };
+        let limits = SafetyLimits {
+            displacement: expand("displacement", &self.displacement)?,
+            velocity: expand("velocity", &self.velocity)?,
+            force: expand("force", &self.force)?,
+            ramp_time: self.ramp_time.unwrap_or(1.0),
+        };
+        limits.validate(n_c)?;
+        Ok(limits)
     }
 }
 

@@ -7,6 +7,7 @@
 pub mod config;
 pub mod matrix_market;
 pub mod run;
+pub mod site_config;
 
 pub use config::{GroundMotion, IntegratorDefinition, OutputSettings, SubstructureDefinition, TestDefinition};
 pub use matrix_market::{parse_matrix_market, read_matrix_market};

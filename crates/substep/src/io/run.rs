@@ -8,6 +8,7 @@
 use super::config::TestDefinition;
 use crate::error::{Error, Result};
 use crate::integrate::{Integrator, Kinematics, Scheme};
+use crate::site::{Mode, RemoteStepTest};
 use crate::specimen::assemble_monolithic;
 use crate::substructure::{StepRecord, SubstepObserver, SubstructureTest};
 use nalgebra::{DMatrix, DVector};
@@ -23,6 +24,8 @@ enum Engine {
         load: DVector<f64>,
     },
     Substructured(Box<SubstructureTest>),
+    /// A remote site in per-step mode (the site runs the sub-steps).
+    RemoteStep(Box<RemoteStepTest>),
 }
 
 /// A test in progress.
@@ -50,6 +53,9 @@ impl Simulation {
                 load: load0,
                 mass_influence,
             },
+            Some(s) if s.remote.as_ref().is_some_and(|r| r.mode == Mode::PerStep) => {
+                Engine::RemoteStep(Box::new(s.build_remote_step_test(model, dt, &load0)?))
+            }
             Some(s) => Engine::Substructured(Box::new(s.build_test(model, dt, &load0)?)),
         };
         Ok(Self {
@@ -85,6 +91,7 @@ impl Simulation {
         match &self.engine {
             Engine::Monolithic { integrator, .. } => integrator.state(),
             Engine::Substructured(test) => test.controller.state(),
+            Engine::RemoteStep(test) => test.controller.state(),
         }
     }
 
@@ -93,13 +100,14 @@ impl Simulation {
         match &self.engine {
             Engine::Monolithic { .. } => None,
             Engine::Substructured(test) => Some(test.record()),
+            Engine::RemoteStep(test) => Some(test.record()),
         }
     }
 
     /// The substructure test (controller and experimental side), if there is one.
     pub fn substructure_test(&self) -> Option<&SubstructureTest> {
         match &self.engine {
-            Engine::Monolithic { .. } => None,
+            Engine::Monolithic { .. } | Engine::RemoteStep(_) => None,
             Engine::Substructured(test) => Some(test),
         }
     }
@@ -130,6 +138,7 @@ impl Simulation {
                 }
             }
             Engine::Substructured(test) => test.step(ag_i, ag_next, observer)?,
+            Engine::RemoteStep(test) => test.step(ag_i, ag_next, observer)?,
         }
         self.step = i + 1;
         Ok(())
@@ -165,6 +174,10 @@ impl Reference {
         let Some(s) = &def.substructure else {
             return Ok(None);
         };
+        if s.specimens.is_empty() {
+            // a remote site without specimen descriptions: nothing to assemble
+            return Ok(None);
+        }
         let mut parts = Vec::with_capacity(s.specimens.len());
         for spec in &s.specimens {
             match spec.linear_matrices() {

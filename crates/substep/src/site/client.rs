@@ -678,14 +678,20 @@ impl RemoteStepTest {
     pub fn step(&mut self, ag_i: f64, ag_next: f64, observer: &mut impl SubstepObserver) -> Result<()> {
         self.load.copy_from(&self.mass_influence);
         self.load.scale_mut(-ag_next);
+        let step = self.step + 1;
         run_remote_step(
             &mut self.controller,
             &mut self.site,
             &self.load,
             (ag_i, ag_next),
-            self.step + 1,
+            step,
             observer,
-        )?;
+        )
+        .map_err(|e| Error::Stopped {
+            step,
+            time: step as f64 * self.controller.dt(),
+            reason: format!("experimental side failed: {e}"),
+        })?;
         let n = self.controller.n_coupling();
         let k = self.controller.substeps();
         self.measured_displacement

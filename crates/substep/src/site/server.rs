@@ -14,7 +14,7 @@ use super::{CommandRamp, LogFn, SiteFactory, substep_ground_acceleration};
 use crate::error::{Error, Result};
 use crate::specimen::SpecimenSpec;
 use crate::substructure::ExperimentalSubstructure;
-use crate::transfer::{ActuatorSpec, SensorSpec, VirtualLab};
+use crate::transfer::{ActuatorSpec, SensorSpec, VirtualLab, channel_sensors};
 use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -782,6 +782,7 @@ impl UdpServer {
 pub struct VirtualLabSpec {
     pub specimens: Vec<SpecimenSpec>,
     pub actuator: ActuatorSpec,
+    /// Base sensor specs; each channel gets its own seed (see [`channel_sensors`]).
     pub force_sensor: SensorSpec,
     pub displacement_sensor: SensorSpec,
     /// Inner intervals per sub-step (≥ 1).
@@ -818,12 +819,14 @@ impl VirtualLabSpec {
             ));
         }
         let n = hello.n_coupling;
+        // per-channel seeds as in a local run's config (`[substructure.sensors] seed`)
+        let (force, displacement) = channel_sensors(&self.force_sensor, &self.displacement_sensor, n);
         VirtualLab::from_specs(
             &hello.coupling_dofs,
             &self.specimens,
             &vec![self.actuator; n],
-            &vec![self.force_sensor; n],
-            &vec![self.displacement_sensor; n],
+            &force,
+            &displacement,
             hello.dtau,
             self.inner_steps,
         )

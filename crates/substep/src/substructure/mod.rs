@@ -9,10 +9,12 @@
 
 mod compensation;
 mod controller;
+mod safety;
 mod test_run;
 
 pub use compensation::{ErrorForceCompensation, ErrorForceSpec};
 pub use controller::{SubstepController, SubstepSettings};
+pub use safety::{LimitedSite, SafetyLimits};
 pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
 
 use crate::error::Result;

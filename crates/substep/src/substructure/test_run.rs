@@ -76,13 +76,16 @@ impl SubstructureTest {
             let (r0, r1) = ((j - 1) as f64 / k as f64, j as f64 / k as f64);
             let ag = (ag_i + r0 * (ag_next - ag_i), ag_i + r1 * (ag_next - ag_i));
             let command = self.controller.next_command();
-            self.site.substep(
+            let result = self.site.substep(
                 command,
                 ag,
                 dtau,
                 &mut self.measured_force,
                 &mut self.measured_displacement,
-            )?;
+            );
+            if let Err(e) = result {
+                return Err(self.stopped(e));
+            }
             observer.substep(
                 self.step + 1,
                 j,
@@ -117,6 +120,21 @@ impl SubstructureTest {
         let n = self.controller.state_len();
         self.controller.read_state(&state[..n]);
         self.site.read_state(&state[n..]);
+    }
+
+    /// The experimental side failed during step `self.step + 1`: a controlled stop (a safety
+    /// stop reported by the site keeps its reason).
+    fn stopped(&self, e: Error) -> Error {
+        let step = self.step + 1;
+        let time = step as f64 * self.controller.dt();
+        match e {
+            Error::Stopped { reason, .. } => Error::Stopped { step, time, reason },
+            other => Error::Stopped {
+                step,
+                time,
+                reason: format!("experimental side failed: {other}"),
+            },
+        }
     }
 
     pub fn steps_done(&self) -> usize {

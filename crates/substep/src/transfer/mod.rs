@@ -18,4 +18,4 @@ mod sensor;
 
 pub use actuator::{Actuator, ActuatorSpec, DelayLine, Dynamics};
 pub use lab::{AttachedSpecimen, VirtualLab};
-pub use sensor::{Sensor, SensorSpec};
+pub use sensor::{Sensor, SensorSpec, channel_seed, channel_sensors};

@@ -97,3 +97,32 @@ impl Sensor {
         self.spec.noise_std == 0.0 && self.spec.adc_bits.is_none()
     }
 }
+
+/// Seed of sensor channel `channel` derived from a base seed (splitmix64), so that every sensor
+/// of a lab gets its own reproducible noise: force sensor of coupling DOF `i` uses channel
+/// `2i`, its displacement sensor `2i + 1`.
+pub fn channel_seed(seed: u64, channel: u64) -> u64 {
+    let mut z = seed
+        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        .wrapping_add(channel.wrapping_add(1).wrapping_mul(0xBF58_476D_1CE4_E5B9));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// One force and one displacement sensor per coupling DOF from base specs, each with its own
+/// seed derived from the base spec's seed by [`channel_seed`].
+pub fn channel_sensors(
+    force: &SensorSpec,
+    displacement: &SensorSpec,
+    n_c: usize,
+) -> (Vec<SensorSpec>, Vec<SensorSpec>) {
+    let with = |s: &SensorSpec, ch: u64| SensorSpec {
+        seed: channel_seed(s.seed, ch),
+        ..*s
+    };
+    (
+        (0..n_c as u64).map(|i| with(force, 2 * i)).collect(),
+        (0..n_c as u64).map(|i| with(displacement, 2 * i + 1)).collect(),
+    )
+}

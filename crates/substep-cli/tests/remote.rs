@@ -1,0 +1,258 @@
+//! Two processes on loopback: `substep site serve` hosting the specimen and `substep run` with
+//! `[substructure.remote]` give the same history as the local run, bit for bit; a site killed
+//! mid-test and a limit violation end in a controlled stop with intact records.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("substep-remote-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_substep"))
+}
+
+fn run(dir: &Path, cfg: &str, out: &str) -> Output {
+    bin()
+        .args(["run", cfg, "--out", out, "--quiet", "--no-plots"])
+        .current_dir(dir)
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+const STRUCTURE: &str = r#"
+[structure]
+mass = [[2000.0, 0.0], [0.0, 1000.0]]
+stiffness = [[1.2e5, -5.0e4], [-5.0e4, 5.0e4]]
+damping = [[800.0, -300.0], [-300.0, 300.0]]
+
+[ground_motion]
+generator = "sine_sweep"
+amplitude = 1.0
+f0 = 0.3
+f1 = 3.0
+duration = DURATION
+
+[integrator]
+scheme = "average_acceleration"
+dt = 0.01
+"#;
+
+const SPECIMENS: &str = r#"
+[[PREFIXspecimen]]
+kind = "linear_sdof"
+dof = 2
+mass = 60.0
+stiffness = 3000.0
+damping = 40.0
+
+[[PREFIXspecimen]]
+kind = "linear_sdof"
+dof = 1
+stiffness = 8000.0
+damping = 100.0
+
+[PREFIXactuator]
+kind = "second_order"
+frequency = 40.0
+zeta = 0.7
+delay = 0.0015
+
+[PREFIXsensors]
+force_noise = 2.0
+displacement_noise = 1e-6
+seed = 11
+"#;
+
+fn client_config(duration: f64, remote: Option<(&str, &str)>, extra: &str) -> String {
+    let mut s = STRUCTURE.replace("DURATION", &duration.to_string());
+    s.push_str("\n[substructure]\ncoupling_dofs = [1, 2]\nsubsteps = 4\n");
+    s.push_str(&SPECIMENS.replace("PREFIX", "substructure."));
+    s.push_str("\n[substructure.error_force]\nkind = \"pid\"\np = 1.0\n");
+    if let Some((addr, mode)) = remote {
+        s.push_str(&format!(
+            "\n[substructure.remote]\naddress = \"{addr}\"\nmode = \"{mode}\"\ntimeout = 1.0\n"
+        ));
+    }
+    s.push_str(extra);
+    s
+}
+
+/// Start `substep site serve --once` on a free port; returns the child and its address.
+fn serve(dir: &Path) -> (Child, String) {
+    let site = format!(
+        "[site]\nprotocol = \"substep\"\nlisten = \"127.0.0.1:0\"\n{}",
+        SPECIMENS.replace("PREFIX", "")
+    );
+    std::fs::write(dir.join("site.toml"), site).unwrap();
+    let mut child = bin()
+        .args(["site", "serve", "site.toml", "--once"])
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.as_mut().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line.trim().rsplit("tcp://").next().unwrap().to_string();
+    assert!(line.contains("listening on tcp://127.0.0.1:"), "{line}");
+    (child, addr)
+}
+
+#[test]
+fn remote_runs_equal_the_local_run_bit_for_bit() {
+    let dir = temp_dir("equal");
+    std::fs::write(dir.join("local.toml"), client_config(3.0, None, "")).unwrap();
+    let local = run(&dir, "local.toml", "local");
+    assert!(local.status.success(), "{}", text(&local.stderr));
+    let local_history = std::fs::read_to_string(dir.join("local/history.csv")).unwrap();
+    let local_substeps = std::fs::read_to_string(dir.join("local/substeps.csv")).unwrap();
+    assert_eq!(local_history.lines().count(), 302);
+    for mode in ["per_step", "per_substep"] {
+        let (mut site, addr) = serve(&dir);
+        let cfg = format!("remote_{mode}.toml");
+        std::fs::write(dir.join(&cfg), client_config(3.0, Some((&addr, mode)), "")).unwrap();
+        let out = run(&dir, &cfg, mode);
+        assert!(out.status.success(), "{mode}: {}", text(&out.stderr));
+        let history = std::fs::read_to_string(dir.join(mode).join("history.csv")).unwrap();
+        let substeps = std::fs::read_to_string(dir.join(mode).join("substeps.csv")).unwrap();
+        assert!(history == local_history, "{mode}: history differs from the local run");
+        assert!(substeps == local_substeps, "{mode}: substeps differ from the local run");
+        let status = site.wait().unwrap();
+        assert!(status.success(), "site exit {status:?}");
+    }
+}
+
+#[test]
+fn killing_the_site_stops_the_test_with_intact_records() {
+    let dir = temp_dir("kill");
+    let (mut site, addr) = serve(&dir);
+    std::fs::write(
+        dir.join("remote.toml"),
+        client_config(600.0, Some((&addr, "per_substep")), ""),
+    )
+    .unwrap();
+    let mut client = bin()
+        .args(["run", "remote.toml", "--out", "out", "--quiet", "--no-plots"])
+        .current_dir(&dir)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(700));
+    site.kill().unwrap();
+    site.wait().unwrap();
+    let out = client.wait_with_output().unwrap();
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.starts_with("error: stopped at step ") && err.contains("experimental side failed"),
+        "{err}"
+    );
+    assert!(err.contains(&addr), "the message names the site: {err}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["completed"], false);
+    let stopped = summary["stopped_at_step"].as_u64().unwrap() as usize;
+    assert!(stopped > 10, "the test ran a while before the kill: {stopped}");
+    let history = std::fs::read_to_string(dir.join("out/history.csv")).unwrap();
+    // header + steps 0 ..= stopped - 1, every row complete and finite
+    let rows: Vec<&str> = history.lines().skip(1).collect();
+    assert_eq!(rows.len(), stopped);
+    let width = history.lines().next().unwrap().split(',').count();
+    assert!(
+        rows.iter()
+            .all(|r| r.split(',').count() == width && r.split(',').all(|v| v.parse::<f64>().unwrap().is_finite()))
+    );
+}
+
+#[test]
+fn a_limit_violation_stops_the_test() {
+    let dir = temp_dir("limit");
+    let limits = "\n[substructure.limits]\ndisplacement = 0.01\nforce = 1e6\nramp_time = 0.2\n";
+    std::fs::write(dir.join("local.toml"), client_config(20.0, None, limits)).unwrap();
+    let out = run(&dir, "local.toml", "out");
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("safety stop: measured displacement") && err.contains("exceeds the limit 1e-2 m"),
+        "{err}"
+    );
+    assert!(err.contains("actuators ramped to 0 over 0.2 s"), "{err}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["completed"], false);
+    let stopped = summary["stopped_at_step"].as_u64().unwrap() as usize;
+    let history = std::fs::read_to_string(dir.join("out/history.csv")).unwrap();
+    assert_eq!(history.lines().count(), 1 + stopped);
+    // the limit was respected by every recorded measured displacement (columns dm1, dm2)
+    let header: Vec<&str> = history.lines().next().unwrap().split(',').collect();
+    let dm: Vec<usize> = header
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| h.starts_with("dm"))
+        .map(|(i, _)| i)
+        .collect();
+    for row in history.lines().skip(1) {
+        let f: Vec<f64> = row.split(',').map(|v| v.parse().unwrap()).collect();
+        assert!(dm.iter().all(|&i| f[i].abs() <= 0.01));
+    }
+}
+
+#[test]
+fn bad_remote_and_limit_keys_are_named() {
+    let dir = temp_dir("bad");
+    let cases = [
+        (
+            "\n[substructure.remote]\naddress = \"127.0.0.1:1\"\nmode = \"sometimes\"\n",
+            "substructure.remote.mode",
+        ),
+        (
+            "\n[substructure.remote]\naddress = \"127.0.0.1:1\"\nprotocol = \"corba\"\n",
+            "substructure.remote.protocol",
+        ),
+        (
+            "\n[substructure.limits]\ndisplacement = [0.1, 0.1, 0.1]\n",
+            "substructure.limits.displacement",
+        ),
+        ("\n[substructure.limits]\nforce = -1.0\n", "substructure.limits.force"),
+    ];
+    for (extra, key) in cases {
+        std::fs::write(dir.join("c.toml"), client_config(1.0, None, extra)).unwrap();
+        let out = run(&dir, "c.toml", "out");
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains(key), "{key}: {err}");
+    }
+    // nobody listens on port 1: a clear connection error, exit 2 before anything is written
+    std::fs::write(
+        dir.join("c.toml"),
+        client_config(1.0, Some(("127.0.0.1:1", "per_substep")), ""),
+    )
+    .unwrap();
+    let out = run(&dir, "c.toml", "nothing");
+    let err = text(&out.stderr);
+    assert_ne!(out.status.code(), Some(0), "{err}");
+    assert!(err.contains("127.0.0.1:1"), "{err}");
+    assert!(!dir.join("nothing/summary.json").exists());
+    // a bad site file
+    std::fs::write(dir.join("site.toml"), "[site]\nprotocol = \"carrier_pigeon\"\nlisten = \"127.0.0.1:0\"\n[[specimen]]\nkind = \"linear_sdof\"\ndof = 1\nstiffness = 1.0\n").unwrap();
+    let out = bin()
+        .args(["site", "serve", "site.toml", "--once"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("site.protocol") && err.contains("carrier_pigeon"), "{err}");
+}
