@@ -682,8 +682,6 @@ fn forbid(prefix: &str, keys: &[(&str, bool)], why: &str) -> Result<()> {
     }
 }
 
-/// Deterministic per-channel seed (SplitMix64 of the user seed and the channel number).
-
 // ---------------------------------------------------------------------------------------------
 // Building: raw → validated.
 

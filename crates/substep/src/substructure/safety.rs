@@ -112,7 +112,7 @@ fn violation(values: &[f64], limits: &Option<Vec<f64>>) -> Option<(usize, f64, f
         .iter()
         .zip(l)
         .enumerate()
-        .find(|(_, (v, l))| !(v.abs() <= **l))
+        .find(|(_, (v, l))| v.is_nan() || v.abs() > **l)
         .map(|(i, (v, l))| (i, *v, *l))
 }
 
@@ -139,7 +139,7 @@ impl ExperimentalSubstructure for LimitedSite {
         if let Some(v) = &self.limits.velocity {
             for (i, (&c, &l)) in command.iter().zip(&self.last_command).enumerate() {
                 let vel = (c - l) / dtau;
-                if !(vel.abs() <= v[i]) {
+                if vel.is_nan() || vel.abs() > v[i] {
                     let reason = format!(
                         "safety stop: command velocity {vel:.4e} m/s on coupling DOF {} exceeds the limit {:e} m/s (command not sent)",
                         i + 1,
