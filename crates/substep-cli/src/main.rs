@@ -7,6 +7,7 @@ mod analyze;
 mod bench;
 mod output;
 mod plots;
+mod realtime;
 mod run;
 mod site;
 
@@ -57,6 +58,15 @@ pub struct RunArgs {
     /// Do not draw PNG plots (overrides `[output] plots`)
     #[arg(long)]
     pub no_plots: bool,
+    /// Run against the wall clock (sub-steps paced at Δt/k_sub, see docs/realtime.md)
+    #[arg(long)]
+    pub realtime: bool,
+    /// With --realtime: lock memory (mlockall); reported when not permitted
+    #[arg(long, requires = "realtime")]
+    pub lock_memory: bool,
+    /// With --realtime: SCHED_FIFO priority of the sub-step thread; reported when not permitted
+    #[arg(long, requires = "realtime", value_name = "PRIO")]
+    pub fifo_priority: Option<i32>,
 }
 
 /// Exit code of a failed command: 1 for a diverged run and for runtime failures (e.g. outputs

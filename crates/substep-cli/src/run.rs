@@ -476,6 +476,13 @@ pub fn run(args: &RunArgs) -> Result<()> {
         .clone()
         .or_else(|| def.output.dir.clone())
         .unwrap_or_else(|| PathBuf::from("results"));
+    if args.realtime {
+        let name = args
+            .config
+            .as_ref()
+            .map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string());
+        return crate::realtime::run_realtime(args, &def, out_dir, name);
+    }
     let mut sim = Simulation::new(&def)?;
     let mut reference = Reference::new(&def)?;
     let n = def.model.n_dofs();

@@ -143,7 +143,7 @@ fn killing_the_site_stops_the_test_with_intact_records() {
         client_config(600.0, Some((&addr, "per_substep")), ""),
     )
     .unwrap();
-    let mut client = bin()
+    let client = bin()
         .args(["run", "remote.toml", "--out", "out", "--quiet", "--no-plots"])
         .current_dir(&dir)
         .stderr(Stdio::piped())

@@ -1,0 +1,153 @@
+//! `substep run --realtime`: the substructure test against the wall clock (see
+//! `docs/realtime.md`). Writes `history.csv` (as `substep run`, without reference columns),
+//! `realtime.json` (deadline report and latency histograms) and `summary.json`.
+
+use crate::RunArgs;
+use crate::output::num;
+use anyhow::{Context, Result};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use substep::io::config::TestDefinition;
+use substep::realtime::{LatencyHistogram, RealtimeOptions, RealtimeReport, RealtimeRunner, RtSetting};
+
+fn histogram_json(h: &LatencyHistogram) -> serde_json::Value {
+    let bins: Vec<serde_json::Value> = h
+        .coarse(std::time::Duration::from_micros(10))
+        .into_iter()
+        .filter(|b| b.2 > 0)
+        .map(|(lo, hi, n)| serde_json::json!([lo.as_secs_f64() * 1e6, hi.as_secs_f64() * 1e6, n]))
+        .collect();
+    serde_json::json!({
+        "count": h.count(),
+        "p50_us": h.percentile(0.5).as_secs_f64() * 1e6,
+        "p99_us": h.percentile(0.99).as_secs_f64() * 1e6,
+        "max_us": h.max().as_secs_f64() * 1e6,
+        "above_range": h.above_range(),
+        "bins_us_lo_hi_count": bins,
+    })
+}
+
+fn setting(s: &RtSetting) -> String {
+    s.to_string()
+}
+
+fn report_json(r: &RealtimeReport) -> serde_json::Value {
+    serde_json::json!({
+        "dt": r.dt, "k_sub": r.k_sub, "steps": r.steps, "substeps": r.substeps,
+        "hold_substeps": r.hold_substeps, "missed_deadlines": r.missed, "late_steps": r.late_steps,
+        "rebased": r.rebased, "records_written": r.records_written, "records_dropped": r.records_dropped,
+        "memory_lock": setting(&r.memory_lock), "fifo": setting(&r.fifo), "numerical_fifo": setting(&r.numerical_fifo),
+        "wall_time_s": r.wall_time.as_secs_f64(),
+        "wake_up_latency": histogram_json(&r.histogram),
+        "completion_latency": histogram_json(&r.completion),
+        "numerical_step": histogram_json(&r.numerical),
+    })
+}
+
+pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, config_name: String) -> Result<()> {
+    let Some(sub) = &def.substructure else {
+        return Err(substep::Error::invalid(
+            "--realtime",
+            "needs a [substructure] (a monolithic run has no real-time part)",
+        )
+        .into());
+    };
+    let accel = def.ground_motion.accel.clone();
+    let load0 = -def.model.effective_mass_vector() * accel[0];
+    let test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
+    let options = RealtimeOptions {
+        lock_memory: args.lock_memory,
+        fifo_priority: args.fifo_priority,
+        ..RealtimeOptions::default()
+    };
+    let runner = RealtimeRunner::new(&def.model, test, accel, options)?;
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let history_path = out_dir.join("history.csv");
+    let file =
+        std::fs::File::create(&history_path).with_context(|| format!("cannot write {}", history_path.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    let n = def.model.n_dofs();
+    let n_c = sub.coupling_dofs.len();
+    let mut header = String::from("t");
+    for p in ["u", "v", "a"] {
+        for k in 1..=n {
+            header.push_str(&format!(",{p}{k}"));
+        }
+    }
+    for p in ["fc", "fe", "fu", "dm"] {
+        for k in 1..=n_c {
+            header.push_str(&format!(",{p}{k}"));
+        }
+    }
+    writeln!(w, "{header}").context("history.csv")?;
+    let mut line = String::new();
+    let mut write_error = None;
+    let mut last_flush = std::time::Instant::now();
+    let sink = |r: &substep::realtime::StepRecordOwned| {
+        line.clear();
+        num(&mut line, r.time);
+        for group in [
+            &r.u,
+            &r.v,
+            &r.a,
+            &r.coupling_force,
+            &r.error_force,
+            &r.compensation_force,
+            &r.measured_displacement,
+        ] {
+            for &x in group.iter() {
+                line.push(',');
+                num(&mut line, x);
+            }
+        }
+        line.push('\n');
+        if let Err(e) = w.write_all(line.as_bytes()) {
+            write_error.get_or_insert(e);
+        }
+        if last_flush.elapsed().as_millis() > 500 {
+            let _ = w.flush();
+            last_flush = std::time::Instant::now();
+        }
+    };
+    let result = runner.run(sink);
+    w.flush().context("history.csv")?;
+    if let Some(e) = write_error {
+        return Err(anyhow::Error::from(e).context(format!("cannot write {}", history_path.display())));
+    }
+    let (report, failure) = match result {
+        Ok((report, _)) => (report, None),
+        Err(f) => (f.report, Some(f.error)),
+    };
+    let rt = report_json(&report);
+    write_json(&out_dir.join("realtime.json"), &rt)?;
+    let summary = serde_json::json!({
+        "config": config_name,
+        "mode": "realtime",
+        "dt": def.integrator.dt,
+        "steps": def.integrator.steps,
+        "completed": failure.is_none(),
+        "steps_done": report.steps,
+        "reason": failure.as_ref().map(|e| e.to_string()),
+        "missed_deadlines": report.missed,
+        "late_steps": report.late_steps,
+        "wake_up_latency_p99_us": report.latency_p99.as_secs_f64() * 1e6,
+        "outputs": [history_path.display().to_string(), out_dir.join("realtime.json").display().to_string()],
+    });
+    write_json(&out_dir.join("summary.json"), &summary)?;
+    if !args.quiet {
+        print!("{report}");
+        println!(
+            "  outputs in {}: history.csv, realtime.json, summary.json",
+            out_dir.display()
+        );
+    }
+    match failure {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
+}
+
+fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(v).expect("json") + "\n")
+        .with_context(|| format!("cannot write {}", path.display()))
+}
