@@ -1,7 +1,9 @@
-//! Model builders: SDOF, primary structure + TMD (2 DOF), uniform shear building.
+//! Model builders: SDOF, primary structure + TMD (2 DOF), uniform shear building (dense or
+//! sparse storage). The moment frame is in `frame.rs`.
 
 use super::StructuralModel;
 use crate::error::{Result, require_non_negative, require_positive};
+use crate::sparse::CscMatrix;
 use nalgebra::{DMatrix, DVector, dmatrix};
 use std::f64::consts::PI;
 
@@ -111,14 +113,7 @@ impl ShearBuilding {
 
 /// Undamped shear building; add damping with [`StructuralModel::with_damping`].
 pub fn shear_building(b: &ShearBuilding) -> Result<StructuralModel> {
-    if b.stories == 0 {
-        return Err(crate::error::Error::invalid(
-            "structure.shear_building.stories",
-            "must be at least 1",
-        ));
-    }
-    require_positive("structure.shear_building.story_mass", b.story_mass)?;
-    require_positive("structure.shear_building.first_period", b.first_period)?;
+    b.validate()?;
     let n = b.stories;
     let k = b.story_stiffness();
     let mut kk = DMatrix::zeros(n, n);
@@ -131,4 +126,40 @@ pub fn shear_building(b: &ShearBuilding) -> Result<StructuralModel> {
     }
     let mm = DMatrix::from_diagonal(&DVector::from_element(n, b.story_mass));
     StructuralModel::new(mm, DMatrix::zeros(n, n), kk, None)
+}
+
+/// The same undamped shear building in sparse storage (diagonal `M`, tridiagonal `K`); add
+/// damping with [`SparseModel::with_damping`](super::SparseModel::with_damping).
+pub fn shear_building_sparse(b: &ShearBuilding) -> Result<super::SparseModel> {
+    b.validate()?;
+    let n = b.stories;
+    let k = b.story_stiffness();
+    let mut t = Vec::with_capacity(3 * n);
+    for i in 0..n {
+        t.push((i, i, if i + 1 < n { 2.0 * k } else { k }));
+        if i + 1 < n {
+            t.push((i, i + 1, -k));
+            t.push((i + 1, i, -k));
+        }
+    }
+    super::SparseModel::new(
+        CscMatrix::from_diagonal(&vec![b.story_mass; n]),
+        CscMatrix::zeros(n),
+        CscMatrix::from_triplets(n, &t),
+        None,
+    )
+}
+
+impl ShearBuilding {
+    fn validate(&self) -> Result<()> {
+        if self.stories == 0 {
+            return Err(crate::error::Error::invalid(
+                "structure.shear_building.stories",
+                "must be at least 1",
+            ));
+        }
+        require_positive("structure.shear_building.story_mass", self.story_mass)?;
+        require_positive("structure.shear_building.first_period", self.first_period)?;
+        Ok(())
+    }
 }

@@ -8,7 +8,7 @@
 use super::compensation::{ErrorForceCompensation, ErrorForceSpec};
 use crate::error::{Error, Result};
 use crate::integrate::{Kinematics, NewmarkCore};
-use crate::model::StructuralModel;
+use crate::model::ModelRef;
 use nalgebra::{DMatrix, DVector};
 
 /// Parameters of the sub-step algorithm.
@@ -55,7 +55,9 @@ pub struct SubstepController {
 
 impl SubstepController {
     /// Set up for `model` at rest with initial load `load0 = f_l(0)` (initial coupling force 0).
-    pub fn new(model: &StructuralModel, settings: &SubstepSettings, load0: &DVector<f64>) -> Result<Self> {
+    /// `model` is a `&StructuralModel`, `&SparseModel` or `&Model` (dense or sparse storage).
+    pub fn new<'a>(model: impl Into<ModelRef<'a>>, settings: &SubstepSettings, load0: &DVector<f64>) -> Result<Self> {
+        let model = model.into();
         let n = model.n_dofs();
         if settings.substeps == 0 {
             return Err(Error::invalid("substructure.substeps", "must be at least 1"));
@@ -81,13 +83,13 @@ impl SubstepController {
                 ));
             }
         }
-        let core = NewmarkCore::new(model, settings.dt, settings.beta, settings.gamma)?;
+        let mut core = NewmarkCore::new(model, settings.dt, settings.beta, settings.gamma)?;
         // Gain columns by n_c solves with the factorised K̂ (never the full inverse).
         let mut gain_columns = DMatrix::zeros(n, n_c);
         for (k, &c) in settings.coupling_dofs.iter().enumerate() {
             gain_columns[(c, k)] = 1.0;
         }
-        core.k_hat.solve_mut(&mut gain_columns);
+        core.solve_columns_in_place(&mut gain_columns);
         let gain_cc = DMatrix::from_fn(n_c, n_c, |r, k| gain_columns[(settings.coupling_dofs[r], k)]);
         let state = Kinematics::at_rest(model, load0)?;
         Ok(Self {
@@ -168,7 +170,7 @@ impl SubstepController {
         for (k, &c) in self.coupling.iter().enumerate() {
             self.predictor[c] += self.compensation_force[k];
         }
-        self.core.k_hat.solve_mut(&mut self.predictor);
+        self.core.solve_in_place(&mut self.predictor);
         for (k, &c) in self.coupling.iter().enumerate() {
             self.predictor_c[k] = self.predictor[c];
         }
@@ -227,8 +229,9 @@ impl SubstepController {
         for (k, &c) in self.coupling.iter().enumerate() {
             r[c] += compensation_used[k] + self.force[k];
         }
-        r -= &self.core.mass * &s.a + &self.core.damping * &s.v + &self.core.stiffness * &s.u;
-        r
+        let mut internal = DVector::zeros(r.len());
+        self.core.internal_force(s, &mut internal);
+        r - internal
     }
 
     /// Length of the algorithm state (for the amplification-matrix analysis and checkpoints):
