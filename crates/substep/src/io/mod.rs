@@ -9,5 +9,7 @@ pub mod matrix_market;
 pub mod run;
 
 pub use config::{GroundMotion, IntegratorDefinition, OutputSettings, SubstructureDefinition, TestDefinition};
-pub use matrix_market::{parse_matrix_market, read_matrix_market};
+pub use matrix_market::{
+    parse_matrix_market, parse_matrix_market_sparse, read_matrix_market, read_matrix_market_sparse,
+};
 pub use run::{Reference, Simulation};
