@@ -373,3 +373,140 @@ fn dense_only_features_refuse_large_sparse_models() {
     );
     assert_eq!(small.dense("modes").unwrap().n_dofs(), 5);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Config: [structure] storage and [structure.frame].
+
+mod config {
+    use std::path::Path;
+    use substep::io::{Reference, Simulation, TestDefinition};
+
+    const MOTION: &str =
+        "[ground_motion]\ngenerator = \"harmonic\"\namplitude = 1.0\nfrequency = 2.0\nduration = 0.05\n";
+
+    fn parse(text: &str) -> substep::Result<TestDefinition> {
+        TestDefinition::from_toml(text, "cfg.toml", Path::new("."))
+    }
+
+    fn frame_cfg(extra: &str, scheme: &str) -> String {
+        format!(
+            "[structure]\n{extra}\n[structure.frame]\nbays = 3\nstories = 30\n[structure.rayleigh]\nzeta = 0.05\n\
+             {MOTION}[integrator]\nscheme = \"{scheme}\"\ndt = 0.01\n"
+        )
+    }
+
+    #[test]
+    fn storage_auto_dense_sparse() {
+        let d = parse(&frame_cfg("", "newmark")).unwrap();
+        assert_eq!((d.model.n_dofs(), d.model.storage_name()), (360, "sparse"));
+        let d = parse(&frame_cfg("storage = \"dense\"", "newmark")).unwrap();
+        assert_eq!(d.model.storage_name(), "dense");
+        // Dense-only schemes keep auto storage dense; explicit sparse is refused.
+        let d = parse(&frame_cfg("", "hht")).unwrap();
+        assert_eq!(d.model.storage_name(), "dense");
+        let e = parse(&frame_cfg("storage = \"sparse\"", "exact"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("cfg.toml: structure.storage: \"sparse\" cannot be used with the integrator scheme"),
+            "{e}"
+        );
+        let e = parse(&frame_cfg("storage = \"banded\"", "newmark"))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "cfg.toml: structure.storage: unknown storage 'banded' (expected auto, dense or sparse)"
+        );
+        // A small shear building stays dense under auto, a large one goes sparse.
+        let chain = |stories: usize, extra: &str| {
+            format!(
+                "[structure]\n{extra}\n[structure.shear_building]\nstories = {stories}\nstory_mass = 1e5\n\
+                 first_period = 2.0\n{MOTION}[integrator]\ndt = 0.01\n"
+            )
+        };
+        assert_eq!(parse(&chain(50, "")).unwrap().model.storage_name(), "dense");
+        assert_eq!(parse(&chain(400, "")).unwrap().model.storage_name(), "sparse");
+        assert_eq!(
+            parse(&chain(50, "storage = \"sparse\"")).unwrap().model.storage_name(),
+            "sparse"
+        );
+        // Modal damping needs dense matrices.
+        let modal = "[structure.modal]\nzeta = 0.05\n";
+        let e = parse(&chain(400, &format!("storage = \"sparse\"\n{modal}")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot be used with modal damping"), "{e}");
+        assert_eq!(parse(&chain(400, modal)).unwrap().model.storage_name(), "dense");
+        let e = parse(&chain(5000, modal)).unwrap_err().to_string();
+        assert!(e.starts_with("cfg.toml: structure: modal damping ([structure.modal]) needs dense matrices, but the model has 5000 DOFs"), "{e}");
+    }
+
+    #[test]
+    fn frame_keys_and_sparse_substructured_run_with_reference() {
+        let text = format!(
+            "{}[substructure]\ncoupling_dofs = [262]\nsubsteps = 4\n[[substructure.specimen]]\nkind = \"linear_sdof\"\n\
+             dof = 262\nstiffness = 1e6\n",
+            frame_cfg("", "newmark").replace(
+                "stories = 30\n",
+                "stories = 30\nrigid_diaphragm = true\nbay_width = 5.0\n"
+            )
+        );
+        let d = parse(&text).unwrap();
+        assert_eq!(d.model.n_dofs(), 30 * 9);
+        assert_eq!(d.model.storage_name(), "dense", "270 DOFs stay dense under auto");
+        let d = parse(&text.replace("[structure]\n", "[structure]\nstorage = \"sparse\"\n")).unwrap();
+        assert!(d.model.is_sparse());
+        let mut sim = Simulation::new(&d).unwrap();
+        let mut reference = Reference::new(&d).unwrap().expect("linear specimen");
+        assert_eq!(reference.scheme(), "newmark");
+        for i in 0..sim.steps_total() {
+            sim.step(&mut ()).unwrap();
+            reference.step(d.ground_motion.accel[i + 1]);
+        }
+        let (u, r) = (&sim.state().u, reference.u());
+        let scale = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let diff = u.iter().zip(r).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            scale > 0.0 && diff < 0.05 * scale,
+            "substructured vs reference: {diff} / {scale}"
+        );
+        let e = parse(&text.replace("bays = 3", "bays = 3\ncolumns = 2"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown field `columns`"), "{e}");
+    }
+
+    #[test]
+    fn matrix_market_files_are_read_sparse() {
+        let dir = std::env::temp_dir().join(format!("substep-sparse-mtx-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let n = 500;
+        let mut m = format!("%%MatrixMarket matrix coordinate real symmetric\n{n} {n} {n}\n");
+        let mut k = format!(
+            "%%MatrixMarket matrix coordinate real symmetric\n{n} {n} {}\n",
+            2 * n - 1
+        );
+        for i in 1..=n {
+            m.push_str(&format!("{i} {i} 1000\n"));
+            k.push_str(&format!("{i} {i} {}\n", if i < n { 2e6 } else { 1e6 }));
+            if i < n {
+                k.push_str(&format!("{} {i} -1e6\n", i + 1));
+            }
+        }
+        std::fs::write(dir.join("M.mtx"), m).unwrap();
+        std::fs::write(dir.join("K.mtx"), k).unwrap();
+        let text = format!(
+            "[structure]\nmass = \"M.mtx\"\nstiffness = \"K.mtx\"\n[structure.rayleigh]\nalpha = 0.1\nbeta = 0.001\n\
+             {MOTION}[integrator]\ndt = 0.01\n"
+        );
+        let d = TestDefinition::from_toml(&text, "cfg.toml", &dir).unwrap();
+        assert_eq!((d.model.n_dofs(), d.model.storage_name()), (n, "sparse"));
+        let s = d.model.as_sparse().unwrap();
+        assert_eq!(s.stiffness.nnz(), 3 * n - 2);
+        assert!((s.damping.get(0, 0) - (0.1 * 1000.0 + 0.001 * 2e6)).abs() < 1e-9);
+        let mut sim = Simulation::new(&d).unwrap();
+        sim.step(&mut ()).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
