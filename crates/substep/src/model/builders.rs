@@ -109,6 +109,11 @@ impl ShearBuilding {
         let s = (PI / (2.0 * (2 * self.stories + 1) as f64)).sin();
         self.story_mass * (w1 / (2.0 * s)).powi(2)
     }
+    /// Circular frequency `ω_j` [rad/s] of mode `j ≥ 1` (closed form).
+    pub fn omega(&self, j: usize) -> f64 {
+        let theta = (2 * j - 1) as f64 * PI / (2.0 * (2 * self.stories + 1) as f64);
+        2.0 * (self.story_stiffness() / self.story_mass).sqrt() * theta.sin()
+    }
 }
 
 /// Undamped shear building; add damping with [`StructuralModel::with_damping`].
