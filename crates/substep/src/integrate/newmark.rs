@@ -65,6 +65,8 @@ enum Backend {
     },
     Sparse {
         mass: CscMatrix,
+        /// The diagonal of `M` when `M` is diagonal (lumped masses): `F̂` in one gather pass.
+        mass_diag: Option<Vec<f64>>,
         damping: CscMatrix,
         stiffness: CscMatrix,
         k_hat: SymmetricFactor,
@@ -98,6 +100,7 @@ impl NewmarkCore {
                 ]);
                 Backend::Sparse {
                     k_hat: SymmetricFactor::new(&k_eff, FactorKind::Auto, K_HAT)?,
+                    mass_diag: model.mass.is_diagonal().then(|| model.mass.diagonal()),
                     mass: model.mass.clone(),
                     damping: model.damping.clone(),
                     stiffness: model.stiffness.clone(),
@@ -175,6 +178,26 @@ impl NewmarkCore {
     /// `out = F̂_i = M(a0 u + a2 v + a3 a) + C(a1 u + a4 v + a5 a)`.
     pub fn effective_load(&mut self, s: &Kinematics, out: &mut DVector<f64>) {
         let a = &self.c.a;
+        if let Backend::Sparse {
+            mass_diag: Some(md),
+            damping,
+            ..
+        } = &self.backend
+        {
+            // Lumped M: out_i = m_i (a0 u + a2 v + a3 a)_i + (C w_c)_i, w_c = a1 u + a4 v + a5 a.
+            let (u, v, acc) = (s.u.as_slice(), s.v.as_slice(), s.a.as_slice());
+            for (i, wc) in self.work_c.iter_mut().enumerate() {
+                *wc = a[1] * u[i] + a[4] * v[i] + a[5] * acc[i];
+            }
+            let o = out.as_mut_slice();
+            for (i, oi) in o.iter_mut().enumerate() {
+                *oi = md[i] * (a[0] * u[i] + a[2] * v[i] + a[3] * acc[i]);
+            }
+            if damping.nnz() > 0 {
+                damping.sym_mul_add(1.0, self.work_c.as_slice(), 1.0, o);
+            }
+            return;
+        }
         self.work_m.copy_from(&s.u);
         self.work_m.scale_mut(a[0]);
         self.work_m.axpy(a[2], &s.v, 1.0);
@@ -198,19 +221,18 @@ impl NewmarkCore {
         }
     }
 
-    /// Given the new displacement in `s_next.u` and the old state, fill `s_next.a` and `s_next.v`.
+    /// Given the new displacement in `s_next.u` and the old state, fill `s_next.a` and `s_next.v`:
+    /// `a_{i+1} = a0 (u_{i+1} − u_i) − a2 v_i − a3 a_i`, `v_{i+1} = v_i + a6 a_i + a7 a_{i+1}`
+    /// (one pass over the DOFs).
     pub fn update_kinematics(&self, s: &Kinematics, s_next: &mut Kinematics) {
         let a = &self.c.a;
-        // a_{i+1} = a0 (u_{i+1} − u_i) − a2 v_i − a3 a_i
-        s_next.a.copy_from(&s_next.u);
-        s_next.a.axpy(-1.0, &s.u, 1.0);
-        s_next.a.scale_mut(a[0]);
-        s_next.a.axpy(-a[2], &s.v, 1.0);
-        s_next.a.axpy(-a[3], &s.a, 1.0);
-        // v_{i+1} = v_i + a6 a_i + a7 a_{i+1}
-        s_next.v.copy_from(&s.v);
-        s_next.v.axpy(a[6], &s.a, 1.0);
-        s_next.v.axpy(a[7], &s_next.a, 1.0);
+        let (u, v, acc) = (s.u.as_slice(), s.v.as_slice(), s.a.as_slice());
+        let Kinematics { u: un, v: vn, a: an } = s_next;
+        for (i, ((an, vn), un)) in an.iter_mut().zip(vn.iter_mut()).zip(un.iter()).enumerate() {
+            let a_new = a[0] * (un - u[i]) - a[2] * v[i] - a[3] * acc[i];
+            *an = a_new;
+            *vn = v[i] + a[6] * acc[i] + a[7] * a_new;
+        }
     }
 }
 

@@ -95,7 +95,7 @@ impl SymmetricFactor {
     /// Stored values of `L`.
     pub fn factor_len(&self) -> usize {
         match &self.inner {
-            Inner::Banded(b) => b.l.len(),
+            Inner::Banded(b) => b.l.len() + b.inv_d.len(),
             Inner::Sparse(s) => s.l_values.len(),
         }
     }
@@ -118,27 +118,28 @@ impl SymmetricFactor {
     }
 }
 
-/// `L` of a band matrix, row by row: row `i` holds `L[i, i−b ..= i]` at `l[i(b+1) ..]`
-/// (entries before column 0 are zero padding), plus `1 / L[i, i]`.
+/// `A = L D Lᵀ` of a band matrix with unit lower-triangular `L`, row by row: row `i` holds
+/// `L[i, i−b .. i]` at `l[i b ..]` (entries before column 0 are zero padding), and `1 / D[i]`.
+/// The unit diagonal keeps one multiply-add per row on the dependency chain of the solves.
 struct BandCholesky {
     n: usize,
     b: usize,
     l: Vec<f64>,
-    inv_diag: Vec<f64>,
+    inv_d: Vec<f64>,
 }
 
 impl BandCholesky {
     /// `None` if `a` is not positive definite.
     fn new(a: &CscMatrix, b: usize) -> Option<Self> {
         let n = a.n();
+        // Cholesky factor with its diagonal first: row i holds C[i, i−b ..= i] at i (b + 1).
         let w = b + 1;
-        let mut l = vec![0.0; n * w];
-        // Lower triangle of A into the band (column j of A = row j, by symmetry).
+        let mut c = vec![0.0; n * w];
         for j in 0..n {
             let (rows, vals) = a.col(j);
             for (&i, &v) in rows.iter().zip(vals) {
                 if i >= j {
-                    l[i * w + (j + b - i)] = v;
+                    c[i * w + (j + b - i)] = v;
                 }
             }
         }
@@ -148,40 +149,63 @@ impl BandCholesky {
             let row_i = i * w;
             for j in k0..=i {
                 let row_j = j * w;
-                // s = A_ij − Σ_{k0 ≤ k < j} L_ik L_jk  (k ≥ j − b holds since j ≤ i)
-                let li = &l[row_i + (k0 + b - i)..row_i + (j + b - i)];
-                let lj = &l[row_j + (k0 + b - j)..row_j + b];
-                let s = l[row_i + (j + b - i)] - dot(li, lj);
+                // s = A_ij − Σ_{k0 ≤ k < j} C_ik C_jk  (k ≥ j − b holds since j ≤ i)
+                let ci = &c[row_i + (k0 + b - i)..row_i + (j + b - i)];
+                let cj = &c[row_j + (k0 + b - j)..row_j + b];
+                let s = c[row_i + (j + b - i)] - dot(ci, cj);
                 if j < i {
-                    l[row_i + (j + b - i)] = s * inv_diag[j];
+                    c[row_i + (j + b - i)] = s * inv_diag[j];
                 } else {
                     if !(s > 0.0 && s.is_finite()) {
                         return None;
                     }
                     let d = s.sqrt();
-                    l[row_i + b] = d;
+                    c[row_i + b] = d;
                     inv_diag[i] = 1.0 / d;
                 }
             }
         }
-        Some(Self { n, b, l, inv_diag })
+        // L = C diag(C)⁻¹, D = diag(C)².
+        let mut l = vec![0.0; n * b];
+        for i in 0..n {
+            for k in i.saturating_sub(b)..i {
+                l[i * b + (k + b - i)] = c[i * w + (k + b - i)] * inv_diag[k];
+            }
+        }
+        let inv_d = inv_diag.iter().map(|x| x * x).collect();
+        Some(Self { n, b, l, inv_d })
     }
 
     fn solve_in_place(&self, x: &mut [f64]) {
-        let (n, b, w) = (self.n, self.b, self.b + 1);
-        // L y = x (forward, row-oriented dot products).
-        for i in 0..n {
-            let k0 = i.saturating_sub(b);
-            let row = &self.l[i * w + (k0 + b - i)..i * w + b];
-            let s = x[i] - dot(row, &x[k0..i]);
-            x[i] = s * self.inv_diag[i];
+        let (n, b) = (self.n, self.b);
+        if b == 0 {
+            x.iter_mut().zip(&self.inv_d).for_each(|(x, d)| *x *= d);
+            return;
         }
-        // Lᵀ x = y (backward: once x_i is known, remove L_ij x_i from the rows j < i).
-        for i in (0..n).rev() {
-            let xi = x[i] * self.inv_diag[i];
-            x[i] = xi;
+        if b == 1 {
+            // Tridiagonal: row i holds L[i, i−1] at l[i].
+            let l = &self.l[..n];
+            for i in 1..n {
+                x[i] -= l[i] * x[i - 1];
+            }
+            x.iter_mut().zip(&self.inv_d).for_each(|(x, d)| *x *= d);
+            for i in (1..n).rev() {
+                x[i - 1] -= l[i] * x[i];
+            }
+            return;
+        }
+        // L y = x (forward, row-oriented dot products).
+        for i in 1..n {
             let k0 = i.saturating_sub(b);
-            let row = &self.l[i * w + (k0 + b - i)..i * w + b];
+            let row = &self.l[i * b + (k0 + b - i)..(i + 1) * b];
+            x[i] -= dot(row, &x[k0..i]);
+        }
+        x.iter_mut().zip(&self.inv_d).for_each(|(x, d)| *x *= d);
+        // Lᵀ x = z (backward: once x_i is final, remove L_ij x_i from the rows j < i).
+        for i in (1..n).rev() {
+            let xi = x[i];
+            let k0 = i.saturating_sub(b);
+            let row = &self.l[i * b + (k0 + b - i)..(i + 1) * b];
             for (xj, &lij) in x[k0..i].iter_mut().zip(row) {
                 *xj -= lij * xi;
             }
