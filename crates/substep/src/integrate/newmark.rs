@@ -186,12 +186,17 @@ impl NewmarkCore {
         {
             // Lumped M: out_i = m_i (a0 u + a2 v + a3 a)_i + (C w_c)_i, w_c = a1 u + a4 v + a5 a.
             let (u, v, acc) = (s.u.as_slice(), s.v.as_slice(), s.a.as_slice());
-            for (i, wc) in self.work_c.iter_mut().enumerate() {
-                *wc = a[1] * u[i] + a[4] * v[i] + a[5] * acc[i];
-            }
             let o = out.as_mut_slice();
-            for (i, oi) in o.iter_mut().enumerate() {
-                *oi = md[i] * (a[0] * u[i] + a[2] * v[i] + a[3] * acc[i]);
+            for (((((oi, wc), m), u), v), acc) in o
+                .iter_mut()
+                .zip(self.work_c.as_mut_slice().iter_mut())
+                .zip(md)
+                .zip(u)
+                .zip(v)
+                .zip(acc)
+            {
+                *wc = a[1] * u + a[4] * v + a[5] * acc;
+                *oi = m * (a[0] * u + a[2] * v + a[3] * acc);
             }
             if damping.nnz() > 0 {
                 damping.sym_mul_add(1.0, self.work_c.as_slice(), 1.0, o);
@@ -228,10 +233,19 @@ impl NewmarkCore {
         let a = &self.c.a;
         let (u, v, acc) = (s.u.as_slice(), s.v.as_slice(), s.a.as_slice());
         let Kinematics { u: un, v: vn, a: an } = s_next;
-        for (i, ((an, vn), un)) in an.iter_mut().zip(vn.iter_mut()).zip(un.iter()).enumerate() {
-            let a_new = a[0] * (un - u[i]) - a[2] * v[i] - a[3] * acc[i];
+        let (a0, a2, a3, a6, a7) = (a[0], a[2], a[3], a[6], a[7]);
+        for (((((an, vn), un), u), v), acc) in an
+            .as_mut_slice()
+            .iter_mut()
+            .zip(vn.as_mut_slice().iter_mut())
+            .zip(un.as_slice())
+            .zip(u)
+            .zip(v)
+            .zip(acc)
+        {
+            let a_new = a0 * (un - u) - a2 * v - a3 * acc;
             *an = a_new;
-            *vn = v[i] + a[6] * acc[i] + a[7] * a_new;
+            *vn = v + a6 * acc + a7 * a_new;
         }
     }
 }

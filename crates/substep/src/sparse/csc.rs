@@ -184,12 +184,11 @@ impl CscMatrix {
     /// `y = alpha · A x + beta · y` for a **symmetric** `A`: column `i` of `A` is its row `i`, so
     /// each `y_i` is a gathered dot product (no scattered writes). Allocation-free.
     pub fn sym_mul_add(&self, alpha: f64, x: &[f64], beta: f64, y: &mut [f64]) {
-        debug_assert_eq!(x.len(), self.n);
-        debug_assert_eq!(y.len(), self.n);
-        for (i, yi) in y.iter_mut().enumerate() {
-            let (lo, hi) = (self.col_ptr[i], self.col_ptr[i + 1]);
+        assert_eq!(x.len(), self.n, "sym_mul_add: x has the wrong length");
+        assert_eq!(y.len(), self.n, "sym_mul_add: y has the wrong length");
+        for (yi, w) in y.iter_mut().zip(self.col_ptr.windows(2)) {
             let mut acc = 0.0;
-            for (&r, &v) in self.row_idx[lo..hi].iter().zip(&self.values[lo..hi]) {
+            for (&r, &v) in self.row_idx[w[0]..w[1]].iter().zip(&self.values[w[0]..w[1]]) {
                 acc += v * x[r];
             }
             *yi = if beta == 0.0 {

@@ -183,14 +183,25 @@ impl BandCholesky {
             return;
         }
         if b == 1 {
-            // Tridiagonal: row i holds L[i, i−1] at l[i].
-            let l = &self.l[..n];
-            for i in 1..n {
-                x[i] -= l[i] * x[i - 1];
+            // Tridiagonal: row i holds L[i, i−1] at l[i]. The running value stays in a register,
+            // so each row costs one multiply-add on the dependency chain; D⁻¹ is applied on the
+            // way back, off the chain.
+            let (l, inv_d) = (&self.l[..n], &self.inv_d[..n]);
+            let mut prev = x[0];
+            for (xi, li) in x[1..].iter_mut().zip(&l[1..]) {
+                prev = *xi - li * prev;
+                *xi = prev;
             }
-            x.iter_mut().zip(&self.inv_d).for_each(|(x, d)| *x *= d);
-            for i in (1..n).rev() {
-                x[i - 1] -= l[i] * x[i];
+            let mut next = x[n - 1] * inv_d[n - 1];
+            x[n - 1] = next;
+            for ((xi, di), li) in x[..n - 1]
+                .iter_mut()
+                .rev()
+                .zip(inv_d[..n - 1].iter().rev())
+                .zip(l[1..].iter().rev())
+            {
+                next = *xi * di - li * next;
+                *xi = next;
             }
             return;
         }
