@@ -10,9 +10,6 @@ use anyhow::Result;
 use serde::Serialize;
 use serde_json::Value;
 use std::path::PathBuf;
-use std::time::Instant;
-use substep::integrate::Scheme;
-use substep::model::{DampingSpec, shear_building_sparse};
 
 #[derive(Debug, Serialize)]
 struct ToolResult {
@@ -51,36 +48,15 @@ fn scripts_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../benches/compare"))
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 pub fn compare(args: &BenchArgs) -> Result<()> {
     let n = args.compare_dofs;
     let steps = args.steps.max(100);
     let (b, alpha, beta) = chain(n)?;
-    let model = shear_building_sparse(&b)?.with_damping(&DampingSpec::Rayleigh { alpha, beta })?;
-    // substep: monolithic Newmark, median of 5 rounds of `steps` steps (µs per step).
-    let mi = model.effective_mass_vector();
-    let ag = |i: usize| (2.0 * std::f64::consts::PI * i as f64 * DT).sin();
-    let mut integ = Scheme::Newmark { beta: 0.25, gamma: 0.5 }.build(&model, DT, &(-&mi * ag(0)))?;
-    let mut load = mi.clone();
-    let mut rounds = Vec::new();
-    let mut i = 0;
-    for _ in 0..5 {
-        let t0 = Instant::now();
-        for _ in 0..steps {
-            i += 1;
-            load.copy_from(&mi);
-            load.scale_mut(-ag(i));
-            integ.step(&load);
-        }
-        rounds.push(t0.elapsed().as_secs_f64() * 1e6 / steps as f64);
-    }
-    let ours = median(rounds);
-    let solver = substep::integrate::NewmarkCore::new(&model, DT, 0.25, 0.5)?.solver();
+    // substep: monolithic Newmark and the full substructure step on the same chain, per-step
+    // medians after a warm-up (see bench_models::bench_model).
     let sub = bench_models::bench_model(BenchModel::Chain, n, steps, args.substeps)?;
+    let ours = sub.us_per_step_monolithic_median;
+    let solver = sub.solver.clone();
 
     let python = std::env::var("SUBSTEP_PYTHON").unwrap_or_else(|_| "python3".into());
     let dir = scripts_dir();

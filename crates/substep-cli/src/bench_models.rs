@@ -188,7 +188,7 @@ pub fn bench_model(model: BenchModel, dofs: usize, steps: usize, substeps: usize
     }
     let solver = substep::integrate::NewmarkCore::new(&m, DT, 0.25, 0.5)?.solver();
     // Monolithic Newmark on the same model (shorter run; the comparison uses it).
-    let mono_steps = steps.clamp(10, 500);
+    let mono_steps = steps.clamp(10, 2000);
     let mut integ = Scheme::Newmark { beta: 0.25, gamma: 0.5 }.build(&m, DT, &(-&mi * ag(0)))?;
     let mut mono = Vec::with_capacity(mono_steps);
     for i in 0..WARMUP_STEPS + mono_steps {
