@@ -52,6 +52,23 @@ fn portal_closed_form(e: f64, ic: f64, ib: f64, h: f64, l: f64) -> f64 {
 }
 
 #[test]
+fn documented_frame_dof_numbering() {
+    // docs/config.md: the default frame's roof horizontal DOF is 109 (1-based), 82 with a
+    // rigid diaphragm.
+    let f = Frame2d::default();
+    assert_eq!(f.dof(10, 0, FrameDof::Ux), Some(108));
+    assert_eq!(f.dof(2, 1, FrameDof::Rz), Some(3 * (4 + 1) + 2));
+    assert_eq!(f.dof(0, 0, FrameDof::Ux), None);
+    let d = Frame2d {
+        rigid_diaphragm: true,
+        ..f
+    };
+    assert_eq!(d.dof(10, 0, FrameDof::Ux), Some(81));
+    assert_eq!(d.dof(10, 3, FrameDof::Ux), Some(81));
+    assert_eq!(d.n_dofs(), 90);
+}
+
+#[test]
 fn portal_frame_lateral_stiffness() {
     for (ib_scale, diaphragm) in [(1.0, false), (0.1, true), (10.0, true)] {
         let f = Frame2d {
