@@ -846,7 +846,9 @@ fn plan(a: &PlanArgs) -> Result<()> {
         Some(s) => parse_f64_list("--delay", s)?,
         None => vec![sub.actuator.delay],
     };
-    let assembled = assemble_monolithic(&def.model, &sub.specimens)?;
+    // The amplification-matrix analysis is dense (refused for large sparse models).
+    let model = def.model.dense("substep analyze plan")?;
+    let assembled = assemble_monolithic(&model, &sub.specimens)?;
     let modes = assembled.modes()?;
     let w1 = modes
         .omega
@@ -878,7 +880,7 @@ fn plan(a: &PlanArgs) -> Result<()> {
             s.actuator.delay = delay;
             s.force_sensors = vec![SensorSpec::ideal(); s.coupling_dofs.len()];
             s.displacement_sensors = vec![SensorSpec::ideal(); s.coupling_dofs.len()];
-            let mut test = s.build_test(&def.model, dt, &DVector::zeros(def.model.n_dofs()))?;
+            let mut test = s.build_test(&*model, dt, &DVector::zeros(model.n_dofs()))?;
             let map = StepMap::probe(&mut test)?;
             let rho = map.spectral_radius();
             let w_max = (1.5 * w_top).min(0.95 * std::f64::consts::PI / dt);

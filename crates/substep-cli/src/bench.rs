@@ -2,6 +2,10 @@
 //! 5 % modal damping, and of the sub-step algorithm (full step and one sub-step) with spring
 //! specimens on 1 and 4 coupling DOFs behind ideal actuators. Each figure is the median over
 //! the repetitions.
+//!
+//! With `--model chain|frame --dofs N`, the large-model benchmark of `bench_models.rs` (sparse
+//! storage, per-step median/p99, peak RSS); `--sweep` runs it over sizes 10²…10⁵; `--compare`
+//! times the 5000-DOF chain against OpenSees and SciPy (`bench_compare.rs`).
 
 use anyhow::{Result, bail};
 use nalgebra::DVector;
@@ -13,8 +17,9 @@ use substep::specimen::SpecimenSpec;
 use substep::substructure::{ErrorForceSpec, ExperimentalSubstructure, SubstepController, SubstepSettings};
 use substep::transfer::{ActuatorSpec, SensorSpec, VirtualLab};
 
+use crate::bench_models::{self, BenchModel};
+
 const DT: f64 = 0.01;
-const SUBSTEPS: usize = 10;
 const ZETA: f64 = 0.05;
 
 #[derive(Debug, Clone, clap::Args)]
@@ -32,6 +37,29 @@ pub struct BenchArgs {
     /// Print one JSON object instead of the table
     #[arg(long)]
     pub json: bool,
+    /// Large-model benchmark on a sparse model: chain (shear building) or frame
+    #[arg(long, value_enum)]
+    pub model: Option<BenchModel>,
+    /// DOFs of the --model benchmark (the frame takes the nearest size its layout allows)
+    #[arg(long)]
+    pub dofs: Option<usize>,
+    /// Sub-steps per step k_sub
+    #[arg(long, default_value_t = 10)]
+    pub substeps: usize,
+    /// With --model: run 100 … 100 000 DOFs (or the --dofs list), each in its own process, and
+    /// report the largest model within 1 ms and 10 ms per step
+    #[arg(long, requires = "model")]
+    pub sweep: bool,
+    /// Sizes for --sweep (comma-separated)
+    #[arg(long, value_delimiter = ',', requires = "sweep")]
+    pub sizes: Option<Vec<usize>>,
+    /// Time the 5000-DOF chain (monolithic Newmark) against OpenSees and a SciPy banded loop
+    /// (benches/compare/*.py; skipped when python3, openseespy or scipy are missing)
+    #[arg(long, conflicts_with = "model")]
+    pub compare: bool,
+    /// DOFs of the --compare chain
+    #[arg(long, default_value_t = 5000, requires = "compare")]
+    pub compare_dofs: usize,
 }
 
 #[derive(Debug, Serialize)]
@@ -111,7 +139,13 @@ fn bench_monolithic(model: &StructuralModel, steps: usize, repeats: usize) -> Re
 }
 
 /// `(µs per full step, µs per sub-step)` with `n_c` spring specimens on the top floors.
-fn bench_substructure(model: &StructuralModel, n_c: usize, steps: usize, repeats: usize) -> Result<(f64, f64)> {
+fn bench_substructure(
+    model: &StructuralModel,
+    n_c: usize,
+    substeps: usize,
+    steps: usize,
+    repeats: usize,
+) -> Result<(f64, f64)> {
     let n = model.n_dofs();
     let coupling: Vec<usize> = (0..n_c).map(|k| n - 1 - k).collect();
     let k_story = model.stiffness[(n - 1, n - 1)];
@@ -128,14 +162,14 @@ fn bench_substructure(model: &StructuralModel, n_c: usize, steps: usize, repeats
         dt: DT,
         beta: 0.25,
         gamma: 0.5,
-        substeps: SUBSTEPS,
+        substeps,
         coupling_dofs: coupling.clone(),
         error_force: ErrorForceSpec::None,
     };
     let mi = model.effective_mass_vector();
     let mut load = -&mi * ag(0);
     let mut ctrl = SubstepController::new(model, &settings, &load)?;
-    let dtau = DT / SUBSTEPS as f64;
+    let dtau = DT / substeps as f64;
     let mut lab = VirtualLab::from_specs(
         &coupling,
         &specimens,
@@ -158,8 +192,8 @@ fn bench_substructure(model: &StructuralModel, n_c: usize, steps: usize, repeats
             load.scale_mut(-a1);
             ctrl.begin_step(&load);
             let t1 = Instant::now();
-            for j in 1..=SUBSTEPS {
-                let (r0, r1) = ((j - 1) as f64 / SUBSTEPS as f64, j as f64 / SUBSTEPS as f64);
+            for j in 1..=substeps {
+                let (r0, r1) = ((j - 1) as f64 / substeps as f64, j as f64 / substeps as f64);
                 let command = ctrl.next_command();
                 lab.substep(
                     command,
@@ -175,7 +209,7 @@ fn bench_substructure(model: &StructuralModel, n_c: usize, steps: usize, repeats
             total += t0.elapsed();
         }
         per_step.push(total.as_secs_f64() * 1e6 / steps as f64);
-        per_substep.push(inner.as_secs_f64() * 1e6 / (steps * SUBSTEPS) as f64);
+        per_substep.push(inner.as_secs_f64() * 1e6 / (steps * substeps) as f64);
     }
     if !ctrl.state().is_finite() {
         bail!("the substructure benchmark diverged");
@@ -184,6 +218,40 @@ fn bench_substructure(model: &StructuralModel, n_c: usize, steps: usize, repeats
 }
 
 pub fn bench(args: &BenchArgs) -> Result<()> {
+    if args.substeps == 0 {
+        return Err(substep::Error::invalid("--substeps", "must be at least 1").into());
+    }
+    if args.steps == 0 {
+        return Err(substep::Error::invalid("--steps", "must be at least 1").into());
+    }
+    if args.compare {
+        return crate::bench_compare::compare(args);
+    }
+    if let Some(model) = args.model {
+        if args.sweep {
+            let sizes = args.sizes.clone().unwrap_or_else(|| bench_models::SWEEP_DOFS.to_vec());
+            let s = bench_models::sweep(model, &sizes, args.steps, args.substeps)?;
+            if args.json {
+                println!("{}", serde_json::to_string(&s).expect("sweep serialises"));
+            } else {
+                bench_models::print_sweep(&s);
+            }
+            return Ok(());
+        }
+        let dofs = args
+            .dofs
+            .ok_or_else(|| substep::Error::invalid("--dofs", "is required with --model (or use --sweep)"))?;
+        let r = bench_models::bench_model(model, dofs, args.steps, args.substeps)?;
+        if args.json {
+            println!("{}", serde_json::to_string(&r).expect("bench result serialises"));
+        } else {
+            bench_models::print_model_bench(&r);
+        }
+        return Ok(());
+    }
+    if args.dofs.is_some() {
+        return Err(substep::Error::invalid("--dofs", "needs --model chain|frame").into());
+    }
     if args.stories.contains(&0) {
         return Err(substep::Error::invalid("--stories", "must be at least 1").into());
     }
@@ -215,7 +283,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     let mut cases = Vec::new();
     for n_c in [1, 4] {
         if n_c <= largest {
-            let (step, sub) = bench_substructure(&model, n_c, args.steps, args.repeats)?;
+            let (step, sub) = bench_substructure(&model, n_c, args.substeps, args.steps, args.repeats)?;
             cases.push(SubstructureCase {
                 n_c,
                 us_per_step: step,
@@ -231,7 +299,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         monolithic,
         substructure: SubstructureResult {
             stories: largest,
-            substeps: SUBSTEPS,
+            substeps: args.substeps,
             cases,
         },
     };
@@ -250,8 +318,8 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         println!("    {:>8}  {:>12.2}", m.stories, m.us_per_step);
     }
     println!(
-        "  substructure: {} stories, k_sub = {SUBSTEPS}, spring specimens on the top floors, ideal actuators",
-        largest
+        "  substructure: {} stories, k_sub = {}, spring specimens on the top floors, ideal actuators",
+        largest, args.substeps
     );
     println!("    {:>8}  {:>12}  {:>14}", "n_c", "µs/step", "µs/sub-step");
     for c in &result.substructure.cases {

@@ -5,6 +5,8 @@
 
 mod analyze;
 mod bench;
+mod bench_compare;
+mod bench_models;
 mod output;
 mod plots;
 mod realtime;

@@ -420,7 +420,11 @@ fn print_header(args: &RunArgs, def: &TestDefinition) {
             s.substeps
         ),
     };
-    println!("  model: {} DOF(s), {kind}", def.model.n_dofs());
+    println!(
+        "  model: {} DOF(s), {} storage, {kind}",
+        def.model.n_dofs(),
+        def.model.storage_name()
+    );
     let steps = def.integrator.steps;
     println!(
         "  ground motion: {}; dt = {} s, {steps} steps ({} s)",

@@ -22,6 +22,7 @@ pub mod compensate;
 pub mod ident;
 pub mod linalg;
 pub mod site;
+pub mod sparse;
 pub mod specimen;
 pub mod substructure;
 pub mod transfer;

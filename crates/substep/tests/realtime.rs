@@ -172,7 +172,7 @@ fn overlapped_predictor_equals_begin_step() {
             .collect();
         let mut plain = SubstepController::new(&model, &s, &loads[0]).unwrap();
         let mut split = SubstepController::new(&model, &s, &loads[0]).unwrap();
-        let mut overlap = OverlapPredictor::new(&split);
+        let mut overlap = OverlapPredictor::new(&mut split);
         plain.begin_step(&loads[1]);
         split.begin_step(&loads[1]);
         let k_spring = dmatrix![3.0e5, -1.0e5; -1.0e5, 2.0e5];

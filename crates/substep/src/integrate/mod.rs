@@ -13,7 +13,8 @@ pub use hht::{AlphaOs, Hht};
 pub use newmark::{ExplicitNewmark, Newmark, NewmarkConstants, NewmarkCore};
 
 use crate::error::{Error, Result, require_positive};
-use crate::model::StructuralModel;
+use crate::model::ModelRef;
+use crate::sparse::{FactorKind, SymmetricFactor};
 use nalgebra::DVector;
 
 /// Displacement, velocity and acceleration of all DOFs at one time level.
@@ -33,15 +34,29 @@ impl Kinematics {
         }
     }
     /// Rest (`u₀ = v₀ = 0`) with the consistent initial acceleration `a₀ = M⁻¹ f*(0)`.
-    pub fn at_rest(model: &StructuralModel, load0: &DVector<f64>) -> Result<Self> {
+    pub fn at_rest<'a>(model: impl Into<ModelRef<'a>>, load0: &DVector<f64>) -> Result<Self> {
+        let model = model.into();
         let mut k = Self::zeros(model.n_dofs());
-        let chol = model
-            .mass
-            .clone()
-            .cholesky()
-            .ok_or_else(|| Error::invalid("structure.mass", "is not positive definite"))?;
         k.a.copy_from(load0);
-        chol.solve_mut(&mut k.a);
+        match model {
+            ModelRef::Dense(model) => {
+                let chol = model
+                    .mass
+                    .clone()
+                    .cholesky()
+                    .ok_or_else(|| Error::invalid("structure.mass", "is not positive definite"))?;
+                chol.solve_mut(&mut k.a);
+            }
+            ModelRef::Sparse(model) if model.mass.is_diagonal() => {
+                for (a, m) in k.a.iter_mut().zip(model.mass.diagonal()) {
+                    *a /= m;
+                }
+            }
+            ModelRef::Sparse(model) => {
+                SymmetricFactor::new(&model.mass, FactorKind::Auto, "structure.mass")?
+                    .solve_in_place(k.a.as_mut_slice());
+            }
+        }
         Ok(k)
     }
     pub fn is_finite(&self) -> bool {
@@ -102,8 +117,33 @@ impl Scheme {
     }
 
     /// Build the integrator for `model`, time step `dt` and initial load `f*(0)`; starts at rest.
-    pub fn build(&self, model: &StructuralModel, dt: f64, load0: &DVector<f64>) -> Result<Box<dyn Integrator>> {
+    /// A sparse model supports the implicit Newmark schemes only.
+    pub fn build<'a>(
+        &self,
+        model: impl Into<ModelRef<'a>>,
+        dt: f64,
+        load0: &DVector<f64>,
+    ) -> Result<Box<dyn Integrator>> {
         require_positive("integrator.dt", dt)?;
+        let model = match model.into() {
+            ModelRef::Dense(m) => m,
+            ModelRef::Sparse(m) => {
+                return match *self {
+                    Scheme::Newmark { beta, gamma } if beta > 0.0 => {
+                        Ok(Box::new(Newmark::new(m, dt, beta, gamma, load0)?))
+                    }
+                    _ => Err(Error::invalid(
+                        "integrator.scheme",
+                        format!(
+                            "{} needs dense matrices, but the model has {} DOFs in sparse storage: use an \
+                             implicit Newmark scheme (e.g. average_acceleration) or structure.storage = \"dense\"",
+                            self.name(),
+                            m.n_dofs()
+                        ),
+                    )),
+                };
+            }
+        };
         Ok(match *self {
             Scheme::Newmark { beta: 0.0, gamma } => Box::new(ExplicitNewmark::new(model, dt, gamma, load0)?),
             Scheme::Newmark { beta, gamma } => Box::new(Newmark::new(model, dt, beta, gamma, load0)?),
@@ -111,6 +151,19 @@ impl Scheme {
             Scheme::AlphaOs { alpha } => Box::new(AlphaOs::new(model, dt, alpha, load0)?),
             Scheme::Exact => Box::new(ExactFoh::new(model, dt, load0)?),
         })
+    }
+}
+
+impl Scheme {
+    /// A short name for messages.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Scheme::Newmark { beta, .. } if *beta == 0.0 => "explicit Newmark (central difference)",
+            Scheme::Newmark { .. } => "newmark",
+            Scheme::Hht { .. } => "hht",
+            Scheme::AlphaOs { .. } => "alpha_os",
+            Scheme::Exact => "the exact scheme",
+        }
     }
 }
 

@@ -2,7 +2,8 @@
 
 use super::{Integrator, Kinematics};
 use crate::error::{Error, Result};
-use crate::model::StructuralModel;
+use crate::model::{ModelRef, StructuralModel};
+use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 
 /// The constants `a0 … a7` of spec §2.2.
@@ -43,44 +44,187 @@ impl NewmarkConstants {
     }
 }
 
-/// The parts of Newmark shared by the monolithic integrator and the sub-step controller:
-/// matrices, the factorised effective stiffness `K̂ = K + a0 M + a1 C` and the two work vectors
-/// needed to form `F̂_i`.
+/// The parts of Newmark shared by the monolithic integrator and the sub-step controller: the
+/// model matrices, the factorised effective stiffness `K̂ = K + a0 M + a1 C` and the work
+/// vectors needed to form `F̂_i`. Dense models use nalgebra's dense Cholesky; sparse models
+/// keep `M`, `C`, `K` in CSC form and factorise `K̂` once with [`SymmetricFactor`] (banded or
+/// sparse Cholesky), so no step allocates and no `n × n` array exists on the sparse path.
 pub struct NewmarkCore {
     pub c: NewmarkConstants,
-    pub mass: DMatrix<f64>,
-    pub damping: DMatrix<f64>,
-    pub stiffness: DMatrix<f64>,
-    pub k_hat: Cholesky<f64, Dyn>,
+    backend: Backend,
     work_m: DVector<f64>,
     work_c: DVector<f64>,
 }
 
+enum Backend {
+    Dense {
+        mass: DMatrix<f64>,
+        damping: DMatrix<f64>,
+        stiffness: DMatrix<f64>,
+        k_hat: Cholesky<f64, Dyn>,
+    },
+    Sparse {
+        mass: CscMatrix,
+        /// The diagonal of `M` when `M` is diagonal (lumped masses): `F̂` in one gather pass.
+        mass_diag: Option<Vec<f64>>,
+        damping: CscMatrix,
+        stiffness: CscMatrix,
+        k_hat: SymmetricFactor,
+    },
+}
+
+const K_HAT: &str = "effective stiffness K + a0 M + a1 C";
+
 impl NewmarkCore {
-    pub fn new(model: &StructuralModel, dt: f64, beta: f64, gamma: f64) -> Result<Self> {
+    pub fn new<'a>(model: impl Into<ModelRef<'a>>, dt: f64, beta: f64, gamma: f64) -> Result<Self> {
+        let model = model.into();
         let c = NewmarkConstants::new(beta, gamma, dt)?;
-        let k_eff = &model.stiffness + &model.mass * c.a[0] + &model.damping * c.a[1];
-        let k_hat = k_eff.cholesky().ok_or_else(|| {
-            Error::numerical(
-                "effective stiffness K + a0 M + a1 C",
-                "is not positive definite (check K, C and dt)",
-            )
-        })?;
+        let backend = match model {
+            ModelRef::Dense(model) => {
+                let k_eff = &model.stiffness + &model.mass * c.a[0] + &model.damping * c.a[1];
+                let k_hat = k_eff
+                    .cholesky()
+                    .ok_or_else(|| Error::numerical(K_HAT, "is not positive definite (check K, C and dt)"))?;
+                Backend::Dense {
+                    mass: model.mass.clone(),
+                    damping: model.damping.clone(),
+                    stiffness: model.stiffness.clone(),
+                    k_hat,
+                }
+            }
+            ModelRef::Sparse(model) => {
+                let k_eff = CscMatrix::linear_combination(&[
+                    (1.0, &model.stiffness),
+                    (c.a[0], &model.mass),
+                    (c.a[1], &model.damping),
+                ]);
+                Backend::Sparse {
+                    k_hat: SymmetricFactor::new(&k_eff, FactorKind::Auto, K_HAT)?,
+                    mass_diag: model.mass.is_diagonal().then(|| model.mass.diagonal()),
+                    mass: model.mass.clone(),
+                    damping: model.damping.clone(),
+                    stiffness: model.stiffness.clone(),
+                }
+            }
+        };
         let n = model.n_dofs();
         Ok(Self {
             c,
-            mass: model.mass.clone(),
-            damping: model.damping.clone(),
-            stiffness: model.stiffness.clone(),
-            k_hat,
+            backend,
             work_m: DVector::zeros(n),
             work_c: DVector::zeros(n),
         })
     }
 
+    pub fn n_dofs(&self) -> usize {
+        self.work_m.len()
+    }
+
+    /// `dense Cholesky`, or the sparse factorisation used (see [`SymmetricFactor::describe`]).
+    pub fn solver(&self) -> String {
+        match &self.backend {
+            Backend::Dense { .. } => "dense Cholesky (nalgebra)".to_string(),
+            Backend::Sparse { k_hat, .. } => k_hat.describe(),
+        }
+    }
+
+    /// Overwrite `x` with `K̂⁻¹ x` (allocation-free).
+    pub fn solve_in_place(&mut self, x: &mut DVector<f64>) {
+        match &mut self.backend {
+            Backend::Dense { k_hat, .. } => k_hat.solve_mut(x),
+            Backend::Sparse { k_hat, .. } => k_hat.solve_in_place(x.as_mut_slice()),
+        }
+    }
+
+    /// Overwrite each column of `x` with `K̂⁻¹` times it (e.g. the gain columns `K̂⁻¹ Sᵀ`).
+    pub fn solve_columns_in_place(&mut self, x: &mut DMatrix<f64>) {
+        match &mut self.backend {
+            Backend::Dense { k_hat, .. } => k_hat.solve_mut(x),
+            Backend::Sparse { k_hat, .. } => {
+                for mut col in x.column_iter_mut() {
+                    k_hat.solve_in_place(col.as_mut_slice());
+                }
+            }
+        }
+    }
+
+    /// `α M X + β C X` for the columns of `X` (allocates; for set-up work such as the real-time
+    /// runner's overlap gain).
+    pub fn mass_damping_columns(&self, alpha: f64, beta: f64, x: &DMatrix<f64>) -> DMatrix<f64> {
+        match &self.backend {
+            Backend::Dense { mass, damping, .. } => {
+                let mut out = mass * x * alpha;
+                out.gemm(beta, damping, x, 1.0);
+                out
+            }
+            Backend::Sparse { mass, damping, .. } => {
+                let mut out = DMatrix::zeros(x.nrows(), x.ncols());
+                for (j, col) in x.column_iter().enumerate() {
+                    let mut o = out.column_mut(j);
+                    let o = o.as_mut_slice();
+                    mass.sym_mul_add(alpha, col.as_slice(), 0.0, o);
+                    damping.sym_mul_add(beta, col.as_slice(), 1.0, o);
+                }
+                out
+            }
+        }
+    }
+
+    /// `out = M a + C v + K u` for the state `s` (allocation-free).
+    pub fn internal_force(&self, s: &Kinematics, out: &mut DVector<f64>) {
+        match &self.backend {
+            Backend::Dense {
+                mass,
+                damping,
+                stiffness,
+                ..
+            } => {
+                out.gemv(1.0, mass, &s.a, 0.0);
+                out.gemv(1.0, damping, &s.v, 1.0);
+                out.gemv(1.0, stiffness, &s.u, 1.0);
+            }
+            Backend::Sparse {
+                mass,
+                damping,
+                stiffness,
+                ..
+            } => {
+                let o = out.as_mut_slice();
+                mass.sym_mul_add(1.0, s.a.as_slice(), 0.0, o);
+                damping.sym_mul_add(1.0, s.v.as_slice(), 1.0, o);
+                stiffness.sym_mul_add(1.0, s.u.as_slice(), 1.0, o);
+            }
+        }
+    }
+
     /// `out = F̂_i = M(a0 u + a2 v + a3 a) + C(a1 u + a4 v + a5 a)`.
     pub fn effective_load(&mut self, s: &Kinematics, out: &mut DVector<f64>) {
         let a = &self.c.a;
+        if let Backend::Sparse {
+            mass_diag: Some(md),
+            damping,
+            ..
+        } = &self.backend
+        {
+            // Lumped M: out_i = m_i (a0 u + a2 v + a3 a)_i + (C w_c)_i, w_c = a1 u + a4 v + a5 a.
+            let (u, v, acc) = (s.u.as_slice(), s.v.as_slice(), s.a.as_slice());
+            let o = out.as_mut_slice();
+            for (((((oi, wc), m), u), v), acc) in o
+                .iter_mut()
+                .zip(self.work_c.as_mut_slice().iter_mut())
+                .zip(md)
+                .zip(u)
+                .zip(v)
+                .zip(acc)
+            {
+                *wc = a[1] * u + a[4] * v + a[5] * acc;
+                *oi = m * (a[0] * u + a[2] * v + a[3] * acc);
+            }
+            if damping.nnz() > 0 {
+                damping.sym_mul_add(1.0, self.work_c.as_slice(), 1.0, o);
+            }
+            return;
+        }
         self.work_m.copy_from(&s.u);
         self.work_m.scale_mut(a[0]);
         self.work_m.axpy(a[2], &s.v, 1.0);
@@ -89,23 +233,42 @@ impl NewmarkCore {
         self.work_c.scale_mut(a[1]);
         self.work_c.axpy(a[4], &s.v, 1.0);
         self.work_c.axpy(a[5], &s.a, 1.0);
-        out.gemv(1.0, &self.mass, &self.work_m, 0.0);
-        out.gemv(1.0, &self.damping, &self.work_c, 1.0);
+        match &self.backend {
+            Backend::Dense { mass, damping, .. } => {
+                out.gemv(1.0, mass, &self.work_m, 0.0);
+                out.gemv(1.0, damping, &self.work_c, 1.0);
+            }
+            Backend::Sparse { mass, damping, .. } => {
+                let o = out.as_mut_slice();
+                mass.sym_mul_add(1.0, self.work_m.as_slice(), 0.0, o);
+                if damping.nnz() > 0 {
+                    damping.sym_mul_add(1.0, self.work_c.as_slice(), 1.0, o);
+                }
+            }
+        }
     }
 
-    /// Given the new displacement in `s_next.u` and the old state, fill `s_next.a` and `s_next.v`.
+    /// Given the new displacement in `s_next.u` and the old state, fill `s_next.a` and `s_next.v`:
+    /// `a_{i+1} = a0 (u_{i+1} − u_i) − a2 v_i − a3 a_i`, `v_{i+1} = v_i + a6 a_i + a7 a_{i+1}`
+    /// (one pass over the DOFs).
     pub fn update_kinematics(&self, s: &Kinematics, s_next: &mut Kinematics) {
         let a = &self.c.a;
-        // a_{i+1} = a0 (u_{i+1} − u_i) − a2 v_i − a3 a_i
-        s_next.a.copy_from(&s_next.u);
-        s_next.a.axpy(-1.0, &s.u, 1.0);
-        s_next.a.scale_mut(a[0]);
-        s_next.a.axpy(-a[2], &s.v, 1.0);
-        s_next.a.axpy(-a[3], &s.a, 1.0);
-        // v_{i+1} = v_i + a6 a_i + a7 a_{i+1}
-        s_next.v.copy_from(&s.v);
-        s_next.v.axpy(a[6], &s.a, 1.0);
-        s_next.v.axpy(a[7], &s_next.a, 1.0);
+        let (u, v, acc) = (s.u.as_slice(), s.v.as_slice(), s.a.as_slice());
+        let Kinematics { u: un, v: vn, a: an } = s_next;
+        let (a0, a2, a3, a6, a7) = (a[0], a[2], a[3], a[6], a[7]);
+        for (((((an, vn), un), u), v), acc) in an
+            .as_mut_slice()
+            .iter_mut()
+            .zip(vn.as_mut_slice().iter_mut())
+            .zip(un.as_slice())
+            .zip(u)
+            .zip(v)
+            .zip(acc)
+        {
+            let a_new = a0 * (un - u) - a2 * v - a3 * acc;
+            *an = a_new;
+            *vn = v + a6 * acc + a7 * a_new;
+        }
     }
 }
 
@@ -117,7 +280,14 @@ pub struct Newmark {
 }
 
 impl Newmark {
-    pub fn new(model: &StructuralModel, dt: f64, beta: f64, gamma: f64, load0: &DVector<f64>) -> Result<Self> {
+    pub fn new<'a>(
+        model: impl Into<ModelRef<'a>>,
+        dt: f64,
+        beta: f64,
+        gamma: f64,
+        load0: &DVector<f64>,
+    ) -> Result<Self> {
+        let model = model.into();
         let core = NewmarkCore::new(model, dt, beta, gamma)?;
         let state = Kinematics::at_rest(model, load0)?;
         let next = state.clone();
@@ -138,7 +308,7 @@ impl Integrator for Newmark {
     fn step(&mut self, load_next: &DVector<f64>) {
         self.core.effective_load(&self.state, &mut self.next.u);
         self.next.u += load_next;
-        self.core.k_hat.solve_mut(&mut self.next.u);
+        self.core.solve_in_place(&mut self.next.u);
         self.core.update_kinematics(&self.state, &mut self.next);
         std::mem::swap(&mut self.state, &mut self.next);
     }

@@ -17,13 +17,17 @@
 //! To add a specimen kind: add a variant to `RawSpecimen` (its keys are the variant's fields)
 //! and one arm to `RawSpecimen::to_spec`.
 
-use super::matrix_market::read_matrix_market;
+use super::matrix_market::{read_matrix_market, read_matrix_market_sparse};
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::excitation::{self, Envelope, KanaiTajimi, Record};
 use crate::integrate::{Scheme, check_hilber_alpha};
-use crate::model::{DampingSpec, ShearBuilding, StructuralModel, TmdSystem, sdof, shear_building, tmd_two_dof};
+use crate::model::{
+    DENSE_MAX_DOFS, DampingSpec, Frame2d, Model, ModelRef, Section, ShearBuilding, SparseModel, Storage,
+    StructuralModel, TmdSystem, frame_2d, sdof, shear_building_sparse, tmd_two_dof,
+};
 use crate::site::openfresco::OpenFrescoSite;
 use crate::site::{ClientOptions, Mode, RemoteSite, RemoteStepSite, RemoteStepTest, Transport};
+use crate::sparse::CscMatrix;
 use crate::specimen::{BoucWenParams, FrictionModel, Pinching, SpecimenSpec};
 use crate::substructure::{
     ErrorForceSpec, ExperimentalSubstructure, LimitedSite, SafetyLimits, SubstepController, SubstepSettings,
@@ -41,8 +45,9 @@ use std::time::Duration;
 pub struct TestDefinition {
     /// Where the definition came from (the config path, or a name for embedded text).
     pub source: String,
-    /// The numerical substructure (with a `[substructure]`, the specimens are not in it).
-    pub model: StructuralModel,
+    /// The numerical substructure (with a `[substructure]`, the specimens are not in it), in
+    /// dense or sparse storage (`[structure] storage`).
+    pub model: Model,
     pub ground_motion: GroundMotion,
     pub integrator: IntegratorDefinition,
     pub substructure: Option<SubstructureDefinition>,
@@ -166,12 +171,13 @@ impl SubstructureDefinition {
     }
 
     /// A per-step remote test (`mode = "per_step"`): the site runs the sub-steps of each step.
-    pub fn build_remote_step_test(
+    pub fn build_remote_step_test<'a>(
         &self,
-        model: &StructuralModel,
+        model: impl Into<ModelRef<'a>>,
         dt: f64,
         load0: &DVector<f64>,
     ) -> Result<RemoteStepTest> {
+        let model = model.into();
         let r = self
             .remote
             .as_ref()
@@ -183,7 +189,13 @@ impl SubstructureDefinition {
 
     /// The substructure test of this definition (controller + virtual lab) for `model` at
     /// rest, time step `dt` and initial load `load0`.
-    pub fn build_test(&self, model: &StructuralModel, dt: f64, load0: &DVector<f64>) -> Result<SubstructureTest> {
+    pub fn build_test<'a>(
+        &self,
+        model: impl Into<ModelRef<'a>>,
+        dt: f64,
+        load0: &DVector<f64>,
+    ) -> Result<SubstructureTest> {
+        let model = model.into();
         let controller = SubstepController::new(model, &self.settings(dt), load0)?;
         let site = self.build_site(&controller, dt)?;
         SubstructureTest::new(model, controller, site)
@@ -285,6 +297,69 @@ struct RawStructure {
     shear_building: Option<RawShearBuilding>,
     sdof: Option<RawSdof>,
     tmd: Option<RawTmd>,
+    frame: Option<RawFrame>,
+    storage: Option<String>,
+}
+
+/// `[structure.frame]`; every key has the default of [`Frame2d::default`].
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct RawFrame {
+    bays: usize,
+    stories: usize,
+    bay_width: f64,
+    story_height: f64,
+    elastic_modulus: f64,
+    column_area: f64,
+    column_inertia: f64,
+    beam_area: f64,
+    beam_inertia: f64,
+    density: f64,
+    floor_mass_per_bay: f64,
+    rigid_diaphragm: bool,
+}
+
+impl Default for RawFrame {
+    fn default() -> Self {
+        let f = Frame2d::default();
+        Self {
+            bays: f.bays,
+            stories: f.stories,
+            bay_width: f.bay_width,
+            story_height: f.story_height,
+            elastic_modulus: f.elastic_modulus,
+            column_area: f.column.area,
+            column_inertia: f.column.inertia,
+            beam_area: f.beam.area,
+            beam_inertia: f.beam.inertia,
+            density: f.density,
+            floor_mass_per_bay: f.floor_mass_per_bay,
+            rigid_diaphragm: f.rigid_diaphragm,
+        }
+    }
+}
+
+impl RawFrame {
+    fn to_frame(&self) -> Frame2d {
+        Frame2d {
+            bays: self.bays,
+            stories: self.stories,
+            bay_width: self.bay_width,
+            story_height: self.story_height,
+            elastic_modulus: self.elastic_modulus,
+            column: Section {
+                area: self.column_area,
+                inertia: self.column_inertia,
+            },
+            beam: Section {
+                area: self.beam_area,
+                inertia: self.beam_inertia,
+            },
+            density: self.density,
+            floor_mass_per_bay: self.floor_mass_per_bay,
+            rigid_diaphragm: self.rigid_diaphragm,
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -662,6 +737,27 @@ pub(super) fn matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<DMa
     }
 }
 
+/// A model matrix in sparse form: `.mtx` files are read without a dense array; inline rows must
+/// be square.
+fn sparse_matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<CscMatrix> {
+    match input {
+        MatrixInput::File(path) => {
+            let resolved = base.join(path);
+            read_matrix_market_sparse(&resolved).map_err(|e| Error::invalid(what, e.to_string()))
+        }
+        MatrixInput::Rows(_) => {
+            let m = matrix(input, what, base)?;
+            if m.nrows() != m.ncols() {
+                return Err(Error::invalid(
+                    what,
+                    format!("is {}x{}, a model matrix must be square", m.nrows(), m.ncols()),
+                ));
+            }
+            Ok(CscMatrix::from_dense(&m))
+        }
+    }
+}
+
 /// 1-based DOF number → 0-based index, with a range check.
 fn dof_index(what: &str, dof: usize, n: usize) -> Result<usize> {
     if (1..=n).contains(&dof) {
@@ -687,8 +783,10 @@ fn forbid(prefix: &str, keys: &[(&str, bool)], why: &str) -> Result<()> {
 
 impl RawConfig {
     fn build(self, name: &str, base: &Path) -> Result<TestDefinition> {
-        let model = self.structure.build(base)?;
         let (name_s, scheme, dt, duration) = self.integrator.build()?;
+        // Only the implicit Newmark schemes (and the sub-step controller) run on sparse storage.
+        let sparse_capable = matches!(scheme, Scheme::Newmark { beta, .. } if beta > 0.0);
+        let model = self.structure.build(base, sparse_capable)?;
         let ground_motion = self.ground_motion.build(dt, duration, base)?;
         let steps = ground_motion.accel.len() - 1;
         if steps == 0 {
@@ -721,13 +819,16 @@ impl RawConfig {
 }
 
 impl RawStructure {
-    fn build(&self, base: &Path) -> Result<StructuralModel> {
+    /// The model in the storage `[structure] storage` asks for; `sparse_capable` is false when
+    /// the integrator needs dense matrices (then `auto` keeps models dense).
+    fn build(&self, base: &Path, sparse_capable: bool) -> Result<Model> {
         let matrices = self.mass.is_some() || self.stiffness.is_some();
         let forms = [
             ("mass + stiffness", matrices),
             ("[structure.shear_building]", self.shear_building.is_some()),
             ("[structure.sdof]", self.sdof.is_some()),
             ("[structure.tmd]", self.tmd.is_some()),
+            ("[structure.frame]", self.frame.is_some()),
         ];
         let given: Vec<&str> = forms.iter().filter(|f| f.1).map(|f| f.0).collect();
         match given.len() {
@@ -735,7 +836,7 @@ impl RawStructure {
                 return Err(Error::invalid(
                     "structure",
                     "no model given: set mass and stiffness, or one of [structure.shear_building], \
-                     [structure.sdof], [structure.tmd]",
+                     [structure.frame], [structure.sdof], [structure.tmd]",
                 ));
             }
             1 => {}
@@ -746,6 +847,10 @@ impl RawStructure {
                 ));
             }
         }
+        let storage = match &self.storage {
+            Some(s) => Storage::from_name(s)?,
+            None => Storage::Auto,
+        };
         let damping_options = [
             ("damping", self.damping.is_some()),
             ("rayleigh", self.rayleigh.is_some()),
@@ -760,14 +865,14 @@ impl RawStructure {
         }
         let influence = self.influence.clone().map(DVector::from_vec);
 
-        let model = if let Some(s) = &self.sdof {
+        let model: Model = if let Some(s) = &self.sdof {
             forbid(
                 "structure.",
                 &damping_options,
                 "not allowed with [structure.sdof] (give its damping there)",
             )?;
             let m = sdof(s.mass, s.damping, s.stiffness).map_err(|e| prefixed(e, "structure.sdof."))?;
-            StructuralModel::new(m.mass, m.damping, m.stiffness, influence)?
+            StructuralModel::new(m.mass, m.damping, m.stiffness, influence)?.into()
         } else if let Some(t) = &self.tmd {
             forbid(
                 "structure.",
@@ -783,24 +888,28 @@ impl RawStructure {
                 zeta_s: t.zeta_s,
             };
             let m = tmd_two_dof(&p).map_err(|e| prefixed(e, "structure."))?;
-            StructuralModel::new(m.mass, m.damping, m.stiffness, influence)?
+            StructuralModel::new(m.mass, m.damping, m.stiffness, influence)?.into()
         } else if let Some(b) = &self.shear_building {
-            let m = shear_building(&ShearBuilding {
+            let m = shear_building_sparse(&ShearBuilding {
                 stories: b.stories,
                 story_mass: b.story_mass,
                 first_period: b.first_period,
             })?;
             let damping = match &self.damping {
-                Some(c) => matrix(c, "structure.damping", base)?,
+                Some(c) => sparse_matrix(c, "structure.damping", base)?,
                 None => m.damping,
             };
-            StructuralModel::new(m.mass, damping, m.stiffness, influence)?
+            SparseModel::new(m.mass, damping, m.stiffness, influence)?.into()
+        } else if let Some(f) = &self.frame {
+            let m = frame_2d(&f.to_frame())?;
+            let damping = match &self.damping {
+                Some(c) => sparse_matrix(c, "structure.damping", base)?,
+                None => m.damping,
+            };
+            SparseModel::new(m.mass, damping, m.stiffness, influence.or(Some(m.influence)))?.into()
         } else {
             let (mass, stiffness) = match (&self.mass, &self.stiffness) {
-                (Some(m), Some(k)) => (
-                    matrix(m, "structure.mass", base)?,
-                    matrix(k, "structure.stiffness", base)?,
-                ),
+                (Some(m), Some(k)) => (m, k),
                 (Some(_), None) => {
                     return Err(Error::invalid(
                         "structure.stiffness",
@@ -814,11 +923,25 @@ impl RawStructure {
                     ));
                 }
             };
-            let damping = match &self.damping {
-                Some(c) => matrix(c, "structure.damping", base)?,
-                None => DMatrix::zeros(mass.nrows(), mass.ncols()),
-            };
-            StructuralModel::new(mass, damping, stiffness, influence)?
+            let inputs = [Some(mass), Some(stiffness), self.damping.as_ref()];
+            if inputs.iter().flatten().any(|m| matches!(m, MatrixInput::File(_))) {
+                // MatrixMarket files are read sparse (they may be large).
+                let mass = sparse_matrix(mass, "structure.mass", base)?;
+                let stiffness = sparse_matrix(stiffness, "structure.stiffness", base)?;
+                let damping = match &self.damping {
+                    Some(c) => sparse_matrix(c, "structure.damping", base)?,
+                    None => CscMatrix::zeros(mass.n()),
+                };
+                SparseModel::new(mass, damping, stiffness, influence)?.into()
+            } else {
+                let mass = matrix(mass, "structure.mass", base)?;
+                let stiffness = matrix(stiffness, "structure.stiffness", base)?;
+                let damping = match &self.damping {
+                    Some(c) => matrix(c, "structure.damping", base)?,
+                    None => DMatrix::zeros(mass.nrows(), mass.ncols()),
+                };
+                StructuralModel::new(mass, damping, stiffness, influence)?.into()
+            }
         };
 
         let spec = if let Some(r) = &self.rayleigh {
@@ -828,10 +951,42 @@ impl RawStructure {
                 .as_ref()
                 .map(|m| DampingSpec::Modal { zeta: m.zeta.0.clone() })
         };
+        let model = resolve_storage(model, storage, sparse_capable, self.modal.is_some())?;
         match spec {
             Some(spec) => model.with_damping(&spec),
             None => Ok(model),
         }
+    }
+}
+
+/// Put `model` in the storage asked for. `auto` picks sparse for large sparse models, but dense
+/// when the integrator or modal damping needs dense matrices (up to [`DENSE_MAX_DOFS`]).
+fn resolve_storage(model: Model, storage: Storage, sparse_capable: bool, modal: bool) -> Result<Model> {
+    let n = model.n_dofs();
+    let needs_dense = if modal {
+        Some("modal damping ([structure.modal])")
+    } else if !sparse_capable {
+        Some("the integrator scheme")
+    } else {
+        None
+    };
+    match (storage, needs_dense) {
+        (Storage::Sparse, Some(why)) => Err(Error::invalid(
+            "structure.storage",
+            format!(
+                "\"sparse\" cannot be used with {why}, which needs dense matrices: use \
+                 [structure.rayleigh] and an implicit Newmark scheme, or storage = \"dense\""
+            ),
+        )),
+        (Storage::Auto, Some(why)) if n > DENSE_MAX_DOFS => Err(Error::invalid(
+            "structure",
+            format!(
+                "{why} needs dense matrices, but the model has {n} DOFs (dense storage is limited to \
+                 {DENSE_MAX_DOFS} DOFs here): use [structure.rayleigh] and an implicit Newmark scheme"
+            ),
+        )),
+        (Storage::Auto, Some(_)) => model.with_storage(Storage::Dense),
+        (storage, _) => model.with_storage(storage),
     }
 }
 
@@ -1381,13 +1536,7 @@ impl RawErrorForce {
 }
 
 impl RawSubstructure {
-    fn build(
-        &self,
-        model: &StructuralModel,
-        scheme_name: &str,
-        scheme: Scheme,
-        base: &Path,
-    ) -> Result<SubstructureDefinition> {
+    fn build(&self, model: &Model, scheme_name: &str, scheme: Scheme, base: &Path) -> Result<SubstructureDefinition> {
         let p = "substructure.";
         let (beta, gamma) = match scheme {
             Scheme::Newmark { beta, gamma } if beta > 0.0 => (beta, gamma),
@@ -1651,7 +1800,10 @@ seed = 3
         let d = parse(BASE).unwrap();
         assert_eq!(d.source, "cfg.toml");
         assert_eq!(d.model.n_dofs(), 3);
-        assert!(d.model.damping[(0, 0)] > 0.0, "Rayleigh damping applied");
+        assert!(
+            d.model.as_dense().unwrap().damping[(0, 0)] > 0.0,
+            "Rayleigh damping applied"
+        );
         assert_eq!(d.integrator.steps, 100);
         assert_eq!(d.ground_motion.accel.len(), 101);
         let s = d.substructure.unwrap();

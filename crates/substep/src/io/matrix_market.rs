@@ -1,4 +1,6 @@
-//! MatrixMarket (`.mtx`) reader for dense real matrices.
+//! MatrixMarket (`.mtx`) reader for real matrices, into a dense matrix
+//! ([`read_matrix_market`]) or a sparse square CSC matrix ([`read_matrix_market_sparse`], no
+//! dense `n × n` array: for large models).
 //!
 //! Supported: `%%MatrixMarket matrix coordinate|array real|integer|double general|symmetric|skew-symmetric`
 //! (keywords in any case). `coordinate` lists `i j value` with 1-based indices; `array` lists all
@@ -11,6 +13,7 @@
 //! out of range 1..=3`.
 
 use crate::error::{Error, Result};
+use crate::sparse::CscMatrix;
 use nalgebra::DMatrix;
 use std::path::Path;
 
@@ -37,6 +40,124 @@ pub fn read_matrix_market(path: impl AsRef<Path>) -> Result<DMatrix<f64>> {
 
 /// Parse the text of a `.mtx` file; `name` names it in messages.
 pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
+    let mut dense = Dense::default();
+    parse_into(text, name, &mut dense)?;
+    Ok(dense.m)
+}
+
+/// Read a `.mtx` file into a sparse square matrix; the path as given names the file in
+/// messages.
+pub fn read_matrix_market_sparse(path: impl AsRef<Path>) -> Result<CscMatrix> {
+    let path = path.as_ref();
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| Error::file(&name, format!("cannot read file: {e}")))?;
+    parse_matrix_market_sparse(&text, &name)
+}
+
+/// Parse the text of a `.mtx` file into a sparse square matrix (stored entries only; explicit
+/// zeros are dropped); `name` names it in messages.
+pub fn parse_matrix_market_sparse(text: &str, name: &str) -> Result<CscMatrix> {
+    let mut sparse = Sparse::default();
+    parse_into(text, name, &mut sparse)?;
+    sparse.finish(name)
+}
+
+/// Where parsed entries go.
+trait Target {
+    /// The size line was read; refuse sizes the target cannot hold.
+    fn start(&mut self, rows: usize, cols: usize) -> std::result::Result<(), String>;
+    /// Entry `(r, c) = v` from file line `line`; `Err(())` if it was already set.
+    fn put(&mut self, r: usize, c: usize, v: f64, line: usize) -> std::result::Result<(), ()>;
+    /// Whether the file is symmetric or skew-symmetric (for messages).
+    fn symmetry(&mut self, _symmetric: bool) {}
+}
+
+#[derive(Default)]
+struct Dense {
+    m: DMatrix<f64>,
+    set: Vec<bool>,
+}
+
+impl Target for Dense {
+    fn start(&mut self, rows: usize, cols: usize) -> std::result::Result<(), String> {
+        // Refuse absurd sizes before allocating (dense storage).
+        const MAX_ENTRIES: usize = 100_000_000;
+        if rows.checked_mul(cols).is_none_or(|n| n > MAX_ENTRIES) {
+            return Err(format!("matrix size {rows}x{cols} is too large for a dense matrix"));
+        }
+        self.m = DMatrix::zeros(rows, cols);
+        self.set = vec![false; rows * cols];
+        Ok(())
+    }
+    fn put(&mut self, r: usize, c: usize, v: f64, _line: usize) -> std::result::Result<(), ()> {
+        let rows = self.m.nrows();
+        if std::mem::replace(&mut self.set[r + c * rows], true) {
+            return Err(());
+        }
+        self.m[(r, c)] = v;
+        Ok(())
+    }
+}
+
+/// Triplets with their file lines; duplicates are found by sorting at the end.
+#[derive(Default)]
+struct Sparse {
+    n: usize,
+    symmetric_file: bool,
+    entries: Vec<(usize, usize, f64, usize)>,
+}
+
+impl Target for Sparse {
+    fn start(&mut self, rows: usize, cols: usize) -> std::result::Result<(), String> {
+        if rows != cols {
+            return Err(format!(
+                "matrix size {rows}x{cols} is not square (a model matrix must be)"
+            ));
+        }
+        self.n = rows;
+        Ok(())
+    }
+    fn put(&mut self, r: usize, c: usize, v: f64, line: usize) -> std::result::Result<(), ()> {
+        self.entries.push((r, c, v, line));
+        Ok(())
+    }
+    fn symmetry(&mut self, symmetric: bool) {
+        self.symmetric_file = symmetric;
+    }
+}
+
+impl Sparse {
+    fn finish(mut self, name: &str) -> Result<CscMatrix> {
+        self.entries.sort_unstable_by_key(|&(r, c, _, line)| (c, r, line));
+        // The first line (in file order) that repeats an entry, as the dense reader reports it.
+        let duplicate = self
+            .entries
+            .windows(2)
+            .filter(|w| (w[0].0, w[0].1) == (w[1].0, w[1].1))
+            .map(|w| w[1])
+            .min_by_key(|&(r, c, _, line)| (line, c, r));
+        if let Some((r, c, _, line)) = duplicate {
+            let note = if self.symmetric_file {
+                " (a symmetric file lists each off-diagonal pair once)"
+            } else {
+                ""
+            };
+            return Err(Error::file(
+                name,
+                format!("line {line}: entry ({}, {}) is given twice{note}", r + 1, c + 1),
+            ));
+        }
+        let triplets: Vec<(usize, usize, f64)> = self
+            .entries
+            .iter()
+            .filter(|e| e.2 != 0.0)
+            .map(|&(r, c, v, _)| (r, c, v))
+            .collect();
+        Ok(CscMatrix::from_triplets(self.n, &triplets))
+    }
+}
+
+fn parse_into<T: Target + ?Sized>(text: &str, name: &str, target: &mut T) -> Result<()> {
     let fail = |line: usize, reason: String| Error::file(name, format!("line {line}: {reason}"));
     let mut lines = text
         .lines()
@@ -47,6 +168,7 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
         .next()
         .ok_or_else(|| Error::file(name, "empty file (expected a '%%MatrixMarket' header)"))?;
     let (layout, symmetry) = parse_header(header).map_err(|r| fail(1, r))?;
+    target.symmetry(symmetry != Symmetry::General);
 
     // Size line: the first line that is neither a comment nor blank.
     let mut data = lines.filter(|(_, l)| {
@@ -87,15 +209,7 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
             format!("a symmetric matrix must be square, the size line says {rows}x{cols}"),
         ));
     }
-    // Refuse absurd sizes before allocating (dense storage).
-    const MAX_ENTRIES: usize = 100_000_000;
-    if rows.checked_mul(cols).is_none_or(|n| n > MAX_ENTRIES) {
-        return Err(fail(
-            size_line,
-            format!("matrix size {rows}x{cols} is too large for a dense matrix"),
-        ));
-    }
-    let mut m = DMatrix::zeros(rows, cols);
+    target.start(rows, cols).map_err(|r| fail(size_line, r))?;
 
     let value = |line: usize, s: &str| -> Result<f64> {
         let v: f64 = s
@@ -122,7 +236,6 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
                     format!("{nnz} entries declared but a {rows}x{cols} matrix of this kind holds at most {max_nnz}"),
                 ));
             }
-            let mut set = vec![false; rows * cols];
             let mut count = 0;
             for (line, l) in data {
                 let f: Vec<&str> = l.split_whitespace().collect();
@@ -155,7 +268,7 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
                     ));
                 }
                 let mut put = |r: usize, c: usize, v: f64| -> Result<()> {
-                    if std::mem::replace(&mut set[r + c * rows], true) {
+                    if target.put(r, c, v, line).is_err() {
                         let note = if symmetry == Symmetry::General {
                             ""
                         } else {
@@ -163,7 +276,6 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
                         };
                         return Err(fail(line, format!("entry ({}, {}) is given twice{note}", r + 1, c + 1)));
                     }
-                    m[(r, c)] = v;
                     Ok(())
                 };
                 put(i, j, v)?;
@@ -203,11 +315,17 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
                         ));
                     };
                     let v = value(line, field)?;
-                    m[(i, j)] = v;
+                    // Array positions are distinct, so `put` cannot report a duplicate here.
+                    let _ = target.put(i, j, v, line);
                     match symmetry {
                         Symmetry::General => {}
-                        Symmetry::Symmetric => m[(j, i)] = v,
-                        Symmetry::SkewSymmetric => m[(j, i)] = -v,
+                        Symmetry::Symmetric if i != j => {
+                            let _ = target.put(j, i, v, line);
+                        }
+                        Symmetry::Symmetric => {}
+                        Symmetry::SkewSymmetric => {
+                            let _ = target.put(j, i, -v, line);
+                        }
                     }
                     count += 1;
                 }
@@ -223,7 +341,7 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
             }
         }
     }
-    Ok(m)
+    Ok(())
 }
 
 fn parse_header(header: &str) -> std::result::Result<(Layout, Symmetry), String> {
@@ -304,6 +422,42 @@ mod tests {
         assert_eq!(m, dmatrix![1.0, 3.0; 2.0, 4.0]);
         let s = parse("%%MatrixMarket matrix array real symmetric\n2 2\n4 -1\n3\n").unwrap();
         assert_eq!(s, dmatrix![4.0, -1.0; -1.0, 3.0]);
+    }
+
+    #[test]
+    fn sparse_reader_matches_dense_and_finds_duplicates() {
+        for text in [
+            "%%MatrixMarket matrix coordinate real symmetric\n3 3 4\n1 1 2\n2 1 -1\n2 2 2\n3 3 0.5\n",
+            "%%MatrixMarket matrix array real symmetric\n2 2\n4 -1\n3\n",
+            "%%MatrixMarket matrix coordinate real general\n2 2 3\n1 1 1\n2 2 1\n1 2 0\n",
+        ] {
+            let d = parse(text).unwrap();
+            let s = parse_matrix_market_sparse(text, "K.mtx").unwrap();
+            assert_eq!(s.to_dense(), d);
+        }
+        let e = parse_matrix_market_sparse(
+            "%%MatrixMarket matrix coordinate real symmetric\n2 2 3\n2 1 1\n1 1 1\n1 2 1\n",
+            "K.mtx",
+        )
+        .unwrap_err()
+        .to_string();
+        assert_eq!(
+            e,
+            "K.mtx: line 5: entry (2, 1) is given twice (a symmetric file lists each off-diagonal pair once)"
+        );
+        let e = parse_matrix_market_sparse("%%MatrixMarket matrix coordinate real general\n2 3 0\n", "K.mtx")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "K.mtx: line 2: matrix size 2x3 is not square (a model matrix must be)"
+        );
+        // No dense n x n storage: a 200 000-DOF diagonal reads fine.
+        let mut big = String::from("%%MatrixMarket matrix coordinate real general\n200000 200000 200000\n");
+        for i in 1..=200_000 {
+            big.push_str(&format!("{i} {i} 1\n"));
+        }
+        assert_eq!(parse_matrix_market_sparse(&big, "M.mtx").unwrap().nnz(), 200_000);
     }
 
     #[test]

@@ -10,5 +10,7 @@ pub mod run;
 pub mod site_config;
 
 pub use config::{GroundMotion, IntegratorDefinition, OutputSettings, SubstructureDefinition, TestDefinition};
-pub use matrix_market::{parse_matrix_market, read_matrix_market};
+pub use matrix_market::{
+    parse_matrix_market, parse_matrix_market_sparse, read_matrix_market, read_matrix_market_sparse,
+};
 pub use run::{Reference, Simulation};

@@ -8,13 +8,14 @@
 use super::config::TestDefinition;
 use crate::error::{Error, Result};
 use crate::integrate::{Integrator, Kinematics, Scheme};
+use crate::model::Model;
 use crate::site::{Mode, RemoteStepTest};
-use crate::specimen::assemble_monolithic;
+use crate::specimen::assemble_monolithic_model;
 use crate::substructure::{StepRecord, SubstepObserver, SubstructureTest};
 use nalgebra::{DMatrix, DVector};
 
 /// The largest assembled model integrated with the exact scheme as a reference; larger models
-/// use Newmark with the run's β, γ and time step.
+/// use Newmark with the run's β, γ and time step (on sparse storage if the model is sparse).
 pub const EXACT_REFERENCE_MAX_DOFS: usize = 200;
 
 enum Engine {
@@ -185,9 +186,12 @@ impl Reference {
                 None => return Ok(None),
             }
         }
-        let assembled = assemble_monolithic(&def.model, &s.specimens)?;
+        let mut assembled = assemble_monolithic_model(&def.model, &s.specimens)?;
         let n = def.model.n_dofs();
         let n_assembled = assembled.n_dofs();
+        if n_assembled <= EXACT_REFERENCE_MAX_DOFS && assembled.is_sparse() {
+            assembled = Model::Dense(assembled.dense("the exact reference")?.into_owned());
+        }
         let (scheme, name) = if n_assembled <= EXACT_REFERENCE_MAX_DOFS {
             (Scheme::Exact, "exact")
         } else {

@@ -1,7 +1,9 @@
-//! Model builders: SDOF, primary structure + TMD (2 DOF), uniform shear building.
+//! Model builders: SDOF, primary structure + TMD (2 DOF), uniform shear building (dense or
+//! sparse storage). The moment frame is in `frame.rs`.
 
 use super::StructuralModel;
 use crate::error::{Result, require_non_negative, require_positive};
+use crate::sparse::CscMatrix;
 use nalgebra::{DMatrix, DVector, dmatrix};
 use std::f64::consts::PI;
 
@@ -107,18 +109,16 @@ impl ShearBuilding {
         let s = (PI / (2.0 * (2 * self.stories + 1) as f64)).sin();
         self.story_mass * (w1 / (2.0 * s)).powi(2)
     }
+    /// Circular frequency `ω_j` [rad/s] of mode `j ≥ 1` (closed form).
+    pub fn omega(&self, j: usize) -> f64 {
+        let theta = (2 * j - 1) as f64 * PI / (2.0 * (2 * self.stories + 1) as f64);
+        2.0 * (self.story_stiffness() / self.story_mass).sqrt() * theta.sin()
+    }
 }
 
 /// Undamped shear building; add damping with [`StructuralModel::with_damping`].
 pub fn shear_building(b: &ShearBuilding) -> Result<StructuralModel> {
-    if b.stories == 0 {
-        return Err(crate::error::Error::invalid(
-            "structure.shear_building.stories",
-            "must be at least 1",
-        ));
-    }
-    require_positive("structure.shear_building.story_mass", b.story_mass)?;
-    require_positive("structure.shear_building.first_period", b.first_period)?;
+    b.validate()?;
     let n = b.stories;
     let k = b.story_stiffness();
     let mut kk = DMatrix::zeros(n, n);
@@ -131,4 +131,40 @@ pub fn shear_building(b: &ShearBuilding) -> Result<StructuralModel> {
     }
     let mm = DMatrix::from_diagonal(&DVector::from_element(n, b.story_mass));
     StructuralModel::new(mm, DMatrix::zeros(n, n), kk, None)
+}
+
+/// The same undamped shear building in sparse storage (diagonal `M`, tridiagonal `K`); add
+/// damping with [`SparseModel::with_damping`](super::SparseModel::with_damping).
+pub fn shear_building_sparse(b: &ShearBuilding) -> Result<super::SparseModel> {
+    b.validate()?;
+    let n = b.stories;
+    let k = b.story_stiffness();
+    let mut t = Vec::with_capacity(3 * n);
+    for i in 0..n {
+        t.push((i, i, if i + 1 < n { 2.0 * k } else { k }));
+        if i + 1 < n {
+            t.push((i, i + 1, -k));
+            t.push((i + 1, i, -k));
+        }
+    }
+    super::SparseModel::new(
+        CscMatrix::from_diagonal(&vec![b.story_mass; n]),
+        CscMatrix::zeros(n),
+        CscMatrix::from_triplets(n, &t),
+        None,
+    )
+}
+
+impl ShearBuilding {
+    fn validate(&self) -> Result<()> {
+        if self.stories == 0 {
+            return Err(crate::error::Error::invalid(
+                "structure.shear_building.stories",
+                "must be at least 1",
+            ));
+        }
+        require_positive("structure.shear_building.story_mass", self.story_mass)?;
+        require_positive("structure.shear_building.first_period", self.first_period)?;
+        Ok(())
+    }
 }

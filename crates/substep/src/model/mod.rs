@@ -6,11 +6,17 @@
 
 mod builders;
 mod damping;
+mod frame;
 mod modal;
+mod sparse;
 
-pub use builders::{ShearBuilding, TmdSystem, sdof, shear_building, tmd_two_dof};
+pub use builders::{ShearBuilding, TmdSystem, sdof, shear_building, shear_building_sparse, tmd_two_dof};
 pub use damping::{DampingSpec, modal_damping, rayleigh_coefficients};
+pub use frame::{Frame2d, FrameDof, Section, frame_2d, frame_2d_dense};
 pub use modal::{Modes, modes};
+pub use sparse::{
+    AUTO_SPARSE_MAX_DENSITY, AUTO_SPARSE_MIN_DOFS, DENSE_MAX_DOFS, Model, ModelRef, SparseModel, Storage,
+};
 
 use crate::error::{Error, Result};
 use nalgebra::{DMatrix, DVector};

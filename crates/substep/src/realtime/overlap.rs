@@ -46,7 +46,7 @@ pub struct OverlapPredictor {
 }
 
 impl OverlapPredictor {
-    pub fn new(controller: &SubstepController) -> Self {
+    pub fn new(controller: &mut SubstepController) -> Self {
         let n = controller.state().u.len();
         Self {
             h: controller.overlap_gain(),

@@ -6,7 +6,7 @@ use super::overlap::{CouplingLoop, OverlapPredictor};
 use super::ring::{Consumer, Producer, SpscRing};
 use super::{LatePolicy, RealtimeOptions, RealtimeReport, StepRecordOwned};
 use crate::error::{Error, Result};
-use crate::model::StructuralModel;
+use crate::model::ModelRef;
 use crate::substructure::{ExperimentalSubstructure, StepRecord, SubstepController, SubstructureTest};
 use nalgebra::DVector;
 use std::fmt;
@@ -54,14 +54,30 @@ impl RealtimeRunner {
     /// `model` is the numerical substructure the test's controller was built from (for the
     /// ground-motion load `−M ι a_g`); `ground_accel[i]` is `a_g` at `t_i = i Δt` from the
     /// test's current state on, so the run has `ground_accel.len() − 1` steps.
-    pub fn new(
-        model: &StructuralModel,
+    pub fn new<'a>(
+        model: impl Into<ModelRef<'a>>,
         test: SubstructureTest,
         ground_accel: Vec<f64>,
         options: RealtimeOptions,
     ) -> Result<Self> {
+        let model = model.into();
         let n = model.n_dofs();
-        if test.controller.newmark_core().mass != model.mass {
+        let core = test.controller.newmark_core();
+        // The controller's M ι must be the given model's (the load the runner applies).
+        let same_mass = core.n_dofs() == n && {
+            let iota = match model {
+                ModelRef::Dense(m) => m.influence.clone(),
+                ModelRef::Sparse(m) => m.influence.clone(),
+            };
+            let m_iota = model.effective_mass_vector();
+            let probe =
+                core.mass_damping_columns(1.0, 0.0, &nalgebra::DMatrix::from_column_slice(n, 1, iota.as_slice()));
+            probe
+                .iter()
+                .zip(m_iota.iter())
+                .all(|(a, b)| (a - b).abs() <= 1e-12 * m_iota.amax().max(1e-300))
+        };
+        if !same_mass {
             return Err(Error::invalid(
                 "realtime.model",
                 "is not the model the substructure test was built from",
@@ -165,7 +181,7 @@ impl RealtimeRunner {
         load.copy_from(&self.mass_influence);
         load.scale_mut(-ag[1]);
         self.test.controller.begin_step(&load);
-        let overlap = OverlapPredictor::new(&self.test.controller);
+        let overlap = OverlapPredictor::new(&mut self.test.controller);
         let coupling = CouplingLoop::new(&self.test.controller, &overlap);
 
         let memory_lock = if opts.lock_memory {

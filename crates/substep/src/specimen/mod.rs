@@ -6,12 +6,14 @@
 //! a load cell is wired to give, spec §1). `commit` accepts the trial state. Displacements are
 //! relative to the ground; the ground acceleration is given as well, for specimens with mass.
 
+mod assemble;
 mod bouc_wen;
 mod friction;
 mod linear;
 mod replay;
 mod spec;
 
+pub use assemble::{assemble_monolithic_model, assemble_monolithic_sparse};
 pub use bouc_wen::{BoucWen, BoucWenParams, Pinching};
 pub use friction::{Friction, FrictionModel};
 pub use linear::LinearSpecimen;

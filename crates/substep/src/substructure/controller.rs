@@ -8,7 +8,7 @@
 use super::compensation::{ErrorForceCompensation, ErrorForceSpec};
 use crate::error::{Error, Result};
 use crate::integrate::{Kinematics, NewmarkCore};
-use crate::model::StructuralModel;
+use crate::model::ModelRef;
 use nalgebra::{DMatrix, DVector};
 
 /// Parameters of the sub-step algorithm.
@@ -55,7 +55,9 @@ pub struct SubstepController {
 
 impl SubstepController {
     /// Set up for `model` at rest with initial load `load0 = f_l(0)` (initial coupling force 0).
-    pub fn new(model: &StructuralModel, settings: &SubstepSettings, load0: &DVector<f64>) -> Result<Self> {
+    /// `model` is a `&StructuralModel`, `&SparseModel` or `&Model` (dense or sparse storage).
+    pub fn new<'a>(model: impl Into<ModelRef<'a>>, settings: &SubstepSettings, load0: &DVector<f64>) -> Result<Self> {
+        let model = model.into();
         let n = model.n_dofs();
         if settings.substeps == 0 {
             return Err(Error::invalid("substructure.substeps", "must be at least 1"));
@@ -81,13 +83,13 @@ impl SubstepController {
                 ));
             }
         }
-        let core = NewmarkCore::new(model, settings.dt, settings.beta, settings.gamma)?;
+        let mut core = NewmarkCore::new(model, settings.dt, settings.beta, settings.gamma)?;
         // Gain columns by n_c solves with the factorised K̂ (never the full inverse).
         let mut gain_columns = DMatrix::zeros(n, n_c);
         for (k, &c) in settings.coupling_dofs.iter().enumerate() {
             gain_columns[(c, k)] = 1.0;
         }
-        core.k_hat.solve_mut(&mut gain_columns);
+        core.solve_columns_in_place(&mut gain_columns);
         let gain_cc = DMatrix::from_fn(n_c, n_c, |r, k| gain_columns[(settings.coupling_dofs[r], k)]);
         let state = Kinematics::at_rest(model, load0)?;
         Ok(Self {
@@ -168,7 +170,7 @@ impl SubstepController {
         for (k, &c) in self.coupling.iter().enumerate() {
             self.predictor[c] += self.compensation_force[k];
         }
-        self.core.k_hat.solve_mut(&mut self.predictor);
+        self.core.solve_in_place(&mut self.predictor);
         for (k, &c) in self.coupling.iter().enumerate() {
             self.predictor_c[k] = self.predictor[c];
         }
@@ -227,8 +229,9 @@ impl SubstepController {
         for (k, &c) in self.coupling.iter().enumerate() {
             r[c] += compensation_used[k] + self.force[k];
         }
-        r -= &self.core.mass * &s.a + &self.core.damping * &s.v + &self.core.stiffness * &s.u;
-        r
+        let mut internal = DVector::zeros(r.len());
+        self.core.internal_force(s, &mut internal);
+        r - internal
     }
 
     /// Length of the algorithm state (for the amplification-matrix analysis and checkpoints):
@@ -292,13 +295,12 @@ impl SubstepController {
 
     /// `H = K̂⁻¹ (α M + β′ C) G_{:,c}` (n × n_c), the sensitivity of the next predictor to
     /// `f^{(k−1)}` of the current step. Allocates; call once at set-up.
-    pub fn overlap_gain(&self) -> DMatrix<f64> {
+    pub fn overlap_gain(&mut self) -> DMatrix<f64> {
         let a = &self.core.c.a;
         let alpha = a[0] * (1.0 + a[2] * a[7] + a[3]);
         let beta = a[1] + a[0] * (a[4] * a[7] + a[5]);
-        let mut h = &self.core.mass * &self.gain_columns * alpha;
-        h.gemm(beta, &self.core.damping, &self.gain_columns, 1.0);
-        self.core.k_hat.solve_mut(&mut h);
+        let mut h = self.core.mass_damping_columns(alpha, beta, &self.gain_columns);
+        self.core.solve_columns_in_place(&mut h);
         h
     }
 
@@ -312,7 +314,7 @@ impl SubstepController {
         self.core.update_kinematics(&self.state, &mut self.next);
         self.core.effective_load(&self.next, out);
         *out += load_after;
-        self.core.k_hat.solve_mut(out);
+        self.core.solve_in_place(out);
     }
 
     /// Take the sub-step results of the current step from a loop that ran the sub-steps on its

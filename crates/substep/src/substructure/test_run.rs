@@ -2,7 +2,7 @@
 
 use super::{ExperimentalSubstructure, SubstepController};
 use crate::error::{Error, Result};
-use crate::model::StructuralModel;
+use crate::model::ModelRef;
 use nalgebra::DVector;
 
 /// Receives every sub-step (for `substeps.csv` or live plots). The default does nothing.
@@ -38,11 +38,12 @@ pub struct SubstructureTest {
 }
 
 impl SubstructureTest {
-    pub fn new(
-        model: &StructuralModel,
+    pub fn new<'a>(
+        model: impl Into<ModelRef<'a>>,
         controller: SubstepController,
         site: Box<dyn ExperimentalSubstructure>,
     ) -> Result<Self> {
+        let model = model.into();
         let n_c = controller.n_coupling();
         if site.n_coupling() != n_c {
             return Err(Error::invalid(

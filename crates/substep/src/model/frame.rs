@@ -1,0 +1,303 @@
+//! Plane (2-D) moment frame: `bays × stories` of Euler–Bernoulli beam-column elements, three
+//! DOFs per node (`ux`, `uy`, `θ`), fixed base, lumped masses, optional rigid floor diaphragm.
+//!
+//! DOF numbering (0-based here, 1-based in configs) goes floor by floor from the first floor
+//! up, so the half-bandwidth is about one floor (`3 (bays + 1) + 2`):
+//! * without diaphragm, node `(level s ≥ 1, column line c)` has `ux, uy, θ` at
+//!   `3 ((s − 1)(bays + 1) + c) + 0, 1, 2`;
+//! * with a rigid diaphragm, floor `s` has one horizontal DOF shared by its nodes at
+//!   `(s − 1)(1 + 2 (bays + 1))`, then `uy, θ` of each node in column-line order.
+//!
+//! Masses: the floor mass per bay is split equally between the bay's two end nodes (in `ux` and
+//! `uy`); each member's own mass `ρ A L` is lumped half to each end, with the rotational
+//! inertia `ρ A L · L² / 78` of HRZ lumping at each end, which keeps `M` positive definite.
+//! The ground motion is horizontal: the influence vector is 1 on horizontal DOFs.
+
+use super::{SparseModel, StructuralModel};
+use crate::error::{Error, Result, require_positive};
+use crate::sparse::CscMatrix;
+use nalgebra::{DMatrix, DVector};
+
+/// Cross-section properties of a member (strong axis in the frame plane).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Section {
+    /// Area `A` [m²].
+    pub area: f64,
+    /// Second moment of area `I` [m⁴].
+    pub inertia: f64,
+}
+
+impl Section {
+    /// HEB 300 (European wide-flange column): `A` = 149.1 cm², `I_y` = 25 170 cm⁴.
+    pub const HEB300: Section = Section {
+        area: 149.1e-4,
+        inertia: 25_170e-8,
+    };
+    /// IPE 400 (European I-beam): `A` = 84.46 cm², `I_y` = 23 130 cm⁴.
+    pub const IPE400: Section = Section {
+        area: 84.46e-4,
+        inertia: 23_130e-8,
+    };
+}
+
+/// One of the three DOFs of a frame node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameDof {
+    /// Horizontal displacement.
+    Ux,
+    /// Vertical displacement.
+    Uy,
+    /// Rotation (counter-clockwise).
+    Rz,
+}
+
+/// A regular plane moment frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame2d {
+    /// Bays (0: a single column line, i.e. a cantilever column stack).
+    pub bays: usize,
+    /// Stories (≥ 1).
+    pub stories: usize,
+    /// Bay width [m].
+    pub bay_width: f64,
+    /// Story height [m].
+    pub story_height: f64,
+    /// Young's modulus of all members [Pa].
+    pub elastic_modulus: f64,
+    pub column: Section,
+    pub beam: Section,
+    /// Density of the members [kg/m³] (their own mass; must be > 0).
+    pub density: f64,
+    /// Floor mass per bay and floor [kg], lumped at the bay's two end nodes.
+    pub floor_mass_per_bay: f64,
+    /// Tie the horizontal DOFs of each floor into one (axially rigid floor).
+    pub rigid_diaphragm: bool,
+}
+
+impl Default for Frame2d {
+    /// Steel frame: 3 bays of 6 m, 10 stories of 3.5 m, `E` = 210 GPa, HEB 300 columns, IPE 400
+    /// beams, steel density, 20 t of floor mass per bay, no diaphragm.
+    fn default() -> Self {
+        Self {
+            bays: 3,
+            stories: 10,
+            bay_width: 6.0,
+            story_height: 3.5,
+            elastic_modulus: 210e9,
+            column: Section::HEB300,
+            beam: Section::IPE400,
+            density: 7850.0,
+            floor_mass_per_bay: 20_000.0,
+            rigid_diaphragm: false,
+        }
+    }
+}
+
+impl Frame2d {
+    /// Bays and stories of about `dofs` DOFs in total (no diaphragm), twice as many stories
+    /// as bays (a tall building; at least one bay).
+    pub fn with_about_dofs(dofs: usize) -> Self {
+        // 3 (b + 1) s DOFs with s = 2 b.
+        let b = (((dofs as f64) / 6.0).sqrt().round() as usize).max(1);
+        let s = (dofs / (3 * (b + 1))).max(1);
+        Self {
+            bays: b,
+            stories: s,
+            ..Self::default()
+        }
+    }
+
+    fn lines(&self) -> usize {
+        self.bays + 1
+    }
+    fn floor_block(&self) -> usize {
+        if self.rigid_diaphragm {
+            1 + 2 * self.lines()
+        } else {
+            3 * self.lines()
+        }
+    }
+
+    pub fn n_dofs(&self) -> usize {
+        self.stories * self.floor_block()
+    }
+
+    /// The DOF of node (`level`, column line `line`); `None` at the fixed base (`level = 0`) or
+    /// outside the frame.
+    pub fn dof(&self, level: usize, line: usize, which: FrameDof) -> Option<usize> {
+        if level == 0 || level > self.stories || line > self.bays {
+            return None;
+        }
+        let base = (level - 1) * self.floor_block();
+        Some(if self.rigid_diaphragm {
+            match which {
+                FrameDof::Ux => base,
+                FrameDof::Uy => base + 1 + 2 * line,
+                FrameDof::Rz => base + 2 + 2 * line,
+            }
+        } else {
+            base + 3 * line
+                + match which {
+                    FrameDof::Ux => 0,
+                    FrameDof::Uy => 1,
+                    FrameDof::Rz => 2,
+                }
+        })
+    }
+
+    fn validate(&self) -> Result<()> {
+        let p = "structure.frame.";
+        if self.stories == 0 {
+            return Err(Error::invalid(format!("{p}stories"), "must be at least 1"));
+        }
+        require_positive(&format!("{p}bay_width"), self.bay_width)?;
+        require_positive(&format!("{p}story_height"), self.story_height)?;
+        require_positive(&format!("{p}elastic_modulus"), self.elastic_modulus)?;
+        require_positive(&format!("{p}column_area"), self.column.area)?;
+        require_positive(&format!("{p}column_inertia"), self.column.inertia)?;
+        require_positive(&format!("{p}beam_area"), self.beam.area)?;
+        require_positive(&format!("{p}beam_inertia"), self.beam.inertia)?;
+        require_positive(&format!("{p}density"), self.density)?;
+        crate::error::require_non_negative(&format!("{p}floor_mass_per_bay"), self.floor_mass_per_bay)?;
+        Ok(())
+    }
+
+    /// Walk all members and lumped masses; `stiff(i, j, v)` and `mass(i, v)` receive the
+    /// contributions to the global matrices (to be summed).
+    fn assemble(&self, mut stiff: impl FnMut(usize, usize, f64), mut mass: impl FnMut(usize, f64)) {
+        let (w, h) = (self.bay_width, self.story_height);
+        let node_dofs =
+            |level: usize, line: usize| [FrameDof::Ux, FrameDof::Uy, FrameDof::Rz].map(|d| self.dof(level, line, d));
+        let mut member = |a: (usize, usize), b: (usize, usize), sec: Section, dx: f64, dy: f64| {
+            let len = (dx * dx + dy * dy).sqrt();
+            let ke = beam_column_stiffness(self.elastic_modulus, sec, len, dx / len, dy / len);
+            let dofs: Vec<Option<usize>> = node_dofs(a.0, a.1).into_iter().chain(node_dofs(b.0, b.1)).collect();
+            for (r, gr) in dofs.iter().enumerate() {
+                for (c, gc) in dofs.iter().enumerate() {
+                    if let (Some(i), Some(j)) = (gr, gc) {
+                        stiff(*i, *j, ke[r][c]);
+                    }
+                }
+            }
+            let m_e = self.density * sec.area * len;
+            for end in [a, b] {
+                let [ux, uy, rz] = node_dofs(end.0, end.1);
+                for d in [ux, uy].into_iter().flatten() {
+                    mass(d, 0.5 * m_e);
+                }
+                if let Some(d) = rz {
+                    mass(d, m_e * len * len / 78.0);
+                }
+            }
+        };
+        for s in 1..=self.stories {
+            for c in 0..=self.bays {
+                member((s - 1, c), (s, c), self.column, 0.0, h);
+            }
+            for b in 0..self.bays {
+                member((s, b), (s, b + 1), self.beam, w, 0.0);
+            }
+        }
+        for s in 1..=self.stories {
+            for b in 0..self.bays {
+                for c in [b, b + 1] {
+                    let [ux, uy, _] = node_dofs(s, c);
+                    for d in [ux, uy].into_iter().flatten() {
+                        mass(d, 0.5 * self.floor_mass_per_bay);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Influence vector: 1 on horizontal DOFs.
+    fn influence(&self) -> DVector<f64> {
+        let mut iota = DVector::zeros(self.n_dofs());
+        for s in 1..=self.stories {
+            for c in 0..=self.bays {
+                if let Some(d) = self.dof(s, c, FrameDof::Ux) {
+                    iota[d] = 1.0;
+                }
+            }
+        }
+        iota
+    }
+}
+
+/// Global stiffness of a 2-D Euler–Bernoulli beam-column from end `a` to end `b` with direction
+/// cosines `(c, s)`; DOF order `ux_a, uy_a, θ_a, ux_b, uy_b, θ_b`.
+pub(crate) fn beam_column_stiffness(e: f64, sec: Section, len: f64, c: f64, s: f64) -> [[f64; 6]; 6] {
+    let ea = e * sec.area / len;
+    let ei = e * sec.inertia;
+    let (k1, k2, k3, k4) = (
+        12.0 * ei / len.powi(3),
+        6.0 * ei / len.powi(2),
+        4.0 * ei / len,
+        2.0 * ei / len,
+    );
+    let kl = [
+        [ea, 0.0, 0.0, -ea, 0.0, 0.0],
+        [0.0, k1, k2, 0.0, -k1, k2],
+        [0.0, k2, k3, 0.0, -k2, k4],
+        [-ea, 0.0, 0.0, ea, 0.0, 0.0],
+        [0.0, -k1, -k2, 0.0, k1, -k2],
+        [0.0, k2, k4, 0.0, -k2, k3],
+    ];
+    // T = diag(R, R), R = [c s 0; −s c 0; 0 0 1]; K = Tᵀ k T.
+    let mut t = [[0.0; 6]; 6];
+    for o in [0, 3] {
+        t[o][o] = c;
+        t[o][o + 1] = s;
+        t[o + 1][o] = -s;
+        t[o + 1][o + 1] = c;
+        t[o + 2][o + 2] = 1.0;
+    }
+    let mut kt = [[0.0; 6]; 6];
+    for i in 0..6 {
+        for j in 0..6 {
+            kt[i][j] = (0..6).map(|k| kl[i][k] * t[k][j]).sum();
+        }
+    }
+    let mut kg = [[0.0; 6]; 6];
+    for i in 0..6 {
+        for j in 0..6 {
+            kg[i][j] = (0..6).map(|k| t[k][i] * kt[k][j]).sum();
+        }
+    }
+    kg
+}
+
+/// The undamped frame in sparse storage; add damping with [`SparseModel::with_damping`].
+pub fn frame_2d(f: &Frame2d) -> Result<SparseModel> {
+    f.validate()?;
+    let n = f.n_dofs();
+    let mut kt = Vec::with_capacity(36 * (2 * f.lines() * f.stories));
+    let mut md = vec![0.0; n];
+    f.assemble(|i, j, v| kt.push((i, j, v)), |i, v| md[i] += v);
+    SparseModel::new(
+        CscMatrix::from_diagonal(&md),
+        CscMatrix::zeros(n),
+        CscMatrix::from_triplets(n, &kt),
+        Some(f.influence()),
+    )
+}
+
+/// The undamped frame assembled straight into dense matrices (small frames, and the check
+/// that both assemblies agree).
+pub fn frame_2d_dense(f: &Frame2d) -> Result<StructuralModel> {
+    f.validate()?;
+    let n = f.n_dofs();
+    if n > super::DENSE_MAX_DOFS {
+        return Err(Error::invalid(
+            "structure.frame",
+            format!(
+                "{n} DOFs are too many for dense storage (at most {})",
+                super::DENSE_MAX_DOFS
+            ),
+        ));
+    }
+    let mut kk = DMatrix::zeros(n, n);
+    let mut mm = DMatrix::zeros(n, n);
+    f.assemble(|i, j, v| kk[(i, j)] += v, |i, v| mm[(i, i)] += v);
+    StructuralModel::new(mm, DMatrix::zeros(n, n), kk, Some(f.influence()))
+}
