@@ -77,6 +77,23 @@ pub trait PhaseLagCompensator: Send {
     fn read_state(&mut self, state: &[f64]);
 }
 
+/// What a phase-lag compensated site reports per sub-step (for records and summaries); see
+/// [`crate::substructure::ExperimentalSubstructure::phase_lag`].
+pub trait PhaseLagReport {
+    /// `d − y` of the last sub-step per coupling DOF (target minus measured displacement).
+    fn tracking_error(&self) -> &[f64];
+    /// `Δu` of the last sub-step per coupling DOF (before the ramp).
+    fn correction(&self) -> &[f64];
+    /// The command sent in the last sub-step, `d + h Δu`.
+    fn command_sent(&self) -> &[f64];
+    /// `h` of the last sub-step.
+    fn ramp_value(&self) -> f64;
+    /// The compensator kind per coupling DOF.
+    fn kinds(&self) -> Vec<&'static str>;
+    /// Per coupling DOF (0-based): why its guard disabled it, if it did. Allocates.
+    fn trips(&self) -> Vec<(usize, GuardTrip)>;
+}
+
 /// Why a [`Guard`] disabled a compensator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum GuardTrip {

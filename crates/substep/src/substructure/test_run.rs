@@ -90,6 +90,9 @@ impl SubstructureTest {
                 &self.measured_force,
                 &self.measured_displacement,
             );
+            if let Some(true_force) = self.site.true_force() {
+                self.controller.feedback_true(true_force);
+            }
             self.controller.feedback(&self.measured_force);
         }
         self.controller.finish_step();
