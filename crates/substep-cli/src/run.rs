@@ -106,6 +106,9 @@ fn substructure_json(s: &SubstructureDefinition) -> Value {
         ErrorForceSpec::None => json!({ "kind": "none" }),
         ErrorForceSpec::Pid { p, i, d } => json!({ "kind": "pid", "p": p, "i": i, "d": d }),
         ErrorForceSpec::PidResidual { p } => json!({ "kind": "pid_residual", "p": p }),
+        ErrorForceSpec::Arx { order, lambda, p0 } => {
+            json!({ "kind": "arx", "order": order, "forgetting_factor": lambda, "p0": p0 })
+        }
     };
     let specimens: Vec<Value> = s
         .specimens

@@ -43,11 +43,13 @@ mod arx_lag;
 mod inverse;
 mod polynomial;
 mod site;
+mod spec;
 
 pub use arx_lag::{ArxPhaseLag, ArxPhaseLagSpec, ErrorPairing, MAX_HISTORY, Regressor};
 pub use inverse::{InverseFir, InverseFirSpec};
 pub use polynomial::{Polynomial, lagrange_extrapolation_weights};
 pub use site::CompensatedSite;
+pub use spec::{PhaseLagDefinition, PhaseLagSpec};
 
 use crate::error::{Error, Result};
 
