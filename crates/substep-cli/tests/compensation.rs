@@ -126,3 +126,44 @@ fn bad_compensation_values_are_input_errors_naming_the_key() {
         assert!(err.contains(key), "{err}");
     }
 }
+
+/// `substep analyze stability --phase-lag polynomial:2`: the stable share of a delayed case grows.
+#[test]
+fn stability_map_with_a_frozen_compensator() {
+    let dir = temp_dir("stab");
+    let share = |extra: &[&str]| -> f64 {
+        let mut args = vec![
+            "analyze",
+            "stability",
+            "--eta-p",
+            "1",
+            "--k-sub",
+            "2",
+            "--omega",
+            "0.05:1.5:30",
+            "--vary",
+            "zeta_s=0:0.5:11",
+            "--no-plots",
+            "--out",
+            "a",
+        ];
+        args.extend_from_slice(extra);
+        let out = substep(&dir, &args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        let line = stdout.lines().find(|l| l.contains("k_sub = 2:")).unwrap().to_string();
+        line.split(": ")
+            .nth(1)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let none = share(&[]);
+    let with = share(&["--phase-lag", "polynomial:2"]);
+    assert!(with > none + 5.0, "{with} vs {none}");
+    let out = substep(&dir, &["analyze", "stability", "--phase-lag", "smith:2"]);
+    assert_eq!(out.status.code(), Some(2));
+}

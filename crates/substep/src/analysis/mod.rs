@@ -13,4 +13,4 @@ pub mod tmd_case;
 pub mod verify;
 
 pub use amplification::{Stability, StepMap};
-pub use tmd_case::{AnalysisCase, Parameter};
+pub use tmd_case::{AnalysisCase, FrozenPhaseLag, Parameter};
