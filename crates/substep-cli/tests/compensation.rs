@@ -167,3 +167,30 @@ fn stability_map_with_a_frozen_compensator() {
     let out = substep(&dir, &["analyze", "stability", "--phase-lag", "smith:2"]);
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// `substep vst --quick`: the table, the CSV and the plots are written.
+#[test]
+fn vst_quick_writes_its_outputs() {
+    let dir = temp_dir("vst");
+    let out = substep(&dir, &["vst", "--quick", "--out", "v", "--quiet"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let md = std::fs::read_to_string(dir.join("v/vst.md")).unwrap();
+    assert!(md.contains("| (d) both: (b) + (c) |"), "{md}");
+    assert!(md.contains("## Acceptance checks (computed by the tool)"));
+    let csv = std::fs::read_to_string(dir.join("v/vst.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 15);
+    for png in [
+        "vst_displacement",
+        "vst_force",
+        "vst_force_error",
+        "vst_hysteresis",
+        "vst_tracking",
+        "vst_compensation",
+        "vst_compensation_spectrum",
+    ] {
+        let b = std::fs::read(dir.join(format!("v/{png}.png"))).unwrap();
+        assert!(b.starts_with(b"\x89PNG"), "{png}");
+    }
+    let bad = substep(&dir, &["vst", "--quick", "--delay", "-1"]);
+    assert_eq!(bad.status.code(), Some(2));
+}
