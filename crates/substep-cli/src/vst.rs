@@ -296,6 +296,8 @@ pub struct Series {
     pub e: Vec<f64>,
     pub fu: Vec<f64>,
     pub ideal: Vec<f64>,
+    /// The force the step was closed with (`f^(k−1)` or the estimate `f̂^(k)`) [N].
+    pub closing: Vec<f64>,
     /// Tracking error of the last sub-step [m].
     pub tracking: Vec<f64>,
 }
@@ -317,6 +319,9 @@ pub struct RunResult {
     /// RMS of the error force `e` and of its ideal value after `settle` [N].
     pub e_rms: f64,
     pub ideal_rms: f64,
+    /// RMS of the true equilibrium error `f°^(k) − f_close` after `settle` [N]: how far the force
+    /// the step was closed with is from the true force at the step's end.
+    pub equilibrium_rms: f64,
     /// RMS of `e − ideal` [N] and the coherence of `e` and its ideal value over the sweep's band
     /// (with P = 1 and the estimation `e` is the compensation force `f_u`).
     pub diff_rms: f64,
@@ -419,6 +424,7 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
         ser.e.push(c.error_force()[0]);
         ser.fu.push(c.compensation_force()[0]);
         ser.ideal.push(c.ideal_error_force().map_or(0.0, |v| v[0]));
+        ser.closing.push(c.closing_force()[0]);
         ser.tracking.push(te);
     };
     push(&mut ser, &sim, 0.0);
@@ -461,6 +467,11 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
         force_meas_rms,
         tracking_rms: (track.sum / track.count.max(1) as f64).sqrt(),
         e_rms: rms(&ser.e[from..]),
+        equilibrium_rms: rms(&ser.f_true[from..]
+            .iter()
+            .zip(&ser.closing[from..])
+            .map(|(t, c)| t - c)
+            .collect::<Vec<_>>()),
         ideal_rms: rms(ideal),
         diff_rms: if has_compensation { rms(&diff) } else { f64::NAN },
         coherence: if has_compensation {
@@ -555,10 +566,12 @@ pub fn acceptance(st: &Study) -> Vec<(String, bool)> {
     for r in st.runs.iter().filter(|r| r.method.series) {
         out.push((
             format!(
-                "{}: residual error force RMS {:.2} N < PID P = 1 {:.2} N; RMS(e − e°) = {:.2} σ (PID {:.2} σ), coherence with e° {:.2} (PID {:.2})",
+                "{}: residual error force RMS {:.2} N < PID P = 1 {:.2} N (true equilibrium error {:.2} N vs {:.2} N); RMS(e − e°) = {:.2} σ (PID {:.2} σ), coherence with e° {:.2} (PID {:.2})",
                 r.method.name,
                 r.e_rms,
                 pid.e_rms,
+                r.equilibrium_rms,
+                pid.equilibrium_rms,
                 r.diff_rms / st.sigma,
                 pid.diff_rms / st.sigma,
                 r.coherence,
@@ -639,15 +652,17 @@ pub fn markdown(st: &Study) -> String {
          normalised by the reference peaks (RMS over the run and peak); `f meas.`: the same for the measured force (includes the noise); \
          tracking: RMS of `d − y` (target command minus achieved displacement) over all sub-steps; \
          `e`: error force (for P = 1 and the estimation also the compensation force), `e°` its ideal (noise-free) value; \
-         coherence of `e` and `e°` over the sweep band (Welch, 5.12 s segments).\n\n",
+         coherence of `e` and `e°` over the sweep band (Welch, 5.12 s segments); \
+         `f° − f_close`: the true equilibrium error of a step, the noise-free force at its end minus the force it was closed with \
+         (`f^(k−1)` measured, or the estimate `f̂^(k)`).\n\n",
     );
-    md.push_str("| run | u RMS % | u peak % | f RMS % | f peak % | f meas. RMS % | tracking RMS [µm] | tracking vs (a) | e RMS [N] | e° RMS [N] | RMS(e − e°)/σ | coherence | estimated steps |\n");
-    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| run | u RMS % | u peak % | f RMS % | f peak % | f meas. RMS % | tracking RMS [µm] | tracking vs (a) | e RMS [N] | e° RMS [N] | RMS(e − e°)/σ | coherence | f° − f_close RMS [N] | estimated steps |\n");
+    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     let none_track = st.run("none").tracking_rms;
     for r in st.runs.iter().filter(|r| !r.method.series) {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {} | {}× | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {}× | {} | {} | {} | {} | {} | {} |",
             r.method.name,
             pct(r.disp_rms),
             pct(r.disp_peak),
@@ -660,22 +675,24 @@ pub fn markdown(st: &Study) -> String {
             num(r.ideal_rms, 2),
             num(r.diff_rms / st.sigma, 2),
             num(r.coherence, 2),
+            num(r.equilibrium_rms, 2),
             r.estimated.map_or("–".into(), |(a, b)| format!("{a}/{b}")),
         );
     }
     md.push_str("\n## Error-force estimation: orders n_u (no phase-lag compensation)\n\n");
-    md.push_str("| run | e RMS [N] | e RMS vs PID P = 1 | e° RMS [N] | RMS(e − e°)/σ | coherence | estimated steps | f RMS % |\n|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| run | e RMS [N] | e RMS vs PID P = 1 | e° RMS [N] | RMS(e − e°)/σ | coherence | f° − f_close RMS [N] | estimated steps | f RMS % |\n|---|---|---|---|---|---|---|---|---|\n");
     let pid = st.run("pid");
     for r in std::iter::once(pid).chain(st.runs.iter().filter(|r| r.method.series)) {
         let _ = writeln!(
             md,
-            "| {} | {} | {} % | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} % | {} | {} | {} | {} | {} | {} |",
             r.method.name,
             num(r.e_rms, 2),
             num(100.0 * r.e_rms / pid.e_rms, 0),
             num(r.ideal_rms, 2),
             num(r.diff_rms / st.sigma, 2),
             num(r.coherence, 2),
+            num(r.equilibrium_rms, 2),
             r.estimated.map_or("–".into(), |(a, b)| format!("{a}/{b}")),
             pct(r.force_rms),
         );
@@ -697,7 +714,7 @@ pub fn markdown(st: &Study) -> String {
 /// `vst.csv`: one row per run.
 pub fn csv(st: &Study) -> String {
     let mut out = String::from(
-        "key,name,completed,u_rms,u_peak,f_rms,f_peak,f_meas_rms,tracking_rms_m,e_rms_n,ideal_rms_n,diff_rms_n,coherence,estimated,steps\n",
+        "key,name,completed,u_rms,u_peak,f_rms,f_peak,f_meas_rms,tracking_rms_m,e_rms_n,ideal_rms_n,diff_rms_n,coherence,equilibrium_rms_n,estimated,steps\n",
     );
     for r in &st.runs {
         let (e, n) = r
@@ -705,7 +722,7 @@ pub fn csv(st: &Study) -> String {
             .map_or((String::new(), String::new()), |(a, b)| (a.to_string(), b.to_string()));
         let _ = writeln!(
             out,
-            "{},\"{}\",{},{},{},{},{},{},{},{},{},{},{},{e},{n}",
+            "{},\"{}\",{},{},{},{},{},{},{},{},{},{},{},{},{e},{n}",
             r.method.key,
             r.method.name,
             r.completed,
@@ -718,7 +735,8 @@ pub fn csv(st: &Study) -> String {
             r.e_rms,
             r.ideal_rms,
             r.diff_rms,
-            r.coherence
+            r.coherence,
+            r.equilibrium_rms
         );
     }
     out
@@ -963,6 +981,8 @@ mod tests {
             );
             assert!(r.diff_rms < pid.diff_rms, "{}", r.method.name);
             assert!(r.diff_rms < 1.2 * st.sigma, "{}", r.method.name);
+            // The force the step is closed with is closer to the true force than f^(k−1).
+            assert!(r.equilibrium_rms < 0.8 * pid.equilibrium_rms, "{}", r.method.name);
             let (est, steps) = r.estimated.unwrap();
             assert!(est as f64 > 0.9 * steps as f64, "{}", r.method.name);
         }
