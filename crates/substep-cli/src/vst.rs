@@ -16,7 +16,7 @@ use crate::plots::{Curve, line_chart};
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use substep::analysis::spectral::{amplitude_spectrum, band_coherence};
+use substep::analysis::spectral::{averaged_amplitude_spectrum, band_coherence};
 use substep::compensate::{ArxPhaseLagSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use substep::excitation::sine_sweep;
 use substep::integrate::Scheme;
@@ -885,7 +885,7 @@ pub fn plots(st: &Study, dir: &Path) -> Result<Vec<PathBuf>> {
     )?;
     let from = ((s.settle / s.dt).ceil() as usize).min(b.series.t.len());
     let pid = st.run("pid");
-    let spec = |y: &[f64]| amplitude_spectrum(&y[from..], s.dt, 10.0);
+    let spec = |y: &[f64]| averaged_amplitude_spectrum(&y[from..], s.dt, 512, 10.0);
     let mut c = Vec::new();
     for (label, y) in [
         ("f_u (estimation, n_u = 4)", &b.series.fu),
@@ -898,7 +898,7 @@ pub fn plots(st: &Study, dir: &Path) -> Result<Vec<PathBuf>> {
     }
     chart(
         "vst_compensation_spectrum.png",
-        "Amplitude spectra: compensation force, its ideal value, the noise",
+        "Amplitude spectra (Welch, 5.12 s segments): compensation force, its ideal value, the noise",
         "frequency [Hz]",
         "amplitude [N]",
         c,
