@@ -9,7 +9,7 @@ use std::f64::consts::PI;
 /// `(frequency [Hz], amplitude)` for the bins `0 ..= n/2` up to `f_max`. `O(n · bins)`.
 pub fn amplitude_spectrum(x: &[f64], dt: f64, f_max: f64) -> (Vec<f64>, Vec<f64>) {
     let n = x.len();
-    if n < 2 || !(dt > 0.0) {
+    if n < 2 || dt.is_nan() || dt <= 0.0 {
         return (Vec::new(), Vec::new());
     }
     let w: Vec<f64> = (0..n)
@@ -73,7 +73,7 @@ fn dft_bin(x: &[f64], w: &[f64], k: usize, n: usize) -> Complex<f64> {
 /// is not enough data.
 pub fn band_coherence(x: &[f64], y: &[f64], dt: f64, segment: usize, f_lo: f64, f_hi: f64) -> f64 {
     let n = x.len().min(y.len());
-    if segment < 8 || n < segment || !(dt > 0.0) {
+    if segment < 8 || n < segment || dt.is_nan() || dt <= 0.0 {
         return f64::NAN;
     }
     let hop = segment / 2;

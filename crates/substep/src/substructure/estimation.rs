@@ -218,12 +218,13 @@ impl DofModel {
     /// `Σ θ_i raw_i / scale_i · s_f` (the model's prediction in N).
     fn predict_raw(&self) -> f64 {
         let th = self.rls.theta();
-        let mut p = 0.0;
-        for i in 0..th.len() {
-            if self.scale[i] > 0.0 {
-                p += th[i] * self.raw[i] / self.scale[i];
-            }
-        }
+        let p: f64 = th
+            .iter()
+            .zip(&self.raw)
+            .zip(&self.scale)
+            .filter(|(_, s)| **s > 0.0)
+            .map(|((t, r), s)| t * r / s)
+            .sum();
         p * self.s_f
     }
 
@@ -359,16 +360,18 @@ impl DofModel {
         };
         // Δ^m f^{(j−1)} = Σ_i binom[m][i] f^{(j−1−i)} → A_{1+i}.
         for m in 0..n {
-            for i in 0..=m {
-                out[i] += coef(m) * self.binom[m * w + i];
+            let c = coef(m);
+            for (o, b) in out[..=m].iter_mut().zip(&self.binom[m * w..]) {
+                *o += c * b;
             }
         }
         let blocks = if self.with_load { 2 } else { 1 };
-        for b in 0..blocks {
-            let at = n + b * w;
+        for blk in 0..blocks {
+            let at = n + blk * w;
             for m in 0..=n {
-                for i in 0..=m {
-                    out[at + i] += coef(at + m) * self.binom[m * w + i];
+                let c = coef(at + m);
+                for (o, b) in out[at..=at + m].iter_mut().zip(&self.binom[m * w..]) {
+                    *o += c * b;
                 }
             }
         }
