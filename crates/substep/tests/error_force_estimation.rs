@@ -241,3 +241,27 @@ fn the_linear_analysis_refuses_the_estimation() {
     let err = substep::analysis::StepMap::probe(&mut test).unwrap_err().to_string();
     assert!(err.contains("error_force.kind = \"arx\""), "{err}");
 }
+
+#[test]
+fn two_coupling_dofs_get_one_model_each_and_stay_finite() {
+    // examples/two_specimens.toml (3-storey frame, damper brace + TMD on two coupling DOFs,
+    // actuator dynamics, noisy quantised sensors) with the estimation instead of PID.
+    let text = include_str!("../../../examples/two_specimens.toml")
+        .replace("kind = \"pid\"\np = 1.0", "kind = \"arx\"\norder = 3");
+    assert!(text.contains("kind = \"arx\""));
+    let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples"));
+    let def = substep::io::TestDefinition::from_toml(&text, "two_specimens.toml", dir).unwrap();
+    let mut sim = substep::io::Simulation::new(&def).unwrap();
+    while sim.steps_done() < sim.steps_total() {
+        sim.step(&mut ()).unwrap();
+        let test = sim.substructure_test().unwrap();
+        assert!(test.controller.command().iter().all(|v| v.is_finite()));
+        assert_eq!(test.controller.ideal_error_force().unwrap().len(), 2);
+    }
+    let test = sim.substructure_test().unwrap();
+    let s = test.controller.estimation_stats().unwrap();
+    println!("{s:?}");
+    assert_eq!(s.steps as usize, sim.steps_total());
+    assert!(s.estimated > s.steps / 2, "{s:?}");
+    assert_eq!(test.controller.estimation_parameters(1).unwrap().len(), 3 + 4 + 4);
+}
