@@ -21,7 +21,7 @@ use substep::analysis::frequency::{
 };
 use substep::analysis::stability::{MapPoint, critical_omega, linear_grid, stability_map};
 use substep::analysis::verify::{free_vibration_growth, stepped_sine_sweep};
-use substep::analysis::{AnalysisCase, Parameter, Stability, StepMap};
+use substep::analysis::{AnalysisCase, FrozenPhaseLag, Parameter, Stability, StepMap};
 use substep::io::config::TestDefinition;
 use substep::specimen::assemble_monolithic;
 use substep::substructure::ErrorForceSpec;
@@ -205,6 +205,10 @@ pub struct StabilityArgs {
     /// Phase-lag ratio η_p = τ/Δt (pure actuator delay)
     #[arg(long, default_value_t = 0.0)]
     pub eta_p: f64,
+    /// Phase-lag compensation with frozen parameters: `none` or `polynomial:ORDER` (ORDER 1..=3,
+    /// lead η_p·k_sub sub-steps)
+    #[arg(long, default_value = "none")]
+    pub phase_lag: String,
     /// Sub-steps per step, a list
     #[arg(long, default_value = "1,2,3,4,5")]
     pub k_sub: String,
@@ -228,6 +232,7 @@ pub struct StabilityArgs {
 fn stability(a: &StabilityArgs) -> Result<()> {
     let mut base = a.case.case()?;
     base.eta_p = a.eta_p;
+    base.phase_lag = parse_phase_lag(&a.phase_lag)?;
     base.validate()?;
     let k_subs = parse_usize_list("--k-sub", &a.k_sub)?;
     let omegas = parse_grid("--omega", &a.omega)?;
@@ -302,6 +307,20 @@ fn stability(a: &StabilityArgs) -> Result<()> {
     Ok(())
 }
 
+/// `none` or `polynomial:ORDER`.
+fn parse_phase_lag(s: &str) -> Result<Option<FrozenPhaseLag>> {
+    if s == "none" {
+        return Ok(None);
+    }
+    match s.split_once(':') {
+        Some(("polynomial", o)) => match o.trim().parse::<usize>() {
+            Ok(order) if (1..=3).contains(&order) => Ok(Some(FrozenPhaseLag::Polynomial { order })),
+            _ => bad!("--phase-lag", "the polynomial order must be 1, 2 or 3, got '{o}'"),
+        },
+        _ => bad!("--phase-lag", "expected none or polynomial:ORDER, got '{s}'"),
+    }
+}
+
 fn describe_case(c: &AnalysisCase, varied: Parameter) -> String {
     let mut parts = Vec::new();
     for (p, v) in [
@@ -316,6 +335,9 @@ fn describe_case(c: &AnalysisCase, varied: Parameter) -> String {
     }
     if c.error_force != ErrorForceSpec::None {
         parts.push("PID".into());
+    }
+    if let Some(FrozenPhaseLag::Polynomial { order }) = c.phase_lag {
+        parts.push(format!("polynomial p = {order} (frozen)"));
     }
     parts.join(", ")
 }

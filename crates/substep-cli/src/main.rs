@@ -12,6 +12,7 @@ mod plots;
 mod realtime;
 mod run;
 mod site;
+mod vst;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -45,6 +46,9 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Host an experimental substructure for remote clients (`site serve SITE.toml`)
     Site(site::SiteArgs),
+    /// The virtual substructure test study (3-storey frame, TMD specimen, delayed actuator,
+    /// 1 % force noise): every compensation method against the exact reference
+    Vst(vst::VstArgs),
 }
 
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -89,6 +93,7 @@ fn main() -> ExitCode {
         Some(Command::Analyze(args)) => analyze::analyze(&args),
         Some(Command::Bench(args)) => bench::bench(&args),
         Some(Command::Site(args)) => site::site(&args),
+        Some(Command::Vst(args)) => vst::vst(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

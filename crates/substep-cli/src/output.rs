@@ -42,14 +42,19 @@ pub struct HistoryWriter {
 
 impl HistoryWriter {
     /// Columns `t, u1..un, v1..vn, a1..an`, then for substructured runs (`n_c > 0`)
-    /// `fc, fe, fu, dm` per coupling DOF and, with a reference, `uref1..urefn`.
-    pub fn create(path: &Path, n: usize, n_c: usize, reference: bool) -> io::Result<Self> {
+    /// `fc, fe, fu, dm` per coupling DOF, the groups named in `extra` (each one column per
+    /// coupling DOF; their values are passed to [`row`](Self::row)) and, with a reference,
+    /// `uref1..urefn`.
+    pub fn create(path: &Path, n: usize, n_c: usize, extra: &[&str], reference: bool) -> io::Result<Self> {
         let mut w = BufWriter::new(File::create(path)?);
         let mut line = String::from("t");
         for p in ["u", "v", "a"] {
             header_group(&mut line, p, n);
         }
         for p in ["fc", "fe", "fu", "dm"] {
+            header_group(&mut line, p, n_c);
+        }
+        for p in extra {
             header_group(&mut line, p, n_c);
         }
         if reference {
@@ -65,6 +70,7 @@ impl HistoryWriter {
         t: f64,
         kin: &substep::integrate::Kinematics,
         coupling: Option<&StepRecord>,
+        extra: &[f64],
         reference: Option<&[f64]>,
     ) -> io::Result<()> {
         let line = &mut self.line;
@@ -79,6 +85,7 @@ impl HistoryWriter {
             row_group(line, c.compensation_force);
             row_group(line, c.measured_displacement);
         }
+        row_group(line, extra);
         if let Some(r) = reference {
             row_group(line, r);
         }
@@ -96,22 +103,31 @@ impl HistoryWriter {
     }
 }
 
-/// `substeps.csv`: `step, substep, t, cmd.., fm.., dm..` for every sub-step. Write errors are
-/// kept and reported by [`SubstepWriter::finish`] (the observer interface cannot return them).
+/// `substeps.csv`: `step, substep, t, cmd.., fm.., dm..` for every sub-step, with phase-lag
+/// compensation also `te.., du..` (tracking error and correction, from
+/// [`SubstepObserver::phase_lag`]). Write errors are kept and reported by
+/// [`SubstepWriter::finish`] (the observer interface cannot return them).
 pub struct SubstepWriter {
     w: BufWriter<File>,
     line: String,
     dt: f64,
     dtau: f64,
     error: Option<io::Error>,
+    /// Tracking error and correction of the current sub-step (phase-lag runs).
+    phase_lag: Option<(Vec<f64>, Vec<f64>)>,
 }
 
 impl SubstepWriter {
-    pub fn create(path: &Path, n_c: usize, dt: f64, substeps: usize) -> io::Result<Self> {
+    pub fn create(path: &Path, n_c: usize, dt: f64, substeps: usize, phase_lag: bool) -> io::Result<Self> {
         let mut w = BufWriter::new(File::create(path)?);
         let mut line = String::from("step,substep,t");
         for p in ["cmd", "fm", "dm"] {
             header_group(&mut line, p, n_c);
+        }
+        if phase_lag {
+            for p in ["te", "du"] {
+                header_group(&mut line, p, n_c);
+            }
         }
         line.push('\n');
         w.write_all(line.as_bytes())?;
@@ -121,6 +137,7 @@ impl SubstepWriter {
             dt,
             dtau: dt / substeps as f64,
             error: None,
+            phase_lag: phase_lag.then(|| (vec![0.0; n_c], vec![0.0; n_c])),
         })
     }
 
@@ -140,6 +157,12 @@ impl SubstepWriter {
 }
 
 impl SubstepObserver for SubstepWriter {
+    fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
+        if let Some((te, du)) = &mut self.phase_lag {
+            te.copy_from_slice(tracking_error);
+            du.copy_from_slice(correction);
+        }
+    }
     fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
         if self.error.is_some() {
             return;
@@ -151,6 +174,10 @@ impl SubstepObserver for SubstepWriter {
         row_group(line, command);
         row_group(line, force);
         row_group(line, displacement);
+        if let Some((te, du)) = &self.phase_lag {
+            row_group(line, te);
+            row_group(line, du);
+        }
         line.push('\n');
         if let Err(e) = self.w.write_all(line.as_bytes()) {
             self.error = Some(e);

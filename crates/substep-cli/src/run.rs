@@ -10,6 +10,7 @@ use serde::Serialize;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+use substep::compensate::{PhaseLagDefinition, PhaseLagSpec};
 use substep::io::{Reference, Simulation, SubstructureDefinition, TestDefinition};
 use substep::specimen::SpecimenSpec;
 use substep::substructure::ErrorForceSpec;
@@ -88,6 +89,15 @@ struct Summary {
     coupling_peaks: Option<Vec<CouplingPeaks>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     reference: Option<ReferenceSummary>,
+    /// Error-force compensation by estimation: how the steps were closed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    estimation: Option<Value>,
+    /// Phase-lag compensation: kind and guard trips.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    phase_lag: Option<Value>,
+    /// Warnings of the run (e.g. a phase-lag compensator disabled by its guard).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    warnings: Vec<String>,
     outputs: Vec<String>,
 }
 
@@ -106,6 +116,9 @@ fn substructure_json(s: &SubstructureDefinition) -> Value {
         ErrorForceSpec::None => json!({ "kind": "none" }),
         ErrorForceSpec::Pid { p, i, d } => json!({ "kind": "pid", "p": p, "i": i, "d": d }),
         ErrorForceSpec::PidResidual { p } => json!({ "kind": "pid_residual", "p": p }),
+        ErrorForceSpec::Arx { order, lambda, p0 } => {
+            json!({ "kind": "arx", "order": order, "forgetting_factor": lambda, "p0": p0 })
+        }
     };
     let specimens: Vec<Value> = s
         .specimens
@@ -138,7 +151,155 @@ fn substructure_json(s: &SubstructureDefinition) -> Value {
             "adc_bits": f.adc_bits.or(d.adc_bits), "lowpass_hz": f.lowpass_hz,
         },
         "error_force": error_force,
+        "phase_lag": s.phase_lag.as_ref().map(phase_lag_json),
     })
+}
+
+// --- Phase-lag compensation, estimation and ideal error force: records and summary ---
+
+fn phase_lag_json(p: &PhaseLagDefinition) -> Value {
+    let ramp = json!({
+        "start_substep": p.ramp.start, "ramp_substeps": p.ramp.ramp_in,
+        "fade_out": p.ramp.fade_out.map(|(b, l)| [b, l]),
+    });
+    match p.spec {
+        PhaseLagSpec::Polynomial {
+            order,
+            lead,
+            guard_factor,
+        } => {
+            json!({ "kind": "polynomial", "order": order, "lead_substeps": lead, "guard_factor": guard_factor, "ramp": ramp })
+        }
+        PhaseLagSpec::Arx(a) => json!({
+            "kind": "arx", "n_u": a.n_u, "k_lag": a.k_lag, "forgetting_factor": a.lambda,
+            "guard_factor": a.guard_factor, "ramp": ramp,
+        }),
+        PhaseLagSpec::InverseFir(f) => json!({
+            "kind": "inverse_fir", "lead_substeps": f.lead, "taps": f.taps, "order": f.order,
+            "forgetting_factor": f.lambda, "ramp": ramp,
+        }),
+    }
+}
+
+/// Extra `history.csv` groups: `fei` (ideal error force) for every virtual (local) substructured
+/// run — a remote site reports no noise-free force —, `te`, `du`
+/// (tracking error and correction of the last sub-step) with phase-lag compensation.
+fn extra_groups(def: &TestDefinition) -> Vec<&'static str> {
+    match &def.substructure {
+        None => Vec::new(),
+        Some(s) if s.remote.is_some() && s.phase_lag.is_some() => vec!["te", "du"],
+        Some(s) if s.remote.is_some() => Vec::new(),
+        Some(s) if s.phase_lag.is_some() => vec!["fei", "te", "du"],
+        Some(_) => vec!["fei"],
+    }
+}
+
+/// Fill the extra columns (group-major, one value per coupling DOF) for the current step.
+fn extra_values(sim: &Simulation, groups: &[&str], out: &mut [f64]) {
+    let Some(test) = sim.substructure_test() else { return };
+    let n_c = test.controller.n_coupling();
+    for (g, name) in groups.iter().enumerate() {
+        let cols = &mut out[g * n_c..(g + 1) * n_c];
+        let src = match *name {
+            "fei" if sim.steps_done() > 0 => test.controller.ideal_error_force(),
+            "te" => test.site.phase_lag().map(|p| p.tracking_error()),
+            "du" => test.site.phase_lag().map(|p| p.correction()),
+            _ => None,
+        };
+        match src {
+            Some(v) => cols.copy_from_slice(v),
+            None => cols
+                .iter_mut()
+                .for_each(|c| *c = if sim.steps_done() == 0 { 0.0 } else { f64::NAN }),
+        }
+    }
+}
+
+/// `compensation_force.png` (with error-force compensation: f_u and its ideal value, DOF of the
+/// first coupling) and `tracking_error.png` (with phase-lag compensation).
+fn compensation_charts(def: &TestDefinition, table: &Decimated, dir: &Path) -> Result<Vec<PathBuf>> {
+    let Some(s) = &def.substructure else {
+        return Ok(Vec::new());
+    };
+    let dof = s.coupling_dofs[0] + 1;
+    let t = table.column(0);
+    let mut out = Vec::new();
+    if s.error_force != ErrorForceSpec::None {
+        let path = dir.join("compensation_force.png");
+        line_chart(
+            &path,
+            &format!("DOF {dof}: compensation force f_u and its ideal (noise-free) value"),
+            "time t [s]",
+            "force [N]",
+            &[
+                Curve {
+                    label: "f_u".into(),
+                    x: t.clone(),
+                    y: table.column(1),
+                },
+                Curve {
+                    label: "ideal".into(),
+                    x: t.clone(),
+                    y: table.column(2),
+                },
+            ],
+        )?;
+        out.push(path);
+    }
+    if s.phase_lag.is_some() {
+        let path = dir.join("tracking_error.png");
+        line_chart(
+            &path,
+            &format!("DOF {dof}: tracking error d − y (last sub-step of each step)"),
+            "time t [s]",
+            "tracking error [m]",
+            &[Curve {
+                label: String::new(),
+                x: t,
+                y: table.column(3),
+            }],
+        )?;
+        out.push(path);
+    }
+    Ok(out)
+}
+
+/// Estimation counts and phase-lag trips of a finished (or stopped) run, and the warnings.
+fn compensation_summary(sim: &Simulation) -> (Option<Value>, Option<Value>, Vec<String>) {
+    let mut warnings = Vec::new();
+    let Some(test) = sim.substructure_test() else {
+        return (None, None, warnings);
+    };
+    let estimation = test.controller.estimation_stats().map(|s| {
+        if s.guard_fallbacks() > 0 {
+            warnings.push(format!(
+                "error-force estimation fell back to the plain algorithm in {} step(s) after its warm-up \
+                 ({} ill-conditioned, {} implausible predictions)",
+                s.guard_fallbacks(),
+                s.ill_conditioned,
+                s.implausible
+            ));
+        }
+        json!({
+            "steps": s.steps, "estimated": s.estimated, "fallbacks": s.fallbacks(),
+            "warm_up": s.warm_up, "ill_conditioned": s.ill_conditioned, "implausible": s.implausible,
+        })
+    });
+    let phase_lag = test.site.phase_lag().map(|p| {
+        let trips: Vec<Value> = p
+            .trips()
+            .into_iter()
+            .map(|(i, t)| {
+                let dof = test.controller.coupling_dofs()[i] + 1;
+                warnings.push(format!(
+                    "phase-lag compensator of coupling DOF {dof} disabled by its guard: {t}"
+                ));
+                json!({ "dof": dof, "reason": t.to_string() })
+            })
+            .collect();
+        json!({ "kinds": p.kinds(), "disabled": trips })
+    });
+    (estimation, phase_lag, warnings)
 }
 
 /// DOFs (0-based) shown in the displacement and acceleration charts: coupling DOFs, the last
@@ -508,13 +669,21 @@ pub fn run(args: &RunArgs) -> Result<()> {
         std::fs::remove_file(&summary_path).with_context(|| format!("cannot remove {}", summary_path.display()))?;
     }
     let history_path = out_dir.join("history.csv");
-    let mut history = HistoryWriter::create(&history_path, n, coupling.len(), reference.is_some())
+    let groups = extra_groups(&def);
+    let mut extra = vec![0.0; groups.len() * coupling.len()];
+    let mut history = HistoryWriter::create(&history_path, n, coupling.len(), &groups, reference.is_some())
         .with_context(|| cannot_write(&history_path))?;
     let substeps_path = out_dir.join("substeps.csv");
     let mut substep_writer = match &def.substructure {
         Some(s) => Some(
-            SubstepWriter::create(&substeps_path, coupling.len(), def.integrator.dt, s.substeps)
-                .with_context(|| cannot_write(&substeps_path))?,
+            SubstepWriter::create(
+                &substeps_path,
+                coupling.len(),
+                def.integrator.dt,
+                s.substeps,
+                s.phase_lag.is_some(),
+            )
+            .with_context(|| cannot_write(&substeps_path))?,
         ),
         None => None,
     };
@@ -534,20 +703,33 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let mut last_flush = Instant::now();
 
     let mut recorder = Recorder::new(n, &coupling);
+    // t, f_u, its ideal value and the tracking error of the first coupling DOF.
+    let mut comp_table = Decimated::new(4, PLOT_ROWS);
     let mut progress = Progress::new(steps, !args.quiet);
     let mut compute = Duration::ZERO;
     let mut failure: Option<substep::Error> = None;
     loop {
         let i = sim.steps_done();
+        extra_values(&sim, &groups, &mut extra);
         history
             .row(
                 sim.time(),
                 sim.state(),
                 sim.coupling().as_ref(),
+                &extra,
                 reference.as_ref().map(|r| r.u()),
             )
             .with_context(|| cannot_write(&history_path))?;
         recorder.record(&sim, reference.as_ref());
+        if let Some(rec) = sim.coupling() {
+            let first_of = |name: &str| {
+                groups
+                    .iter()
+                    .position(|g| *g == name)
+                    .map_or(f64::NAN, |g| extra[g * coupling.len()])
+            };
+            comp_table.push(&[sim.time(), rec.compensation_force[0], first_of("fei"), first_of("te")]);
+        }
         if i == steps {
             break;
         }
@@ -588,6 +770,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
             outputs.push(path);
         }
     }
+    if def.output.plots && !args.no_plots && comp_table.rows() > 1 {
+        for path in compensation_charts(&def, &comp_table, &out_dir)? {
+            outputs.push(path);
+        }
+    }
     outputs.push(summary_path.clone());
 
     let (stopped_at_step, reason) = match &failure {
@@ -597,6 +784,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         Some(e) => (Some(done + 1), Some(e.to_string())),
         None => (None, None),
     };
+    let (estimation, phase_lag, warnings) = compensation_summary(&sim);
     let summary = Summary {
         config: match &args.config {
             None => DEFAULT_CONFIG_NAME.to_string(),
@@ -635,6 +823,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 .collect()
         }),
         reference: reference.as_ref().map(|r| recorder.reference_summary(r)),
+        estimation,
+        phase_lag,
+        warnings,
         outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
     };
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
@@ -649,6 +840,15 @@ pub fn run(args: &RunArgs) -> Result<()> {
             Some(e) => println!("  STOPPED after {done} of {steps} steps: {e}"),
         }
         recorder.print();
+        if let Some(e) = &summary.estimation {
+            println!(
+                "  error-force estimation: {} of {} steps closed with the estimate",
+                e["estimated"], e["steps"]
+            );
+        }
+        for w in &summary.warnings {
+            println!("  warning: {w}");
+        }
         if let Some(r) = &summary.reference {
             let what = if r.scheme == "exact" {
                 "exact solution"

@@ -59,7 +59,7 @@ fn default_job_runs_the_embedded_example() {
     assert!(summary["us_per_step"].as_f64().unwrap() > 0.0);
 
     let history = lines(&res.join("history.csv"));
-    assert_eq!(history[0], "t,u1,v1,a1,fc1,fe1,fu1,dm1,uref1");
+    assert_eq!(history[0], "t,u1,v1,a1,fc1,fe1,fu1,dm1,fei1,uref1");
     assert_eq!(history.len(), 1 + 2001, "one row per step from t = 0");
     assert!(history[2].starts_with("0.01,"));
     let substeps = lines(&res.join("substeps.csv"));

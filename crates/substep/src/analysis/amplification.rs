@@ -46,6 +46,7 @@ impl StepMap {
     /// accelerations from the zero state. The test's state is restored afterwards. Fails with
     /// a message naming the part if the experimental side is not linear.
     pub fn probe(test: &mut SubstructureTest) -> Result<Self> {
+        test.controller.is_linear()?;
         test.site.is_linear()?;
         let n = test.state_len();
         let mut saved = vec![0.0; n];

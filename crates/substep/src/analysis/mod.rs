@@ -7,9 +7,10 @@
 
 pub mod amplification;
 pub mod frequency;
+pub mod spectral;
 pub mod stability;
 pub mod tmd_case;
 pub mod verify;
 
 pub use amplification::{Stability, StepMap};
-pub use tmd_case::{AnalysisCase, Parameter};
+pub use tmd_case::{AnalysisCase, FrozenPhaseLag, Parameter};

@@ -3,10 +3,13 @@
 //! `Δt = Ω`, `T = 2π`).
 
 use super::StepMap;
+use crate::compensate::{CompensatedSite, PhaseLagCompensator, Polynomial, Ramp};
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::model::{StructuralModel, TmdSystem, sdof, tmd_two_dof};
 use crate::specimen::SpecimenSpec;
-use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings, SubstructureTest};
+use crate::substructure::{
+    ErrorForceSpec, ExperimentalSubstructure, SubstepController, SubstepSettings, SubstructureTest,
+};
 use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab};
 use nalgebra::DVector;
 use std::f64::consts::PI;
@@ -28,6 +31,17 @@ pub struct AnalysisCase {
     /// Phase-lag ratio `η_p = τ/Δt` (pure delay of an otherwise ideal actuator).
     pub eta_p: f64,
     pub error_force: ErrorForceSpec,
+    /// Phase-lag compensation with frozen parameters (a fixed linear filter), if any.
+    pub phase_lag: Option<FrozenPhaseLag>,
+}
+
+/// A phase-lag compensator for the linear analysis: frozen, full from the first sub-step, on
+/// the actuator of the analysis model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FrozenPhaseLag {
+    /// Polynomial extrapolation of order `order` (1..=3) with the lead `η_p · k_sub` sub-steps
+    /// (the actuator delay).
+    Polynomial { order: usize },
 }
 
 /// Parameters that maps and series vary.
@@ -86,6 +100,7 @@ impl AnalysisCase {
             k_sub: 1,
             eta_p: 0.0,
             error_force: ErrorForceSpec::None,
+            phase_lag: None,
         }
     }
     /// "Coupled system with large mass ratio": `η_m = 50 %`, `ζ = ζ_s = 5 %`, `η_f = 1`.
@@ -157,7 +172,8 @@ impl AnalysisCase {
     }
 
     /// The substructure test of this case: numerical SDOF, TMD specimen on a delayed ideal
-    /// actuator, Newmark average acceleration, noise-free sensors.
+    /// actuator, Newmark average acceleration, noise-free sensors; with `phase_lag`, the lab is
+    /// wrapped in a frozen [`CompensatedSite`].
     pub fn build_test(&self) -> Result<SubstructureTest> {
         self.validate()?;
         let sys = self.system();
@@ -192,7 +208,17 @@ impl AnalysisCase {
             self.dt() / self.k_sub as f64,
             1,
         )?;
-        SubstructureTest::new(&model, controller, Box::new(lab))
+        let site: Box<dyn ExperimentalSubstructure> = match self.phase_lag {
+            None => Box::new(lab),
+            Some(FrozenPhaseLag::Polynomial { order }) => {
+                let lead = self.eta_p * self.k_sub as f64;
+                let comp: Box<dyn PhaseLagCompensator> = Box::new(Polynomial::new(order, lead)?);
+                let mut site = CompensatedSite::new(Box::new(lab), vec![comp], Ramp::full())?;
+                site.set_frozen(true);
+                Box::new(site)
+            }
+        };
+        SubstructureTest::new(&model, controller, site)
     }
 
     pub fn step_map(&self) -> Result<StepMap> {

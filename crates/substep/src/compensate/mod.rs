@@ -43,11 +43,13 @@ mod arx_lag;
 mod inverse;
 mod polynomial;
 mod site;
+mod spec;
 
 pub use arx_lag::{ArxPhaseLag, ArxPhaseLagSpec, ErrorPairing, MAX_HISTORY, Regressor};
 pub use inverse::{InverseFir, InverseFirSpec};
 pub use polynomial::{Polynomial, lagrange_extrapolation_weights};
 pub use site::CompensatedSite;
+pub use spec::{PhaseLagDefinition, PhaseLagSpec};
 
 use crate::error::{Error, Result};
 
@@ -75,6 +77,23 @@ pub trait PhaseLagCompensator: Send {
     fn state_len(&self) -> usize;
     fn write_state(&self, out: &mut [f64]);
     fn read_state(&mut self, state: &[f64]);
+}
+
+/// What a phase-lag compensated site reports per sub-step (for records and summaries); see
+/// [`crate::substructure::ExperimentalSubstructure::phase_lag`].
+pub trait PhaseLagReport {
+    /// `d − y` of the last sub-step per coupling DOF (target minus measured displacement).
+    fn tracking_error(&self) -> &[f64];
+    /// `Δu` of the last sub-step per coupling DOF (before the ramp).
+    fn correction(&self) -> &[f64];
+    /// The command sent in the last sub-step, `d + h Δu`.
+    fn command_sent(&self) -> &[f64];
+    /// `h` of the last sub-step.
+    fn ramp_value(&self) -> f64;
+    /// The compensator kind per coupling DOF.
+    fn kinds(&self) -> Vec<&'static str>;
+    /// Per coupling DOF (0-based): why its guard disabled it, if it did. Allocates.
+    fn trips(&self) -> Vec<(usize, GuardTrip)>;
 }
 
 /// Why a [`Guard`] disabled a compensator.

@@ -1,6 +1,6 @@
 //! An experimental substructure with phase-lag compensation of its actuators.
 
-use super::{PhaseLagCompensator, Ramp};
+use super::{GuardTrip, PhaseLagCompensator, PhaseLagReport, Ramp};
 use crate::error::{Error, Result};
 use crate::substructure::ExperimentalSubstructure;
 
@@ -136,6 +136,16 @@ impl<S: ExperimentalSubstructure + ?Sized> ExperimentalSubstructure for Compensa
         Ok(())
     }
 
+    fn true_force(&self) -> Option<&[f64]> {
+        self.inner.true_force()
+    }
+    fn true_displacement(&self) -> Option<&[f64]> {
+        self.inner.true_displacement()
+    }
+    fn phase_lag(&self) -> Option<&dyn PhaseLagReport> {
+        Some(self)
+    }
+
     fn is_linear(&self) -> Result<()> {
         if !self.frozen {
             return Err(Error::invalid(
@@ -175,5 +185,26 @@ impl<S: ExperimentalSubstructure + ?Sized> ExperimentalSubstructure for Compensa
             c.read_state(&s[at..at + l]);
             at += l;
         }
+    }
+}
+
+impl<S: ExperimentalSubstructure + ?Sized> PhaseLagReport for CompensatedSite<S> {
+    fn tracking_error(&self) -> &[f64] {
+        &self.tracking_error
+    }
+    fn correction(&self) -> &[f64] {
+        &self.correction
+    }
+    fn command_sent(&self) -> &[f64] {
+        &self.command
+    }
+    fn ramp_value(&self) -> f64 {
+        self.h
+    }
+    fn kinds(&self) -> Vec<&'static str> {
+        self.compensators.iter().map(|c| c.kind()).collect()
+    }
+    fn trips(&self) -> Vec<(usize, GuardTrip)> {
+        self.warnings().collect()
     }
 }

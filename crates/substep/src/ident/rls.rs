@@ -175,6 +175,63 @@ impl Rls {
         self.bound_trace();
     }
 
+    /// Change the units of the parameters: `θ_i ← s_i θ_i`, `P_ij ← s_i s_j P_ij` (the regressor
+    /// entry `i` is from now on divided by `s_i`). The covariance bound is re-applied. Panics if the
+    /// length is not `n_params`; non-finite or non-positive factors are ignored (no change).
+    pub fn rescale(&mut self, s: &[f64]) {
+        assert_eq!(s.len(), self.n, "rescale needs one factor per parameter");
+        if s.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return;
+        }
+        let n = self.n;
+        for i in 0..n {
+            self.theta[i] *= s[i];
+            for j in 0..n {
+                self.p[i * n + j] *= s[i] * s[j];
+            }
+        }
+        self.bound_trace();
+    }
+
+    /// A pseudo-measurement of parameter `i` without forgetting: the RLS step for the regressor
+    /// `√w·e_i` and the target `√w·prior` (adds `w (θ_i − prior)²` to the cost). Cycling it over
+    /// the parameters keeps a ridge towards `prior` that forgetting cannot erase (regularised
+    /// forgetting). Ignored for non-finite or non-positive `w`.
+    pub fn regularize(&mut self, i: usize, w: f64, prior: f64) {
+        if !(w.is_finite() && w > 0.0 && prior.is_finite()) || i >= self.n {
+            return;
+        }
+        let n = self.n;
+        let e = prior - self.theta[i];
+        // Pφ = √w P_{:,i}, φᵀPφ = w P_ii.
+        let pii = self.p[i * n + i];
+        let denom = 1.0 + w * pii;
+        if !(denom.is_finite() && pii > 0.0) {
+            return;
+        }
+        for r in 0..n {
+            self.pphi[r] = self.p[r * n + i];
+        }
+        let g = w / denom;
+        for r in 0..n {
+            self.theta_new[r] = self.theta[r] + self.pphi[r] * g * e;
+        }
+        if self.theta_new.iter().any(|v| !v.is_finite()) {
+            return;
+        }
+        self.theta.copy_from_slice(&self.theta_new);
+        for r in 0..n {
+            for c in r..n {
+                let v = 0.5 * (self.p[r * n + c] + self.p[c * n + r]) - g * self.pphi[r] * self.pphi[c];
+                self.p[r * n + c] = v;
+                self.p[c * n + r] = v;
+            }
+        }
+        if (0..n).any(|r| !(self.p[r * n + r].is_finite() && self.p[r * n + r] > 0.0)) {
+            self.reset_covariance();
+        }
+    }
+
     /// Number of updates applied so far.
     pub fn updates(&self) -> u64 {
         self.updates

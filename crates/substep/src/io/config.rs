@@ -18,6 +18,7 @@
 //! and one arm to `RawSpecimen::to_spec`.
 
 use super::matrix_market::{read_matrix_market, read_matrix_market_sparse};
+use crate::compensate::{ArxPhaseLagSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::excitation::{self, Envelope, KanaiTajimi, Record};
 use crate::integrate::{Scheme, check_hilber_alpha};
@@ -93,6 +94,8 @@ pub struct SubstructureDefinition {
     /// Newmark β, γ of the integrator.
     pub beta: f64,
     pub gamma: f64,
+    /// Phase-lag compensation of the actuators (`[substructure.phase_lag]`), if any.
+    pub phase_lag: Option<PhaseLagDefinition>,
     /// A remote site instead of the virtual lab (the specimens, if any, then only feed the
     /// reference solution).
     pub remote: Option<RemoteDefinition>,
@@ -163,6 +166,10 @@ impl SubstructureDefinition {
                     ));
                 }
             },
+        };
+        let site: Box<dyn ExperimentalSubstructure> = match &self.phase_lag {
+            None => site,
+            Some(p) => Box::new(p.wrap(site).map_err(|e| prefixed(e, "substructure."))?),
         };
         Ok(match &self.limits {
             Some(l) => Box::new(LimitedSite::new(site, l.clone())?),
@@ -466,6 +473,7 @@ struct RawSubstructure {
     actuator: Option<RawActuator>,
     sensors: Option<RawSensors>,
     error_force: Option<RawErrorForce>,
+    phase_lag: Option<RawPhaseLag>,
     remote: Option<RawRemote>,
     limits: Option<RawLimits>,
 }
@@ -613,6 +621,42 @@ enum RawErrorForce {
         #[serde(default = "one")]
         p: f64,
     },
+    Arx {
+        #[serde(default = "default_arx_order")]
+        order: usize,
+        #[serde(default = "default_arx_lambda")]
+        forgetting_factor: f64,
+        #[serde(default = "default_arx_p0")]
+        p0: f64,
+    },
+}
+
+fn default_arx_order() -> usize {
+    4
+}
+fn default_arx_lambda() -> f64 {
+    0.98
+}
+fn default_arx_p0() -> f64 {
+    100.0
+}
+
+/// `[substructure.phase_lag]`; which keys apply depends on `kind` (checked in `build`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPhaseLag {
+    kind: String,
+    order: Option<usize>,
+    lead: Option<f64>,
+    lead_substeps: Option<f64>,
+    k_lag: Option<usize>,
+    n_u: Option<usize>,
+    forgetting_factor: Option<f64>,
+    taps: Option<usize>,
+    guard_factor: Option<f64>,
+    ramp_start: Option<usize>,
+    ramp_steps: Option<usize>,
+    fade_out: Option<[usize; 2]>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -797,7 +841,7 @@ impl RawConfig {
         }
         let substructure = match self.substructure {
             None => None,
-            Some(s) => Some(s.build(&model, &name_s, scheme, base)?),
+            Some(s) => Some(s.build(&model, &name_s, scheme, dt, base)?),
         };
         Ok(TestDefinition {
             source: name.to_string(),
@@ -1531,12 +1575,156 @@ impl RawErrorForce {
             RawErrorForce::None {} => ErrorForceSpec::None,
             RawErrorForce::Pid { p, i, d } => ErrorForceSpec::Pid { p, i, d },
             RawErrorForce::PidResidual { p } => ErrorForceSpec::PidResidual { p },
+            RawErrorForce::Arx {
+                order,
+                forgetting_factor,
+                p0,
+            } => ErrorForceSpec::Arx {
+                order,
+                lambda: forgetting_factor,
+                p0,
+            },
         }
     }
 }
 
+/// Default ramp-in of the phase-lag compensation [steps].
+const DEFAULT_RAMP_STEPS: usize = 100;
+
+impl RawPhaseLag {
+    /// `None` for `kind = "none"`. `dt` time step, `k_sub` sub-steps, `delay` the actuator's pure
+    /// delay [s] (the default lead and `k_lag`).
+    fn build(&self, dt: f64, k_sub: usize, delay: f64) -> Result<Option<PhaseLagDefinition>> {
+        let p = "substructure.phase_lag.";
+        let dtau = dt / k_sub as f64;
+        let keys = |names: &[&'static str]| -> Vec<(&'static str, bool)> {
+            names
+                .iter()
+                .map(|&n| {
+                    let present = match n {
+                        "order" => self.order.is_some(),
+                        "lead" => self.lead.is_some(),
+                        "lead_substeps" => self.lead_substeps.is_some(),
+                        "k_lag" => self.k_lag.is_some(),
+                        "n_u" => self.n_u.is_some(),
+                        "forgetting_factor" => self.forgetting_factor.is_some(),
+                        "taps" => self.taps.is_some(),
+                        "guard_factor" => self.guard_factor.is_some(),
+                        "ramp_start" => self.ramp_start.is_some(),
+                        "ramp_steps" => self.ramp_steps.is_some(),
+                        "fade_out" => self.fade_out.is_some(),
+                        _ => false,
+                    };
+                    (n, present)
+                })
+                .collect()
+        };
+        let kind = self.kind.as_str();
+        let unused = format!("is not used with kind = \"{kind}\"");
+        // The lead in sub-steps: `lead` [s] or `lead_substeps`, default the actuator delay.
+        let lead = || -> Result<f64> {
+            match (self.lead, self.lead_substeps) {
+                (Some(_), Some(_)) => Err(Error::invalid(
+                    format!("{p}lead_substeps"),
+                    "give either lead [s] or lead_substeps, not both",
+                )),
+                (Some(l), None) => {
+                    require_non_negative(&format!("{p}lead"), l)?;
+                    Ok(l / dtau)
+                }
+                (None, Some(l)) => {
+                    require_non_negative(&format!("{p}lead_substeps"), l)?;
+                    Ok(l)
+                }
+                (None, None) => Ok(delay / dtau),
+            }
+        };
+        let guard_factor = self.guard_factor.unwrap_or(10.0);
+        let spec = match kind {
+            "none" => {
+                forbid(
+                    p,
+                    &keys(&[
+                        "order",
+                        "lead",
+                        "lead_substeps",
+                        "k_lag",
+                        "n_u",
+                        "forgetting_factor",
+                        "taps",
+                        "guard_factor",
+                        "ramp_start",
+                        "ramp_steps",
+                        "fade_out",
+                    ]),
+                    &unused,
+                )?;
+                return Ok(None);
+            }
+            "polynomial" => {
+                forbid(p, &keys(&["k_lag", "n_u", "forgetting_factor", "taps"]), &unused)?;
+                PhaseLagSpec::Polynomial {
+                    order: self.order.unwrap_or(3),
+                    lead: lead()?,
+                    guard_factor,
+                }
+            }
+            "arx" => {
+                forbid(p, &keys(&["order", "lead", "lead_substeps", "taps"]), &unused)?;
+                let k_lag = self.k_lag.unwrap_or_else(|| ((delay / dtau).round() as usize).max(1));
+                let mut spec = ArxPhaseLagSpec::new(k_lag);
+                if let Some(n) = self.n_u {
+                    spec.n_u = n;
+                }
+                if let Some(l) = self.forgetting_factor {
+                    spec.lambda = l;
+                }
+                spec.guard_factor = guard_factor;
+                PhaseLagSpec::Arx(spec)
+            }
+            "inverse_fir" => {
+                forbid(p, &keys(&["k_lag", "n_u", "guard_factor"]), &unused)?;
+                let mut spec = InverseFirSpec::new(lead()?);
+                if let Some(o) = self.order {
+                    spec.order = o;
+                }
+                if let Some(t) = self.taps {
+                    spec.taps = t;
+                }
+                if let Some(l) = self.forgetting_factor {
+                    spec.lambda = l;
+                }
+                PhaseLagSpec::InverseFir(spec)
+            }
+            other => {
+                return Err(Error::invalid(
+                    format!("{p}kind"),
+                    format!("unknown kind '{other}' (expected none, polynomial, arx or inverse_fir)"),
+                ));
+            }
+        };
+        let mut ramp = Ramp::new(
+            self.ramp_start.unwrap_or(0) * k_sub,
+            self.ramp_steps.unwrap_or(DEFAULT_RAMP_STEPS) * k_sub,
+        );
+        if let Some([begin, steps]) = self.fade_out {
+            ramp = ramp.with_fade_out(begin * k_sub, steps * k_sub);
+        }
+        let def = PhaseLagDefinition { spec, ramp };
+        def.validate().map_err(|e| prefixed(e, "substructure."))?;
+        Ok(Some(def))
+    }
+}
+
 impl RawSubstructure {
-    fn build(&self, model: &Model, scheme_name: &str, scheme: Scheme, base: &Path) -> Result<SubstructureDefinition> {
+    fn build(
+        &self,
+        model: &Model,
+        scheme_name: &str,
+        scheme: Scheme,
+        dt: f64,
+        base: &Path,
+    ) -> Result<SubstructureDefinition> {
         let p = "substructure.";
         let (beta, gamma) = match scheme {
             Scheme::Newmark { beta, gamma } if beta > 0.0 => (beta, gamma),
@@ -1630,6 +1818,10 @@ impl RawSubstructure {
             .as_ref()
             .map_or(ErrorForceSpec::None, RawErrorForce::spec);
         error_force.validate()?;
+        let phase_lag = match &self.phase_lag {
+            Some(raw) => raw.build(dt, self.substeps, actuator.delay)?,
+            None => None,
+        };
         Ok(SubstructureDefinition {
             substeps: self.substeps,
             inner_steps,
@@ -1643,6 +1835,7 @@ impl RawSubstructure {
             limits: self.limits.as_ref().map(|l| l.build(coupling.len())).transpose()?,
             coupling_dofs: coupling,
             remote,
+            phase_lag,
         })
     }
 }
@@ -2098,5 +2291,143 @@ seed = 3
             e.starts_with("cfg.toml: ground_motion.frequency: must be below the Nyquist"),
             "{e}"
         );
+    }
+
+    // --- error_force.kind = "arx" and [substructure.phase_lag] ---
+
+    fn with_tables(extra: &str) -> String {
+        format!("{BASE}\n{extra}")
+    }
+
+    #[test]
+    fn error_force_arx_keys() {
+        let def = parse(&with_tables("[substructure.error_force]\nkind = \"arx\"\n")).unwrap();
+        assert_eq!(def.substructure.unwrap().error_force, ErrorForceSpec::ARX_DEFAULT);
+        let def = parse(&with_tables(
+            "[substructure.error_force]\nkind = \"arx\"\norder = 12\nforgetting_factor = 0.995\np0 = 10.0\n",
+        ))
+        .unwrap();
+        assert_eq!(
+            def.substructure.unwrap().error_force,
+            ErrorForceSpec::Arx {
+                order: 12,
+                lambda: 0.995,
+                p0: 10.0
+            }
+        );
+        for (extra, key) in [
+            ("order = 1", "substructure.error_force.order: must be in 2..=12, got 1"),
+            (
+                "order = 13",
+                "substructure.error_force.order: must be in 2..=12, got 13",
+            ),
+            (
+                "forgetting_factor = 0.0",
+                "substructure.error_force.forgetting_factor: must be in (0, 1]",
+            ),
+            (
+                "forgetting_factor = 1.5",
+                "substructure.error_force.forgetting_factor: must be in (0, 1]",
+            ),
+            ("p0 = -1.0", "substructure.error_force.p0"),
+        ] {
+            let e = err(&with_tables(&format!(
+                "[substructure.error_force]\nkind = \"arx\"\n{extra}\n"
+            )));
+            assert!(e.starts_with(&format!("cfg.toml: {key}")), "{e}");
+        }
+        let e = err(&with_tables("[substructure.error_force]\nkind = \"arx\"\np = 1.0\n"));
+        assert!(e.contains("unknown field `p`"), "{e}");
+    }
+
+    #[test]
+    fn phase_lag_kinds_and_defaults() {
+        let delayed = |extra: &str| {
+            with_tables(&format!("[substructure.phase_lag]\n{extra}\n")).replacen(
+                "zeta = 0.7",
+                "zeta = 0.7\ndelay = 0.005",
+                1,
+            )
+        };
+        // Δτ = 2.5 ms, delay 5 ms: default lead 2 sub-steps, default k_lag 2.
+        let def = parse(&delayed("kind = \"polynomial\"")).unwrap();
+        let pl = def.substructure.as_ref().unwrap().phase_lag.unwrap();
+        assert_eq!(
+            pl.spec,
+            PhaseLagSpec::Polynomial {
+                order: 3,
+                lead: 2.0,
+                guard_factor: 10.0
+            }
+        );
+        assert_eq!(pl.ramp, Ramp::new(0, DEFAULT_RAMP_STEPS * 4));
+        let def = parse(&delayed(
+            "kind = \"arx\"\nn_u = 3\nramp_start = 10\nramp_steps = 20\nfade_out = [90, 5]",
+        ))
+        .unwrap();
+        let pl = def.substructure.as_ref().unwrap().phase_lag.unwrap();
+        match pl.spec {
+            PhaseLagSpec::Arx(a) => assert_eq!((a.k_lag, a.n_u, a.lambda), (2, 3, 0.99)),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(pl.ramp, Ramp::new(40, 80).with_fade_out(360, 20));
+        let def = parse(&delayed("kind = \"inverse_fir\"\nlead = 0.01\ntaps = 6")).unwrap();
+        match def.substructure.as_ref().unwrap().phase_lag.unwrap().spec {
+            PhaseLagSpec::InverseFir(f) => assert_eq!((f.lead, f.taps, f.order), (4.0, 6, 2)),
+            other => panic!("{other:?}"),
+        }
+        let def = parse(&delayed("kind = \"none\"")).unwrap();
+        assert!(def.substructure.as_ref().unwrap().phase_lag.is_none());
+        // The test is built with the compensated site.
+        let def = parse(&delayed("kind = \"arx\"")).unwrap();
+        let s = def.substructure.as_ref().unwrap();
+        let test = s.build_test(&def.model, 0.01, &DVector::zeros(3)).unwrap();
+        assert!(test.site.phase_lag().is_some());
+    }
+
+    #[test]
+    fn phase_lag_bad_values_name_the_key() {
+        let p = "cfg.toml: substructure.phase_lag.";
+        for (extra, expect) in [
+            (
+                "kind = \"polynomial\"\norder = 4",
+                "order: polynomial extrapolation supports orders 1 to 3",
+            ),
+            ("kind = \"polynomial\"\nlead = -0.01", "lead: "),
+            (
+                "kind = \"polynomial\"\nlead = 0.01\nlead_substeps = 4.0",
+                "lead_substeps: give either",
+            ),
+            (
+                "kind = \"polynomial\"\nk_lag = 4",
+                "k_lag: is not used with kind = \"polynomial\"",
+            ),
+            ("kind = \"arx\"\nn_u = 13", "n_u: must be in 1..=12"),
+            (
+                "kind = \"arx\"\nforgetting_factor = 1.5",
+                "forgetting_factor: must be in (0, 1]",
+            ),
+            ("kind = \"arx\"\nk_lag = 0", "k_lag: must be at least 1"),
+            ("kind = \"arx\"\nk_lag = 100000", "k_lag: k_lag larger than the history"),
+            ("kind = \"arx\"\norder = 2", "order: is not used with kind = \"arx\""),
+            (
+                "kind = \"arx\"\nguard_factor = 0.0",
+                "guard_factor: must be a finite number > 0",
+            ),
+            ("kind = \"inverse_fir\"\ntaps = 0", "taps: must be in 1..=64"),
+            (
+                "kind = \"inverse_fir\"\nforgetting_factor = 0.0",
+                "forgetting_factor: must be in (0, 1]",
+            ),
+            (
+                "kind = \"arx\"\nramp_steps = 10\nfade_out = [5, 3]",
+                "fade_out: begins at sub-step 20",
+            ),
+            ("kind = \"none\"\nn_u = 3", "n_u: is not used with kind = \"none\""),
+            ("kind = \"smith\"", "kind: unknown kind 'smith'"),
+        ] {
+            let e = err(&with_tables(&format!("[substructure.phase_lag]\n{extra}\n")));
+            assert!(e.starts_with(&format!("{p}{expect}")), "{extra}: {e}");
+        }
     }
 }

@@ -83,6 +83,14 @@ impl RealtimeRunner {
                 "is not the model the substructure test was built from",
             ));
         }
+        if matches!(test.controller.compensation().spec, crate::substructure::ErrorForceSpec::Arx { .. }) {
+            // The estimation changes the last command of each step from the identified model;
+            // the real-time coupling loop only mirrors the plain ramp.
+            return Err(Error::invalid(
+                "substructure.error_force.kind",
+                "\"arx\" is not supported by the real-time runner yet (use none or pid)",
+            ));
+        }
         if ground_accel.len() < 2 {
             return Err(Error::invalid(
                 "realtime.ground_accel",

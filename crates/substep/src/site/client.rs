@@ -595,6 +595,14 @@ pub fn run_remote_step(
     step: usize,
     observer: &mut impl SubstepObserver,
 ) -> Result<()> {
+    if controller.estimation_stats().is_some() {
+        // The estimation replaces the last sub-step's command; a per-step site runs the plain ramp.
+        return Err(Error::invalid(
+            "substructure.error_force",
+            "error_force.kind = \"arx\" changes the last sub-step's command, which a per-step site \
+             computes itself; use a per-sub-step site",
+        ));
+    }
     controller.begin_step(load_next);
     let n = controller.n_coupling();
     let k = controller.substeps();

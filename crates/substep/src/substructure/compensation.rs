@@ -12,6 +12,31 @@ pub enum ErrorForceSpec {
     /// OpenHySL's variant: residual `r_{i+1} = e_{i+1} − f_u,i`, `f_u,i+1 = P r_{i+1}`
     /// (recursion `r_{i+1} + P r_i = e_{i+1}`, pole at `−P`). Only to reproduce OpenHySL runs.
     PidResidual { p: f64 },
+    /// Estimation by on-line identification (spec §4): an ARX model of order `order` (`n_u`,
+    /// 2..=12) per coupling DOF, RLS with forgetting factor `lambda` and initial covariance `p0`
+    /// (of the normalised regressor). The last sub-step's force is predicted, the last command
+    /// solved consistently with it, and `f_u = e = f^{(k)} − f̂^{(k)}` (P = 1). See
+    /// [`super::estimation`].
+    Arx { order: usize, lambda: f64, p0: f64 },
+}
+
+impl ErrorForceSpec {
+    /// Defaults of the estimation: `n_u = 4`, `λ = 0.98`, `p0 = 100`.
+    pub const ARX_DEFAULT: ErrorForceSpec = ErrorForceSpec::Arx {
+        order: 4,
+        lambda: 0.98,
+        p0: 100.0,
+    };
+
+    /// `none`, `pid`, `pid_residual` or `arx` (the config's `kind`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ErrorForceSpec::None => "none",
+            ErrorForceSpec::Pid { .. } => "pid",
+            ErrorForceSpec::PidResidual { .. } => "pid_residual",
+            ErrorForceSpec::Arx { .. } => "arx",
+        }
+    }
 }
 
 impl ErrorForceSpec {
@@ -34,6 +59,27 @@ impl ErrorForceSpec {
                 check("d", d)
             }
             ErrorForceSpec::PidResidual { p } => check("p", p),
+            ErrorForceSpec::Arx { order, lambda, p0 } => {
+                if !(2..=12).contains(&order) {
+                    return Err(Error::invalid(
+                        "substructure.error_force.order",
+                        format!("must be in 2..=12, got {order}"),
+                    ));
+                }
+                if !(lambda.is_finite() && lambda > 0.0 && lambda <= 1.0) {
+                    return Err(Error::invalid(
+                        "substructure.error_force.forgetting_factor",
+                        format!("must be in (0, 1], got {lambda}"),
+                    ));
+                }
+                if !(p0.is_finite() && p0 > 0.0) {
+                    return Err(Error::invalid(
+                        "substructure.error_force.p0",
+                        format!("must be a finite number > 0, got {p0}"),
+                    ));
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -75,6 +121,8 @@ impl ErrorForceCompensation {
                     f_u[k] = p * (e[k] - f_u[k]);
                 }
             }
+            // The estimation's error force is already the mismatch of the prediction: P = 1.
+            ErrorForceSpec::Arx { .. } => f_u.copy_from_slice(e),
         }
     }
 

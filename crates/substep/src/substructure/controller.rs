@@ -6,6 +6,7 @@
 //! [`SubstepController::finish_step`]. None of them allocates.
 
 use super::compensation::{ErrorForceCompensation, ErrorForceSpec};
+use super::estimation::{EstimationOutcome, EstimationStats, ForceEstimation};
 use crate::error::{Error, Result};
 use crate::integrate::{Kinematics, NewmarkCore};
 use crate::model::ModelRef;
@@ -51,6 +52,8 @@ pub struct SubstepController {
     command: DVector<f64>,
     /// Sub-steps done in the current step.
     substep: usize,
+    /// Error-force compensation by estimation and the ideal error force (see the block at the end).
+    est: EstimationState,
 }
 
 impl SubstepController {
@@ -92,6 +95,7 @@ impl SubstepController {
         core.solve_columns_in_place(&mut gain_columns);
         let gain_cc = DMatrix::from_fn(n_c, n_c, |r, k| gain_columns[(settings.coupling_dofs[r], k)]);
         let state = Kinematics::at_rest(model, load0)?;
+        let est = EstimationState::new(&settings.error_force, &gain_cc, &settings.coupling_dofs, load0)?;
         Ok(Self {
             core,
             k_sub: settings.substeps,
@@ -111,6 +115,7 @@ impl SubstepController {
             compensation: ErrorForceCompensation::new(settings.error_force, n_c)?,
             command: DVector::zeros(n_c),
             substep: 0,
+            est,
         })
     }
 
@@ -177,6 +182,7 @@ impl SubstepController {
         self.force_last.copy_from(&self.force);
         self.force_before.copy_from(&self.force);
         self.substep = 0;
+        self.estimation_begin_step(load_next);
     }
 
     /// Step 2: the command `d^{(j)} = (1 − r_j) x̂_c^{(i)} + r_j x̂_c + G_cc f^{(j−1)}` of the next
@@ -188,6 +194,9 @@ impl SubstepController {
         self.command.scale_mut(1.0 - r);
         self.command.axpy(r, &self.predictor_c, 1.0);
         self.command.gemv(1.0, &self.gain_cc, &self.force_last, 1.0);
+        if self.substep + 1 == self.k_sub {
+            self.estimated_last_command();
+        }
         self.command.as_slice()
     }
 
@@ -195,6 +204,7 @@ impl SubstepController {
     pub fn feedback(&mut self, measured_force: &[f64]) {
         std::mem::swap(&mut self.force_before, &mut self.force_last);
         self.force_last.copy_from_slice(measured_force);
+        self.observe_substep();
         self.substep += 1;
     }
 
@@ -202,17 +212,20 @@ impl SubstepController {
     /// compensation for the next step.
     pub fn finish_step(&mut self) {
         debug_assert_eq!(self.substep, self.k_sub, "finish_step before all sub-steps");
-        // u_{i+1} = x̂ + G_{:,c} f^{(k−1)}; on the coupling DOFs this is d^{(k)}.
+        // u_{i+1} = x̂ + G_{:,c} f_close with f_close = f^{(k−1)} (or the estimate f̂^{(k)});
+        // on the coupling DOFs this is d^{(k)}.
+        self.select_closing_force();
         self.next.u.copy_from(&self.predictor);
-        self.next.u.gemv(1.0, &self.gain_columns, &self.force_before, 1.0);
+        self.next.u.gemv(1.0, &self.gain_columns, &self.est.closing_force, 1.0);
         for (k, &c) in self.coupling.iter().enumerate() {
             self.next.u[c] = self.command[k];
         }
         self.core.update_kinematics(&self.state, &mut self.next);
         std::mem::swap(&mut self.state, &mut self.next);
         for k in 0..self.coupling.len() {
-            self.error_force[k] = self.force_last[k] - self.force_before[k];
+            self.error_force[k] = self.force_last[k] - self.est.closing_force[k];
         }
+        self.finish_ideal_error_force();
         self.force.copy_from(&self.force_last);
         self.predictor_c_prev.copy_from(&self.predictor_c);
         self.compensation
@@ -338,5 +351,183 @@ impl SubstepController {
         self.force_last.copy_from(&self.force);
         self.force_before.copy_from(&self.force);
         self.substep = 0;
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Error-force compensation by estimation (spec §4) and the ideal error force of virtual tests.
+// ---------------------------------------------------------------------------------------------
+
+/// State of the estimation and of the noise-free bookkeeping; see [`super::estimation`].
+struct EstimationState {
+    estimation: Option<ForceEstimation>,
+    /// The force the step was closed with: `f^{(k−1)}` (plain) or `f̂^{(k)}` (estimation).
+    closing_force: DVector<f64>,
+    /// Noise-free forces `f°^{(j)}` and `f°^{(j−1)}`, if the site reports them.
+    true_last: Vec<f64>,
+    true_before: Vec<f64>,
+    /// Set by `feedback_true` for the coming `feedback`.
+    true_pending: bool,
+    /// External load on the coupling DOFs at the start and the end of the step (`f_l,i`,
+    /// `f_l,i+1`), interpolated over the sub-steps: the estimation's load input `w`.
+    load_prev: Vec<f64>,
+    load_next: Vec<f64>,
+    /// Whether the last sub-step of the step came with a noise-free force.
+    true_seen: bool,
+    ideal_error_force: Vec<f64>,
+}
+
+impl EstimationState {
+    fn new(spec: &ErrorForceSpec, gain_cc: &DMatrix<f64>, coupling: &[usize], load0: &DVector<f64>) -> Result<Self> {
+        let n_c = gain_cc.nrows();
+        let estimation = match *spec {
+            ErrorForceSpec::Arx { order, lambda, p0 } => {
+                spec.validate()?;
+                Some(ForceEstimation::new(order, lambda, p0, gain_cc)?)
+            }
+            _ => None,
+        };
+        Ok(Self {
+            estimation,
+            closing_force: DVector::zeros(n_c),
+            true_last: vec![0.0; n_c],
+            true_before: vec![0.0; n_c],
+            true_pending: false,
+            load_prev: vec![0.0; n_c],
+            load_next: coupling.iter().map(|&c| load0[c]).collect(),
+            true_seen: false,
+            ideal_error_force: vec![f64::NAN; n_c],
+        })
+    }
+}
+
+impl SubstepController {
+    /// The noise-free force `f°^{(j)}` of the coming [`feedback`](Self::feedback) (virtual tests:
+    /// [`crate::transfer::VirtualLab::true_force`]). Optional; with it the controller computes the
+    /// [ideal error force](Self::ideal_error_force).
+    pub fn feedback_true(&mut self, true_force: &[f64]) {
+        std::mem::swap(&mut self.est.true_before, &mut self.est.true_last);
+        self.est.true_last.copy_from_slice(true_force);
+        self.est.true_pending = true;
+    }
+
+    /// The ideal value of the error force of the last step (and, with P = 1 or the estimation,
+    /// of the compensation force): the same formula evaluated with the noise-free forces in place
+    /// of the measured ones, with the same commands and model parameters —
+    /// `f°^{(k)} − f°^{(k−1)}` for none/PID and for steps the estimation closed with the plain
+    /// algorithm, `f°^{(k)} − [Σ A_l f°^{(k−l)} + Σ B_l d^{(k−l)}]` for steps it closed with the
+    /// estimate. `None` if the site did not report noise-free forces
+    /// ([`feedback_true`](Self::feedback_true)).
+    pub fn ideal_error_force(&self) -> Option<&[f64]> {
+        self.est.true_seen.then_some(self.est.ideal_error_force.as_slice())
+    }
+
+    /// The coupling force the last step was closed with: `f^{(k−1)}`, or the estimate `f̂^{(k)}`
+    /// (error force `e = f^{(k)} −` this).
+    pub fn closing_force(&self) -> &[f64] {
+        self.est.closing_force.as_slice()
+    }
+
+    /// Counts of how the estimation closed the steps (`None` unless `error_force` is `arx`).
+    pub fn estimation_stats(&self) -> Option<EstimationStats> {
+        self.est.estimation.as_ref().map(|e| e.stats)
+    }
+
+    /// How the last step was closed by the estimation (`None` unless `error_force` is `arx`).
+    pub fn estimation_outcome(&self) -> Option<EstimationOutcome> {
+        self.est.estimation.as_ref().map(|e| e.outcome)
+    }
+
+    /// The identified `[A_1 … A_n, B_0 … B_n, C_0 … C_n]` (B in N/m, C for the load input,
+    /// dimensionless) of coupling DOF `m` (`None` unless `error_force` is `arx`). Allocates.
+    pub fn estimation_parameters(&self, m: usize) -> Option<Vec<f64>> {
+        self.est.estimation.as_ref().map(|e| {
+            let mut out = vec![0.0; e.n_params()];
+            e.parameters(m, &mut out);
+            out
+        })
+    }
+
+    /// `Ok` if one step is a linear map of [`write_state`](Self::write_state)'s state (for the
+    /// amplification-matrix analysis). The estimation adapts on line, switches between the
+    /// estimate and the plain algorithm, and its histories are not part of the state: refused.
+    pub fn is_linear(&self) -> Result<()> {
+        if self.est.estimation.is_some() {
+            return Err(Error::invalid(
+                "substructure.error_force",
+                "error_force.kind = \"arx\" (estimation) identifies its model on line and switches to \
+                 the plain algorithm when its guards trip; the linear analysis does not support it",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Last sub-step: replace the plain command by the one consistent with the estimate, if the
+    /// estimation is on and ready.
+    fn estimated_last_command(&mut self) {
+        if let Some(est) = self.est.estimation.as_mut() {
+            est.last_command(
+                &self.predictor_c,
+                &self.est.load_next,
+                &self.gain_cc,
+                &self.force_last,
+                &mut self.command,
+            );
+        }
+    }
+
+    fn estimation_begin_step(&mut self, load_next: &DVector<f64>) {
+        if self.est.estimation.is_none() {
+            return;
+        }
+        std::mem::swap(&mut self.est.load_prev, &mut self.est.load_next);
+        for (k, &c) in self.coupling.iter().enumerate() {
+            self.est.load_next[k] = load_next[c];
+        }
+    }
+
+    /// After `f^{(j)}` is stored in `force_last`: update the estimators.
+    fn observe_substep(&mut self) {
+        let with_true = self.est.true_pending;
+        self.est.true_pending = false;
+        self.est.true_seen = with_true;
+        if let Some(est) = self.est.estimation.as_mut() {
+            // Load input of sub-step j = substep + 1, linear over the step.
+            let r = (self.substep + 1) as f64 / self.k_sub as f64;
+            for m in 0..self.coupling.len() {
+                let w = (1.0 - r) * self.est.load_prev[m] + r * self.est.load_next[m];
+                let ft = with_true.then(|| self.est.true_last[m]);
+                est.observe(m, self.command[m], w, self.force_last[m], ft);
+            }
+        }
+    }
+
+    fn select_closing_force(&mut self) {
+        match self.est.estimation.as_mut() {
+            Some(est) if est.active => self.est.closing_force.copy_from_slice(&est.closing),
+            _ => self.est.closing_force.copy_from(&self.force_before),
+        }
+        if let Some(est) = self.est.estimation.as_mut() {
+            est.count_step();
+        }
+    }
+
+    fn finish_ideal_error_force(&mut self) {
+        let est = &mut self.est;
+        if !est.true_seen {
+            est.ideal_error_force.iter_mut().for_each(|v| *v = f64::NAN);
+            return;
+        }
+        let active = est.estimation.as_ref().is_some_and(|e| e.active);
+        for m in 0..est.ideal_error_force.len() {
+            let closing = match &est.estimation {
+                Some(e) if active => e.ideal_prediction(m),
+                _ => est.true_before[m],
+            };
+            est.ideal_error_force[m] = est.true_last[m] - closing;
+        }
+        if let Some(e) = est.estimation.as_mut() {
+            e.active = false;
+        }
     }
 }

@@ -9,11 +9,13 @@
 
 mod compensation;
 mod controller;
+mod estimation;
 mod safety;
 mod test_run;
 
 pub use compensation::{ErrorForceCompensation, ErrorForceSpec};
 pub use controller::{SubstepController, SubstepSettings};
+pub use estimation::{EstimationOutcome, EstimationStats};
 pub use safety::{LimitedSite, SafetyLimits};
 pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
 
@@ -41,4 +43,19 @@ pub trait ExperimentalSubstructure: Send {
     fn state_len(&self) -> usize;
     fn write_state(&self, out: &mut [f64]);
     fn read_state(&mut self, state: &[f64]);
+
+    /// The noise-free force on the numerical substructure at the end of the last sub-step, if the
+    /// side knows it (virtual lab; used for the ideal error force). Default: `None`.
+    fn true_force(&self) -> Option<&[f64]> {
+        None
+    }
+    /// The noise-free achieved coupling displacement at the end of the last sub-step, if known
+    /// (virtual lab). Default: `None`.
+    fn true_displacement(&self) -> Option<&[f64]> {
+        None
+    }
+    /// Phase-lag compensation of this side, if it has one ([`crate::compensate::CompensatedSite`]).
+    fn phase_lag(&self) -> Option<&dyn crate::compensate::PhaseLagReport> {
+        None
+    }
 }

@@ -8,6 +8,9 @@ use nalgebra::DVector;
 /// Receives every sub-step (for `substeps.csv` or live plots). The default does nothing.
 pub trait SubstepObserver {
     fn substep(&mut self, _step: usize, _j: usize, _command: &[f64], _force: &[f64], _displacement: &[f64]) {}
+    /// With phase-lag compensation: the tracking error `d − y` and the correction `Δu` of the
+    /// sub-step, called just before [`substep`](Self::substep) for the same sub-step.
+    fn phase_lag(&mut self, _tracking_error: &[f64], _correction: &[f64]) {}
 }
 
 impl SubstepObserver for () {}
@@ -87,6 +90,9 @@ impl SubstructureTest {
             if let Err(e) = result {
                 return Err(self.stopped(e));
             }
+            if let Some(p) = self.site.phase_lag() {
+                observer.phase_lag(p.tracking_error(), p.correction());
+            }
             observer.substep(
                 self.step + 1,
                 j,
@@ -94,6 +100,9 @@ impl SubstructureTest {
                 &self.measured_force,
                 &self.measured_displacement,
             );
+            if let Some(true_force) = self.site.true_force() {
+                self.controller.feedback_true(true_force);
+            }
             self.controller.feedback(&self.measured_force);
         }
         self.controller.finish_step();

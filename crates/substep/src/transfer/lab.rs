@@ -227,6 +227,13 @@ impl ExperimentalSubstructure for VirtualLab {
         Ok(())
     }
 
+    fn true_force(&self) -> Option<&[f64]> {
+        Some(&self.true_force)
+    }
+    fn true_displacement(&self) -> Option<&[f64]> {
+        Some(&self.achieved_start)
+    }
+
     fn is_linear(&self) -> Result<()> {
         for (k, s) in self.specimens.iter().enumerate() {
             if !s.specimen.is_linear() {

@@ -1,0 +1,196 @@
+//! `substep run` with error-force compensation by estimation and phase-lag compensation:
+//! the extra columns, `summary.json`, guard warnings and bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const DEFAULT: &str = include_str!("../../../examples/default.toml");
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("substep-comp-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn substep(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_substep"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("the substep binary runs")
+}
+
+/// The default example, 8 s, with `error_force` replaced and `extra` appended.
+fn config(dir: &Path, error_force: &str, extra: &str) -> PathBuf {
+    let text = DEFAULT.replace("duration = 20.0", "duration = 8.0").replace(
+        "kind = \"pid\"                       # feed the last sub-step's force change into the next step\np = 1.0",
+        error_force,
+    );
+    assert!(text.contains(error_force));
+    let path = dir.join("c.toml");
+    std::fs::write(&path, format!("{text}\n{extra}\n")).unwrap();
+    path
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn estimation_and_phase_lag_runs_record_their_columns_and_counts() {
+    let dir = temp_dir("both");
+    let cfg = config(
+        &dir,
+        "kind = \"arx\"\norder = 3",
+        "[substructure.phase_lag]\nkind = \"arx\"\nramp_steps = 50",
+    );
+    let out = substep(
+        &dir,
+        &["run", cfg.to_str().unwrap(), "--out", "out", "--no-plots", "--quiet"],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let history = std::fs::read_to_string(dir.join("out/history.csv")).unwrap();
+    let mut rows = history.lines();
+    assert_eq!(rows.next().unwrap(), "t,u1,v1,a1,fc1,fe1,fu1,dm1,fei1,te1,du1,uref1");
+    assert!(rows.all(|r| !r.contains("NaN") && !r.contains("inf")));
+    let substeps = std::fs::read_to_string(dir.join("out/substeps.csv")).unwrap();
+    assert_eq!(substeps.lines().next().unwrap(), "step,substep,t,cmd1,fm1,dm1,te1,du1");
+    let s = json(&dir.join("out/summary.json"));
+    assert_eq!(s["completed"], true);
+    assert_eq!(s["substructure"]["error_force"]["kind"], "arx");
+    assert_eq!(s["substructure"]["phase_lag"]["kind"], "arx");
+    assert_eq!(s["substructure"]["phase_lag"]["k_lag"], 1);
+    let est = &s["estimation"];
+    assert_eq!(est["steps"], 800);
+    assert!(est["estimated"].as_u64().unwrap() > 700, "{est}");
+    assert_eq!(s["phase_lag"]["disabled"].as_array().unwrap().len(), 0);
+    assert!(s.get("warnings").is_none());
+}
+
+#[test]
+fn a_tripped_phase_lag_guard_is_a_warning_in_the_summary_and_commands_stay_finite() {
+    let dir = temp_dir("trip");
+    // A bound of 1e-9 × the target range: the first correction trips it.
+    let cfg = config(
+        &dir,
+        "kind = \"pid\"\np = 1.0",
+        "[substructure.phase_lag]\nkind = \"polynomial\"\nlead_substeps = 4.0\nguard_factor = 1e-9\nramp_steps = 1",
+    );
+    let out = substep(&dir, &["run", cfg.to_str().unwrap(), "--out", "out", "--no-plots"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("warning: phase-lag compensator of coupling DOF 1 disabled by its guard"),
+        "{stdout}"
+    );
+    let s = json(&dir.join("out/summary.json"));
+    let w = s["warnings"].as_array().unwrap();
+    assert!(
+        w[0].as_str().unwrap().contains("disabled by its guard: correction"),
+        "{w:?}"
+    );
+    assert_eq!(s["phase_lag"]["disabled"][0]["dof"], 1);
+    let substeps = std::fs::read_to_string(dir.join("out/substeps.csv")).unwrap();
+    for row in substeps.lines().skip(1) {
+        let cmd: f64 = row.split(',').nth(3).unwrap().parse().unwrap();
+        assert!(cmd.is_finite(), "{row}");
+    }
+}
+
+#[test]
+fn bad_compensation_values_are_input_errors_naming_the_key() {
+    let dir = temp_dir("bad");
+    for (ef, extra, key) in [
+        ("kind = \"arx\"\norder = 13", "", "substructure.error_force.order"),
+        (
+            "kind = \"arx\"\nforgetting_factor = 1.2",
+            "",
+            "substructure.error_force.forgetting_factor",
+        ),
+        (
+            "kind = \"pid\"",
+            "[substructure.phase_lag]\nkind = \"arx\"\nk_lag = 20000",
+            "substructure.phase_lag.k_lag",
+        ),
+        (
+            "kind = \"pid\"",
+            "[substructure.phase_lag]\nkind = \"polynomial\"\norder = 0",
+            "substructure.phase_lag.order",
+        ),
+    ] {
+        let cfg = config(&dir, ef, extra);
+        let out = substep(&dir, &["run", cfg.to_str().unwrap(), "--out", "out", "--no-plots"]);
+        assert_eq!(out.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(key), "{err}");
+    }
+}
+
+/// `substep analyze stability --phase-lag polynomial:2`: the stable share of a delayed case grows.
+#[test]
+fn stability_map_with_a_frozen_compensator() {
+    let dir = temp_dir("stab");
+    let share = |extra: &[&str]| -> f64 {
+        let mut args = vec![
+            "analyze",
+            "stability",
+            "--eta-p",
+            "1",
+            "--k-sub",
+            "2",
+            "--omega",
+            "0.05:1.5:30",
+            "--vary",
+            "zeta_s=0:0.5:11",
+            "--no-plots",
+            "--out",
+            "a",
+        ];
+        args.extend_from_slice(extra);
+        let out = substep(&dir, &args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        let line = stdout.lines().find(|l| l.contains("k_sub = 2:")).unwrap().to_string();
+        line.split(": ")
+            .nth(1)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let none = share(&[]);
+    let with = share(&["--phase-lag", "polynomial:2"]);
+    assert!(with > none + 5.0, "{with} vs {none}");
+    let out = substep(&dir, &["analyze", "stability", "--phase-lag", "smith:2"]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
+/// `substep vst --quick`: the table, the CSV and the plots are written.
+#[test]
+fn vst_quick_writes_its_outputs() {
+    let dir = temp_dir("vst");
+    let out = substep(&dir, &["vst", "--quick", "--out", "v", "--quiet"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let md = std::fs::read_to_string(dir.join("v/vst.md")).unwrap();
+    assert!(md.contains("| (d) both: (b) + (c) |"), "{md}");
+    assert!(md.contains("## Acceptance checks (computed by the tool)"));
+    let csv = std::fs::read_to_string(dir.join("v/vst.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 15);
+    for png in [
+        "vst_displacement",
+        "vst_force",
+        "vst_force_error",
+        "vst_hysteresis",
+        "vst_tracking",
+        "vst_compensation",
+        "vst_compensation_spectrum",
+    ] {
+        let b = std::fs::read(dir.join(format!("v/{png}.png"))).unwrap();
+        assert!(b.starts_with(b"\x89PNG"), "{png}");
+    }
+    let bad = substep(&dir, &["vst", "--quick", "--delay", "-1"]);
+    assert_eq!(bad.status.code(), Some(2));
+}
