@@ -83,7 +83,10 @@ impl RealtimeRunner {
                 "is not the model the substructure test was built from",
             ));
         }
-        if matches!(test.controller.compensation().spec, crate::substructure::ErrorForceSpec::Arx { .. }) {
+        if matches!(
+            test.controller.compensation().spec,
+            crate::substructure::ErrorForceSpec::Arx { .. }
+        ) {
             // The estimation changes the last command of each step from the identified model;
             // the real-time coupling loop only mirrors the plain ramp.
             return Err(Error::invalid(

@@ -725,17 +725,6 @@ impl RemoteStepTest {
     }
 
     pub fn record(&self) -> StepRecord<'_> {
-        let s = self.controller.state();
-        StepRecord {
-            step: self.step,
-            time: self.step as f64 * self.controller.dt(),
-            u: s.u.as_slice(),
-            v: s.v.as_slice(),
-            a: s.a.as_slice(),
-            coupling_force: self.controller.coupling_force(),
-            error_force: self.controller.error_force(),
-            compensation_force: self.controller.compensation_force(),
-            measured_displacement: &self.measured_displacement,
-        }
+        StepRecord::of(&self.controller, self.step, &self.measured_displacement)
     }
 }

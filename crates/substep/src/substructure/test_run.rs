@@ -28,6 +28,25 @@ pub struct StepRecord<'a> {
     pub measured_displacement: &'a [f64],
 }
 
+impl<'a> StepRecord<'a> {
+    /// The record of `controller`'s last completed step `step` (shared by every driver of the
+    /// controller: offline, remote per-step).
+    pub fn of(controller: &'a SubstepController, step: usize, measured_displacement: &'a [f64]) -> Self {
+        let s = controller.state();
+        StepRecord {
+            step,
+            time: step as f64 * controller.dt(),
+            u: s.u.as_slice(),
+            v: s.v.as_slice(),
+            a: s.a.as_slice(),
+            coupling_force: controller.coupling_force(),
+            error_force: controller.error_force(),
+            compensation_force: controller.compensation_force(),
+            measured_displacement,
+        }
+    }
+}
+
 /// A substructure test: controller + experimental side + ground motion load.
 pub struct SubstructureTest {
     pub controller: SubstepController,
@@ -152,17 +171,6 @@ impl SubstructureTest {
     }
 
     pub fn record(&self) -> StepRecord<'_> {
-        let s = self.controller.state();
-        StepRecord {
-            step: self.step,
-            time: self.step as f64 * self.controller.dt(),
-            u: s.u.as_slice(),
-            v: s.v.as_slice(),
-            a: s.a.as_slice(),
-            coupling_force: self.controller.coupling_force(),
-            error_force: self.controller.error_force(),
-            compensation_force: self.controller.compensation_force(),
-            measured_displacement: &self.measured_displacement,
-        }
+        StepRecord::of(&self.controller, self.step, &self.measured_displacement)
     }
 }
