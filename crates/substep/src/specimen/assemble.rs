@@ -1,7 +1,8 @@
 //! The monolithic model of a numerical substructure plus linear specimens, for either storage.
 
+use super::spec::SpecimenScatter;
 use super::{SpecimenSpec, assemble_monolithic};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::model::{Model, SparseModel};
 use crate::sparse::CscMatrix;
 use nalgebra::DVector;
@@ -19,37 +20,17 @@ pub fn assemble_monolithic_model(model: &Model, specimens: &[SpecimenSpec]) -> R
 /// The sparse counterpart of [`assemble_monolithic`].
 pub fn assemble_monolithic_sparse(model: &SparseModel, specimens: &[SpecimenSpec]) -> Result<SparseModel> {
     let n = model.n_dofs();
-    let mut parts = Vec::with_capacity(specimens.len());
-    for (k, s) in specimens.iter().enumerate() {
-        let m = s.linear_matrices().ok_or_else(|| {
-            Error::invalid(
-                format!("substructure.specimen[{}]", k + 1),
-                format!("the {} specimen is not linear", s.kind()),
-            )
-        })?;
-        parts.push(m);
-    }
-    let total = n + parts.iter().map(|p| p.stiffness.nrows() - p.dofs.len()).sum::<usize>();
+    let scatter = SpecimenScatter::new(n, specimens)?;
+    let total = scatter.total;
     let mut iota = DVector::zeros(total);
     iota.rows_mut(0, n).copy_from(&model.influence);
-    let (mut tm, mut tc, mut tk) = (Vec::new(), Vec::new(), Vec::new());
-    let mut next = n;
-    for p in &parts {
-        let n_a = p.dofs.len();
-        let n_p = p.stiffness.nrows();
-        let global: Vec<usize> = p.dofs.iter().copied().chain(next..next + n_p - n_a).collect();
-        for (li, &gi) in global.iter().enumerate() {
-            if li >= n_a {
-                iota[gi] = p.influence[li];
-            }
-            for (lj, &gj) in global.iter().enumerate() {
-                tm.push((gi, gj, p.mass[(li, lj)]));
-                tc.push((gi, gj, p.damping[(li, lj)]));
-                tk.push((gi, gj, p.stiffness[(li, lj)]));
-            }
-        }
-        next += n_p - n_a;
+    for &(i, v) in &scatter.influence {
+        iota[i] = v;
     }
+    let triplets = |pick: fn(&(usize, usize, f64, f64, f64)) -> f64| -> Vec<(usize, usize, f64)> {
+        scatter.entries.iter().map(|e| (e.0, e.1, pick(e))).collect()
+    };
+    let (tm, tc, tk) = (triplets(|e| e.2), triplets(|e| e.3), triplets(|e| e.4));
     let add = |a: &CscMatrix, t: &[(usize, usize, f64)]| {
         CscMatrix::linear_combination(&[(1.0, &a.grown(total)), (1.0, &CscMatrix::from_triplets(total, t))])
     };

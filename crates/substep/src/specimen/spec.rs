@@ -154,22 +154,57 @@ impl SpecimenSpec {
     }
 }
 
+/// The specimens' contribution to the monolithic model of a numerical substructure with `n`
+/// DOFs: internal specimen DOFs are appended after the model's DOFs, in specimen order.
+pub(crate) struct SpecimenScatter {
+    /// DOFs of the assembled model.
+    pub total: usize,
+    /// `(global DOF, ι)` of the appended internal DOFs.
+    pub influence: Vec<(usize, f64)>,
+    /// `(row, column, m, c, k)` to add to the assembled matrices.
+    pub entries: Vec<(usize, usize, f64, f64, f64)>,
+}
+
+impl SpecimenScatter {
+    /// Errors name the first nonlinear specimen.
+    pub fn new(n: usize, specimens: &[SpecimenSpec]) -> Result<Self> {
+        let mut out = Self {
+            total: n,
+            influence: Vec::new(),
+            entries: Vec::new(),
+        };
+        for (k, s) in specimens.iter().enumerate() {
+            let p = s.linear_matrices().ok_or_else(|| {
+                Error::invalid(
+                    format!("substructure.specimen[{}]", k + 1),
+                    format!("the {} specimen is not linear", s.kind()),
+                )
+            })?;
+            let (n_a, n_p) = (p.dofs.len(), p.stiffness.nrows());
+            let next = out.total;
+            let global: Vec<usize> = p.dofs.iter().copied().chain(next..next + n_p - n_a).collect();
+            for (li, &gi) in global.iter().enumerate() {
+                if li >= n_a {
+                    out.influence.push((gi, p.influence[li]));
+                }
+                for (lj, &gj) in global.iter().enumerate() {
+                    out.entries
+                        .push((gi, gj, p.mass[(li, lj)], p.damping[(li, lj)], p.stiffness[(li, lj)]));
+                }
+            }
+            out.total += n_p - n_a;
+        }
+        Ok(out)
+    }
+}
+
 /// The monolithic model of the numerical substructure plus all (linear) specimens: internal
 /// specimen DOFs are appended after the model's DOFs, in specimen order. Errors name the first
 /// nonlinear specimen.
 pub fn assemble_monolithic(model: &StructuralModel, specimens: &[SpecimenSpec]) -> Result<StructuralModel> {
     let n = model.n_dofs();
-    let mut parts = Vec::with_capacity(specimens.len());
-    for (k, s) in specimens.iter().enumerate() {
-        let m = s.linear_matrices().ok_or_else(|| {
-            Error::invalid(
-                format!("substructure.specimen[{}]", k + 1),
-                format!("the {} specimen is not linear", s.kind()),
-            )
-        })?;
-        parts.push(m);
-    }
-    let total = n + parts.iter().map(|p| p.stiffness.nrows() - p.dofs.len()).sum::<usize>();
+    let scatter = SpecimenScatter::new(n, specimens)?;
+    let total = scatter.total;
     let grow = |a: &DMatrix<f64>| {
         let mut b = DMatrix::zeros(total, total);
         b.view_mut((0, 0), (n, n)).copy_from(a);
@@ -178,22 +213,13 @@ pub fn assemble_monolithic(model: &StructuralModel, specimens: &[SpecimenSpec]) 
     let (mut mm, mut cc, mut kk) = (grow(&model.mass), grow(&model.damping), grow(&model.stiffness));
     let mut iota = DVector::zeros(total);
     iota.rows_mut(0, n).copy_from(&model.influence);
-    let mut next = n;
-    for p in &parts {
-        let n_a = p.dofs.len();
-        let n_p = p.stiffness.nrows();
-        let global: Vec<usize> = p.dofs.iter().copied().chain(next..next + n_p - n_a).collect();
-        for (li, &gi) in global.iter().enumerate() {
-            if li >= n_a {
-                iota[gi] = p.influence[li];
-            }
-            for (lj, &gj) in global.iter().enumerate() {
-                mm[(gi, gj)] += p.mass[(li, lj)];
-                cc[(gi, gj)] += p.damping[(li, lj)];
-                kk[(gi, gj)] += p.stiffness[(li, lj)];
-            }
-        }
-        next += n_p - n_a;
+    for &(i, v) in &scatter.influence {
+        iota[i] = v;
+    }
+    for &(i, j, m, c, k) in &scatter.entries {
+        mm[(i, j)] += m;
+        cc[(i, j)] += c;
+        kk[(i, j)] += k;
     }
     StructuralModel::new(mm, cc, kk, Some(iota))
 }
