@@ -12,7 +12,7 @@
 use super::protocol::{HEADER_LEN, Header, Hello, MAX_DATAGRAM, Message, Mode, Session, StepReply, StepRequest};
 use super::transport::{LinkError, read_frame, write_all};
 use crate::error::{Error, Result};
-use crate::model::StructuralModel;
+use crate::model::ModelRef;
 use crate::substructure::{ExperimentalSubstructure, StepRecord, SubstepController, SubstepObserver};
 use nalgebra::DVector;
 use std::io;
@@ -647,7 +647,12 @@ pub struct RemoteStepTest {
 
 impl RemoteStepTest {
     /// The site must have been connected with this controller's handshake.
-    pub fn new(model: &StructuralModel, controller: SubstepController, site: RemoteStepSite) -> Result<Self> {
+    pub fn new<'a>(
+        model: impl Into<ModelRef<'a>>,
+        controller: SubstepController,
+        site: RemoteStepSite,
+    ) -> Result<Self> {
+        let model = model.into();
         let expected = Hello::from_controller(&controller, Mode::PerStep);
         let h = site.client.hello();
         let same = h.n_coupling == expected.n_coupling
