@@ -5,6 +5,9 @@
 //! controller that drives the coupling DOFs of an experimental substructure, error-force and
 //! phase-lag compensation, and the accuracy/stability analysis of the whole algorithm.
 //!
+//! Large numerical substructures use sparse storage ([`model::SparseModel`], [`sparse`]):
+//! banded or sparse Cholesky of the effective stiffness, factorised once, allocation-free steps.
+//!
 //! Equations and sign conventions follow `shared/spec/algorithm.md`; units are SI throughout.
 //! The numerical core does no I/O; readers for ground-motion files live in [`excitation`],
 //! MatrixMarket and TOML test definitions (and the runner for a defined test) in [`io`].

@@ -2,7 +2,7 @@
 //! DOFs per node (`ux`, `uy`, `θ`), fixed base, lumped masses, optional rigid floor diaphragm.
 //!
 //! DOF numbering (0-based here, 1-based in configs) goes floor by floor from the first floor
-//! up, so the half-bandwidth is about one floor (`3 (bays + 1) + 2`):
+//! up, so the half-bandwidth is about one floor (`3 (bays + 1) + 2` without a diaphragm):
 //! * without diaphragm, node `(level s ≥ 1, column line c)` has `ux, uy, θ` at
 //!   `3 ((s − 1)(bays + 1) + c) + 0, 1, 2`;
 //! * with a rigid diaphragm, floor `s` has one horizontal DOF shared by its nodes at
