@@ -165,11 +165,10 @@ pub fn bench_model(model: BenchModel, dofs: usize, steps: usize, substeps: usize
         load.scale_mut(-a1);
         ctrl.begin_step(&load);
         for j in 1..=substeps {
-            let (r0, r1) = ((j - 1) as f64 / substeps as f64, j as f64 / substeps as f64);
             let command = ctrl.next_command();
             lab.substep(
                 command,
-                (a0 + r0 * (a1 - a0), a0 + r1 * (a1 - a0)),
+                substep::substructure::substep_ground_acceleration(a0, a1, j, substeps),
                 dtau,
                 &mut force,
                 &mut disp,

@@ -627,8 +627,7 @@ impl RealTime<'_> {
                     self.stats.rebased += 1;
                 }
                 let end = self.t0 + step_start + Duration::from_nanos(self.slot_offset(dt_ns, holds, j));
-                let (r0, r1) = ((j - 1) as f64 / k as f64, j as f64 / k as f64);
-                let ag = (ag_i + r0 * (ag_next - ag_i), ag_i + r1 * (ag_next - ag_i));
+                let ag = crate::substructure::substep_ground_acceleration(ag_i, ag_next, j, k);
                 let command = self.coupling.next_command();
                 self.site
                     .substep(command, ag, dtau_slot, &mut self.force, &mut self.displacement)?;

@@ -95,10 +95,4 @@ impl CommandRamp {
     }
 }
 
-/// Ground acceleration at the start and end of sub-step `j` (1-based) of `k`, interpolated
-/// linearly between `ag_i` and `ag_next` exactly as [`crate::substructure::SubstructureTest`]
-/// does.
-pub fn substep_ground_acceleration(ag_i: f64, ag_next: f64, j: usize, k: usize) -> (f64, f64) {
-    let (r0, r1) = ((j - 1) as f64 / k as f64, j as f64 / k as f64);
-    (ag_i + r0 * (ag_next - ag_i), ag_i + r1 * (ag_next - ag_i))
-}
+pub use crate::substructure::substep_ground_acceleration;

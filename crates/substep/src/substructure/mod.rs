@@ -21,6 +21,15 @@ pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
 
 use crate::error::Result;
 
+/// Ground acceleration at the start and end of sub-step `j` (1-based) of `k`, interpolated
+/// linearly between `a_g(t_i) = ag_i` and `a_g(t_{i+1}) = ag_next` (spec §3 step 2). Every driver
+/// of the controller (offline, real time, remote per-step sites, benchmarks) uses this one, so
+/// their results agree bit for bit.
+pub fn substep_ground_acceleration(ag_i: f64, ag_next: f64, j: usize, k: usize) -> (f64, f64) {
+    let (r0, r1) = ((j - 1) as f64 / k as f64, j as f64 / k as f64);
+    (ag_i + r0 * (ag_next - ag_i), ag_i + r1 * (ag_next - ag_i))
+}
+
 /// The experimental side as seen by the controller.
 pub trait ExperimentalSubstructure: Send {
     /// Number of coupling DOFs (actuators / load cells).

@@ -96,8 +96,7 @@ impl SubstructureTest {
         let k = self.controller.substeps();
         let dtau = self.controller.dt() / k as f64;
         for j in 1..=k {
-            let (r0, r1) = ((j - 1) as f64 / k as f64, j as f64 / k as f64);
-            let ag = (ag_i + r0 * (ag_next - ag_i), ag_i + r1 * (ag_next - ag_i));
+            let ag = super::substep_ground_acceleration(ag_i, ag_next, j, k);
             let command = self.controller.next_command();
             let result = self.site.substep(
                 command,
