@@ -10,6 +10,7 @@ pub mod frequency;
 pub mod spectral;
 pub mod stability;
 pub mod tmd_case;
+pub mod tracking;
 pub mod verify;
 
 pub use amplification::{Stability, StepMap};
