@@ -324,7 +324,7 @@ fn scanner_reports_each_kind_of_bad_reference_with_its_line() {
     let (s21, s4, s7, s99) = ("2.1", "4", "7", "9.9");
     let theory = "# T\n<a id=\"s1\"></a>\n## 1\n<a id=\"s1.2\"></a>\n### 1.2 Sign\nSee §1.2 and §1.3.\n";
     let lib = format!(
-        "//! ok: docs/theory.md §1.2, §1\n//! bad: docs/theory.md §1.2, §{s21}\n//! see {}/algorithm.md\n\
+        "//! ok: docs/theory.md §1.2, §1\n//! bad: docs/theory.md §1.2, §{s21}\n//! see {}/notes.md\n\
          //! the {} 3 step\n//! `theory.md` §{s7} and theory.md#s1.2 and theory.md#s{s99}.\n",
         FORBIDDEN[0], FORBIDDEN[3]
     );
