@@ -11,12 +11,13 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::sync::mpsc;
+use std::time::Duration;
 use substep::excitation::{parse_at2, parse_single_column, parse_two_column};
 use substep::io::site_config::SiteDefinition;
 use substep::io::{TestDefinition, parse_matrix_market, parse_matrix_market_sparse};
 
-const DEFAULT_CASES: usize = 1500;
+const DEFAULT_CASES: usize = 3000;
 const DEFAULT_SEED: u64 = 0x5eed_0011;
 
 fn cases() -> usize {
@@ -100,6 +101,26 @@ const VALUES: &[&str] = &[
     "-1e6", "3", "7", "\"x\"", "[]", "[1.0]", "true", "{}", "0x10", "1_0", "+1",
 ];
 
+/// With `SUBSTEP_FUZZ_EXTREME=1`, number literals also become these: the sizes and magnitudes
+/// of the size-limit and numerics work (issue 11, items 1 and 2). Off by default: until every
+/// such limit is in place a case may allocate gigabytes or iterate for minutes (run it under
+/// `ulimit -v`, see `docs/fuzzing.md`).
+const EXTREME: &[&str] = &[
+    "1e300",
+    "-1e300",
+    "1e60",
+    "1e20",
+    "1e9",
+    "100000",
+    "4294967296",
+    "18446744073709551615",
+    "1e-200",
+];
+
+fn extreme() -> bool {
+    std::env::var("SUBSTEP_FUZZ_EXTREME").is_ok_and(|v| v == "1")
+}
+
 struct Mutator {
     rng: ChaCha8Rng,
 }
@@ -172,7 +193,11 @@ impl Mutator {
                 let nums = Self::numbers(v);
                 if !nums.is_empty() {
                     let (s, e) = *self.pick(&nums);
-                    let value = *self.pick(VALUES);
+                    let value = if extreme() && self.rng.random_bool(0.3) {
+                        *self.pick(EXTREME)
+                    } else {
+                        *self.pick(VALUES)
+                    };
                     v.splice(s..e, value.bytes());
                 }
             }
@@ -230,59 +255,89 @@ fn save(target: &str, k: usize, input: &[u8]) -> PathBuf {
     path
 }
 
-/// Run `parse` on `cases()` inputs made from `seeds`: no panic, every refusal one line
-/// (non-empty, no line break, naming something as `thing: reason`), no case slower than
-/// `slow`. Returns (accepted, refused).
+/// What one case did (sent back by the worker thread).
+enum Outcome {
+    Accepted,
+    Refused(String),
+    Panicked(String),
+}
+
+const WORKER: &str = "fuzz-worker";
+
+/// Panics on the worker threads are caught and reported by [`fuzz`]; the default hook would
+/// print every one of them. Other threads keep the default hook (the failure message).
+fn quiet_workers() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let default = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if std::thread::current().name() != Some(WORKER) {
+                default(info)
+            }
+        }));
+    });
+}
+
+/// Run `parse` on `cases()` inputs made from `seeds` on a worker thread: no panic, every
+/// refusal one line (non-empty, no line break, naming something as `thing: reason`), every
+/// case done within `slow` (a hang fails the test instead of blocking it; the hung worker is
+/// left behind). Returns (accepted, refused).
 fn fuzz<T>(
     target: &str,
     seeds: &[String],
     slow: Duration,
-    parse: impl Fn(&str) -> substep::Result<T>,
+    parse: impl Fn(&str) -> substep::Result<T> + Send + 'static,
 ) -> (usize, usize) {
     for s in seeds {
         parse(s).unwrap_or_else(|e| panic!("{target}: a seed input is refused: {e}"));
     }
+    quiet_workers();
     let salt = target
         .bytes()
         .fold(0u64, |h, b| h.wrapping_mul(31).wrapping_add(b as u64));
     let mut m = Mutator {
         rng: ChaCha8Rng::seed_from_u64(seed() ^ salt),
     };
-    // The default panic hook would print every caught panic; the failure message says it all.
-    let hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    let (to_worker, inputs) = mpsc::channel::<String>();
+    let (send_outcome, outcomes) = mpsc::channel::<Outcome>();
+    let worker = std::thread::Builder::new()
+        .name(WORKER.into())
+        .spawn(move || {
+            for text in inputs {
+                let outcome = match catch_unwind(AssertUnwindSafe(|| parse(&text))) {
+                    Ok(Ok(_)) => Outcome::Accepted,
+                    Ok(Err(e)) => Outcome::Refused(e.to_string()),
+                    Err(p) => Outcome::Panicked(
+                        p.downcast_ref::<String>()
+                            .cloned()
+                            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                            .unwrap_or_default(),
+                    ),
+                };
+                if send_outcome.send(outcome).is_err() {
+                    break;
+                }
+            }
+        })
+        .unwrap();
     let (mut accepted, mut refused) = (0, 0);
     let mut failure = None;
     for k in 0..cases() {
         let input = m.case(k, seeds);
-        let text = String::from_utf8_lossy(&input);
-        let started = Instant::now();
-        let outcome = catch_unwind(AssertUnwindSafe(|| parse(&text)));
-        let took = started.elapsed();
-        let problem = match outcome {
-            Err(p) => {
-                let what = p
-                    .downcast_ref::<String>()
-                    .cloned()
-                    .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-                    .unwrap_or_default();
-                Some(format!("panicked: {what}"))
-            }
-            Ok(Ok(_)) => {
+        to_worker.send(String::from_utf8_lossy(&input).into_owned()).unwrap();
+        let problem = match outcomes.recv_timeout(slow) {
+            Err(_) => Some(format!("did not finish within {slow:?} (a hang?)")),
+            Ok(Outcome::Panicked(what)) => Some(format!("panicked: {what}")),
+            Ok(Outcome::Accepted) => {
                 accepted += 1;
                 None
             }
-            Ok(Err(e)) => {
+            Ok(Outcome::Refused(msg)) => {
                 refused += 1;
-                let msg = e.to_string();
-                if msg.is_empty() || msg.contains(['\n', '\r']) || !msg.contains(": ") {
-                    Some(format!("refusal is not one line naming the thing: {msg:?}"))
-                } else {
-                    None
-                }
+                let one_line = !msg.is_empty() && !msg.contains(['\n', '\r']) && msg.contains(": ");
+                (!one_line).then(|| format!("refusal is not one line naming the thing: {msg:?}"))
             }
         };
-        let problem = problem.or_else(|| (took > slow).then(|| format!("took {took:?} (limit {slow:?})")));
         if let Some(p) = problem {
             failure = Some(format!(
                 "{target}, case {k}: {p}; input in {}",
@@ -291,10 +346,11 @@ fn fuzz<T>(
             break;
         }
     }
-    std::panic::set_hook(hook);
+    drop(to_worker);
     if let Some(f) = failure {
         panic!("{f}");
     }
+    worker.join().unwrap();
     println!("{target}: {} cases, {accepted} accepted, {refused} refused", cases());
     (accepted, refused)
 }
@@ -402,7 +458,7 @@ plots = false
         .to_string(),
     );
     let base = examples();
-    let mix = fuzz("config", &seeds, Duration::from_secs(5), |text| {
+    let mix = fuzz("config", &seeds, Duration::from_secs(5), move |text| {
         TestDefinition::from_toml(text, "fuzz.toml", &base)
     });
     assert_mix("config", mix);
@@ -453,7 +509,7 @@ stiffness = 5000.0
         .to_string(),
     ];
     let base = examples();
-    let mix = fuzz("site", &seeds, Duration::from_secs(2), |text| {
+    let mix = fuzz("site", &seeds, Duration::from_secs(2), move |text| {
         SiteDefinition::from_toml(text, "site.toml", &base)
     });
     assert_mix("site", mix);
@@ -511,4 +567,19 @@ fn ground_motion_records() {
         parse_single_column(text, dt, "fuzz.txt")
     });
     assert_mix("single_column", mix);
+}
+
+/// Found by this harness: an AT2 header quoted in the message kept a lone carriage return (and
+/// any escape sequence), so the "one line" was two on a terminal. Control characters are now
+/// escaped in every message.
+#[test]
+fn control_characters_in_quoted_input_are_escaped() {
+    let text = "title\ndate\nACCELERATION\nNPTS?\r\x1b[31m red\n1.0\n";
+    let msg = parse_at2(text, "rec.AT2").unwrap_err().to_string();
+    assert_eq!(
+        msg,
+        "rec.AT2: line 4: cannot find NPTS and DT in 'NPTS?\\r\\u{1b}[31m red'"
+    );
+    let msg = parse_two_column("0 0\n0.1 x\x07\n", "ag.csv").unwrap_err().to_string();
+    assert_eq!(msg, "ag.csv: line 2: cannot parse 'x\\u{7}' as a number");
 }
