@@ -173,6 +173,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     write_json(&summary_path, &summary)?;
     if !args.quiet {
         print!("{report}");
+        if let Some(n) = ramp_substeps.filter(|&n| n > 0) {
+            println!("  the {n} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)");
+        }
         let names: Vec<String> = outputs
             .iter()
             .filter_map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()))

@@ -846,6 +846,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
             ),
             Some(e) => println!("  STOPPED after {done} of {steps} steps: {e}"),
         }
+        if ramp_substeps > 0 {
+            println!(
+                "  the {ramp_substeps} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)"
+            );
+        }
         recorder.print();
         if let Some(e) = &summary.estimation {
             println!(
