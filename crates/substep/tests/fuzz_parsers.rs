@@ -13,9 +13,9 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
-use substep::excitation::{parse_at2, parse_single_column, parse_two_column};
+use substep::excitation::{parse_at2, parse_single_column, parse_two_column, read_record};
 use substep::io::site_config::SiteDefinition;
-use substep::io::{TestDefinition, parse_matrix_market, parse_matrix_market_sparse};
+use substep::io::{TestDefinition, parse_matrix_market, parse_matrix_market_sparse, read_matrix_market};
 
 const DEFAULT_CASES: usize = 3000;
 const DEFAULT_SEED: u64 = 0x5eed_0011;
@@ -288,8 +288,21 @@ fn fuzz<T>(
     slow: Duration,
     parse: impl Fn(&str) -> substep::Result<T> + Send + 'static,
 ) -> (usize, usize) {
+    fuzz_bytes(target, seeds, cases(), slow, move |b| {
+        parse(&String::from_utf8_lossy(b))
+    })
+}
+
+/// [`fuzz`] on the raw bytes (e.g. written to a file), `n` cases.
+fn fuzz_bytes<T>(
+    target: &str,
+    seeds: &[String],
+    n: usize,
+    slow: Duration,
+    parse: impl Fn(&[u8]) -> substep::Result<T> + Send + 'static,
+) -> (usize, usize) {
     for s in seeds {
-        parse(s).unwrap_or_else(|e| panic!("{target}: a seed input is refused: {e}"));
+        parse(s.as_bytes()).unwrap_or_else(|e| panic!("{target}: a seed input is refused: {e}"));
     }
     quiet_workers();
     let salt = target
@@ -298,7 +311,7 @@ fn fuzz<T>(
     let mut m = Mutator {
         rng: ChaCha8Rng::seed_from_u64(seed() ^ salt),
     };
-    let (to_worker, inputs) = mpsc::channel::<String>();
+    let (to_worker, inputs) = mpsc::channel::<Vec<u8>>();
     let (send_outcome, outcomes) = mpsc::channel::<Outcome>();
     let worker = std::thread::Builder::new()
         .name(WORKER.into())
@@ -322,9 +335,9 @@ fn fuzz<T>(
         .unwrap();
     let (mut accepted, mut refused) = (0, 0);
     let mut failure = None;
-    for k in 0..cases() {
+    for k in 0..n {
         let input = m.case(k, seeds);
-        to_worker.send(String::from_utf8_lossy(&input).into_owned()).unwrap();
+        to_worker.send(input.clone()).unwrap();
         let problem = match outcomes.recv_timeout(slow) {
             Err(_) => Some(format!("did not finish within {slow:?} (a hang?)")),
             Ok(Outcome::Panicked(what)) => Some(format!("panicked: {what}")),
@@ -351,14 +364,14 @@ fn fuzz<T>(
         panic!("{f}");
     }
     worker.join().unwrap();
-    println!("{target}: {} cases, {accepted} accepted, {refused} refused", cases());
+    println!("{target}: {n} cases, {accepted} accepted, {refused} refused");
     (accepted, refused)
 }
 
 /// Every mutator path runs and the arbitrary-byte cases are refused, not accepted by accident:
 /// a harness that produced only valid or only garbage inputs would test little.
 fn assert_mix(target: &str, (accepted, refused): (usize, usize)) {
-    let n = cases();
+    let n = accepted + refused;
     if n >= 200 {
         assert!(refused >= n / 4, "{target}: only {refused} of {n} cases refused");
         assert!(accepted >= 1, "{target}: no mutated input was accepted");
@@ -582,4 +595,50 @@ fn control_characters_in_quoted_input_are_escaped() {
     );
     let msg = parse_two_column("0 0\n0.1 x\x07\n", "ag.csv").unwrap_err().to_string();
     assert_eq!(msg, "ag.csv: line 2: cannot parse 'x\\u{7}' as a number");
+}
+
+/// The file readers get the mutated bytes as files (invalid UTF-8 included, which the text
+/// parsers above only see replaced): one case in ten of `SUBSTEP_FUZZ_CASES` per reader.
+#[test]
+fn files() {
+    let dir = std::env::temp_dir().join(format!("substep-fuzz-files-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let n = (cases() / 10).max(1);
+    let file = |name: &str| {
+        let path = dir.join(name);
+        move |bytes: &[u8]| {
+            std::fs::write(&path, bytes).unwrap();
+            Ok::<_, substep::Error>(path.clone())
+        }
+    };
+    let record = ["ag.csv", "ag.AT2", "ag.txt"].map(file);
+    let seeds = vec![example("ag_sweep.csv").lines().take(100).collect::<Vec<_>>().join("\n")];
+    let csv = record[0].clone();
+    fuzz_bytes("file_two_column", &seeds, n, Duration::from_secs(2), move |b| {
+        read_record(csv(b)?, None)
+    });
+    let seeds = vec!["PEER\nX\nACCELERATION TIME SERIES IN UNITS OF G\nNPTS= 3, DT= .01 SEC\n.1 .2\n-.3\n".to_string()];
+    let at2 = record[1].clone();
+    fuzz_bytes("file_at2", &seeds, n, Duration::from_secs(2), move |b| {
+        read_record(at2(b)?, Some(0.01))
+    });
+    let seeds = vec!["0.0\n0.5 -0.5\n1e-2\n".to_string()];
+    let txt = record[2].clone();
+    fuzz_bytes("file_single_column", &seeds, n, Duration::from_secs(2), move |b| {
+        read_record(txt(b)?, Some(0.01))
+    });
+    let mtx = file("k.mtx");
+    let seeds = vec![example("three_story_K.mtx")];
+    fuzz_bytes("file_mtx", &seeds, n, Duration::from_secs(2), move |b| {
+        read_matrix_market(mtx(b)?)
+    });
+    // the record the config names, next to it
+    std::fs::copy(examples().join("ag_sweep.csv"), dir.join("ag_sweep.csv")).unwrap();
+    let cfg = file("cfg.toml");
+    let seeds = vec![example("tmd_substructure.toml")];
+    fuzz_bytes("file_config", &seeds, n, Duration::from_secs(5), move |b| {
+        TestDefinition::from_file(cfg(b)?)
+    });
+    let _ = std::fs::remove_dir_all(&dir);
 }
