@@ -1,7 +1,9 @@
 //! `substep`: run and benchmark real-time substructure tests with sub-step control.
 //!
-//! Exit codes: 0 success, 1 a run that diverged (or outputs that could not be written),
-//! 2 bad input (config, files, parameters). Errors are printed as one line `error: ...`.
+//! Exit codes (offline and `--realtime` alike): 0 success, 1 a run that diverged or stopped
+//! (safety limit, failing remote site; also outputs that could not be written while running),
+//! 2 bad input (config, files, parameters, an output directory that cannot be created or
+//! cleared). Errors are printed as one line `error: ...`.
 
 mod analyze;
 mod bench;
@@ -75,8 +77,10 @@ pub struct RunArgs {
     pub fifo_priority: Option<i32>,
 }
 
-/// Exit code of a failed command: 1 for a diverged run and for runtime failures (e.g. outputs
-/// that cannot be written), 2 for bad input (any other library error: config, files, parameters).
+/// Exit code of a failed command: 1 for a diverged or stopped run and for runtime failures
+/// (e.g. outputs that cannot be written), 2 for bad input (any other library error: config,
+/// files, parameters, the output directory). Every driver reports an experimental side that
+/// fails mid-run as `Error::Stopped`, so a killed site is 1 offline and in real time.
 fn exit_code(e: &anyhow::Error) -> u8 {
     match e.downcast_ref::<substep::Error>() {
         Some(substep::Error::Diverged { .. } | substep::Error::Stopped { .. }) => 1,

@@ -1,13 +1,110 @@
 //! Output files of `substep run`: `history.csv` and `substeps.csv` (written row by row through
 //! a `BufWriter`), the statistics that go into `summary.json`, and a decimating recorder that
 //! keeps the series for the plots bounded in memory.
+//!
+//! The output directory: [`prepare_dir`] creates it and removes the files an earlier run wrote
+//! there ([`OWNED_OUTPUTS`], nothing else), so no file in it can be mistaken for this run's;
+//! small files (`summary.json`, `realtime.json`, plots) are replaced atomically
+//! ([`write_atomic`]), so a run killed at any moment leaves either the old or the new file.
 
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use substep::substructure::{StepRecord, SubstepObserver};
+
+/// Every file `substep run` (offline or `--realtime`) writes into its output directory. A run
+/// removes these (and their temporary files) before it writes anything; other files in the
+/// directory are never touched.
+pub const OWNED_OUTPUTS: &[&str] = &[
+    "history.csv",
+    "substeps.csv",
+    "summary.json",
+    "realtime.json",
+    "displacement.png",
+    "acceleration.png",
+    "coupling_force.png",
+    "error_force.png",
+    "hysteresis.png",
+    "reference.png",
+    "compensation_force.png",
+    "tracking_error.png",
+];
+
+/// The temporary file [`write_atomic`] writes before renaming it to `path`: hidden, in the
+/// same directory (a rename within one file system is atomic), same extension (the PNG
+/// encoder picks the format from it).
+pub fn temp_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let tmp = match name.rsplit_once('.') {
+        Some((stem, ext)) => format!(".{stem}.tmp.{ext}"),
+        None => format!(".{name}.tmp"),
+    };
+    path.with_file_name(tmp)
+}
+
+/// Replace `path` atomically by what `write` puts into the file at the given temporary path:
+/// written, synced to disk, then renamed over `path` (and the directory synced). On any error
+/// the temporary file is removed and `path` is unchanged.
+pub fn replace_atomic(path: &Path, write: impl FnOnce(&Path) -> io::Result<()>) -> io::Result<()> {
+    let tmp = temp_path(path);
+    let result = write(&tmp).and_then(|()| {
+        File::open(&tmp)?.sync_all()?;
+        std::fs::rename(&tmp, path)
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+        return result;
+    }
+    // The rename is durable once the directory is synced; not every file system allows it.
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+        && let Ok(d) = File::open(dir)
+    {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+/// [`replace_atomic`] with the given bytes.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    replace_atomic(path, |tmp| {
+        let mut f = File::create(tmp)?;
+        f.write_all(bytes)?;
+        f.flush()
+    })
+}
+
+/// Create the output directory `dir` and remove what an earlier run left in it (the files of
+/// [`OWNED_OUTPUTS`] and their temporary files). Errors are bad input (exit code 2): the
+/// directory cannot be created, a name is taken by something that is not a file, or a stale
+/// output cannot be removed.
+pub fn prepare_dir(dir: &Path) -> substep::Result<()> {
+    let name = dir.display().to_string();
+    std::fs::create_dir_all(dir)
+        .map_err(|e| substep::Error::file(&name, format!("cannot create the output directory: {e}")))?;
+    for owned in OWNED_OUTPUTS {
+        let path = dir.join(owned);
+        for p in [temp_path(&path), path] {
+            let Ok(meta) = std::fs::symlink_metadata(&p) else {
+                continue;
+            };
+            let shown = p.display().to_string();
+            if meta.is_dir() {
+                return Err(substep::Error::file(
+                    shown,
+                    "is a directory, but substep writes a file of that name here (choose another --out)",
+                ));
+            }
+            std::fs::remove_file(&p).map_err(|e| {
+                substep::Error::file(shown, format!("cannot remove this output of an earlier run: {e}"))
+            })?;
+        }
+    }
+    Ok(())
+}
 
 /// A number for CSV: shortest round-trip form, exponent notation for very small or large values.
 pub fn num(out: &mut String, x: f64) {
@@ -105,8 +202,10 @@ impl HistoryWriter {
 
 /// `substeps.csv`: `step, substep, t, cmd.., fm.., dm..` for every sub-step, with phase-lag
 /// compensation also `te.., du..` (tracking error and correction, from
-/// [`SubstepObserver::phase_lag`]). Write errors are kept and reported by
-/// [`SubstepWriter::finish`] (the observer interface cannot return them).
+/// [`SubstepObserver::phase_lag`]), with safety limits a last column `ramp`: 0 for the
+/// algorithm's sub-steps, `s = 1, 2, ...` for the ramp to the safe position after a stop
+/// ([`SubstepObserver::ramp`]; `te`, `du` are NaN there). Write errors are kept and reported
+/// by [`SubstepWriter::finish`] (the observer interface cannot return them).
 pub struct SubstepWriter {
     w: BufWriter<File>,
     line: String,
@@ -115,10 +214,20 @@ pub struct SubstepWriter {
     error: Option<io::Error>,
     /// Tracking error and correction of the current sub-step (phase-lag runs).
     phase_lag: Option<(Vec<f64>, Vec<f64>)>,
+    /// The `ramp` column is written (runs with safety limits).
+    ramp_column: bool,
+    ramp_rows: usize,
 }
 
 impl SubstepWriter {
-    pub fn create(path: &Path, n_c: usize, dt: f64, substeps: usize, phase_lag: bool) -> io::Result<Self> {
+    pub fn create(
+        path: &Path,
+        n_c: usize,
+        dt: f64,
+        substeps: usize,
+        phase_lag: bool,
+        ramp_column: bool,
+    ) -> io::Result<Self> {
         let mut w = BufWriter::new(File::create(path)?);
         let mut line = String::from("step,substep,t");
         for p in ["cmd", "fm", "dm"] {
@@ -129,6 +238,9 @@ impl SubstepWriter {
                 header_group(&mut line, p, n_c);
             }
         }
+        if ramp_column {
+            line.push_str(",ramp");
+        }
         line.push('\n');
         w.write_all(line.as_bytes())?;
         Ok(Self {
@@ -138,7 +250,45 @@ impl SubstepWriter {
             dtau: dt / substeps as f64,
             error: None,
             phase_lag: phase_lag.then(|| (vec![0.0; n_c], vec![0.0; n_c])),
+            ramp_column,
+            ramp_rows: 0,
         })
+    }
+
+    /// Ramp sub-steps written after a safety stop.
+    pub fn ramp_rows(&self) -> usize {
+        self.ramp_rows
+    }
+
+    /// One row; `ramp`: 0 for an algorithm sub-step, else the ramp sub-step.
+    fn write_row(&mut self, step: usize, j: usize, ramp: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        if self.error.is_some() {
+            return;
+        }
+        let line = &mut self.line;
+        line.clear();
+        let _ = write!(line, "{step},{j},");
+        num(line, step.saturating_sub(1) as f64 * self.dt + j as f64 * self.dtau);
+        row_group(line, command);
+        row_group(line, force);
+        row_group(line, displacement);
+        if let Some((te, du)) = &self.phase_lag {
+            if ramp == 0 {
+                row_group(line, te);
+                row_group(line, du);
+            } else {
+                for _ in 0..te.len() + du.len() {
+                    line.push_str(",NaN");
+                }
+            }
+        }
+        if self.ramp_column {
+            let _ = write!(line, ",{ramp}");
+        }
+        line.push('\n');
+        if let Err(e) = self.w.write_all(line.as_bytes()) {
+            self.error = Some(e);
+        }
     }
 
     pub fn flush(&mut self) -> io::Result<()> {
@@ -164,24 +314,11 @@ impl SubstepObserver for SubstepWriter {
         }
     }
     fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
-        if self.error.is_some() {
-            return;
-        }
-        let line = &mut self.line;
-        line.clear();
-        let _ = write!(line, "{step},{j},");
-        num(line, (step - 1) as f64 * self.dt + j as f64 * self.dtau);
-        row_group(line, command);
-        row_group(line, force);
-        row_group(line, displacement);
-        if let Some((te, du)) = &self.phase_lag {
-            row_group(line, te);
-            row_group(line, du);
-        }
-        line.push('\n');
-        if let Err(e) = self.w.write_all(line.as_bytes()) {
-            self.error = Some(e);
-        }
+        self.write_row(step, j, 0, command, force, displacement);
+    }
+    fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.ramp_rows += 1;
+        self.write_row(step, j, s, command, force, displacement);
     }
 }
 
@@ -325,6 +462,39 @@ mod tests {
         let step = c[1] - c[0];
         assert!(c.windows(2).all(|w| w[1] - w[0] == step), "{c:?}");
         assert_eq!(c[0], 0.0);
+    }
+
+    #[test]
+    fn an_interrupted_replacement_leaves_the_old_file() {
+        let dir = std::env::temp_dir().join(format!("substep-atomic-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("summary.json");
+        write_atomic(&path, b"{\"completed\": true}\n").unwrap();
+        // The writer dies half-way (as a killed process or a full disk would leave it).
+        let err = replace_atomic(&path, |tmp| {
+            std::fs::write(tmp, b"{\"compl")?;
+            Err(io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert_eq!(err.to_string(), "disk full");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "{\"completed\": true}\n");
+        assert!(!temp_path(&path).exists());
+        // Until the rename, readers see the old file; then the new one.
+        replace_atomic(&path, |tmp| {
+            std::fs::write(tmp, b"{\"completed\": false}\n")?;
+            assert_eq!(std::fs::read_to_string(&path)?, "{\"completed\": true}\n");
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "{\"completed\": false}\n");
+        let names: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["summary.json"]);
+        assert_eq!(temp_path(Path::new("out/a.png")), Path::new("out/.a.tmp.png"));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

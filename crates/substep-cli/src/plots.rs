@@ -66,7 +66,7 @@ fn tick(v: f64, scale: f64) -> String {
 /// Draw `curves` into the PNG `path` (1000×560 px).
 pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, curves: &[Curve]) -> Result<()> {
     register_font()?;
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let draw = |path: &Path| -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>> {
         let root = BitMapBackend::new(path, (1000, 560)).into_drawing_area();
         root.fill(&WHITE)?;
         let (x0, x1) = range(curves.iter().flat_map(|c| c.x.iter().copied()));
@@ -113,7 +113,8 @@ pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, curves
         root.present()?;
         Ok(())
     };
-    draw()
+    // Drawn to a temporary file and renamed: a killed run never leaves half a PNG.
+    crate::output::replace_atomic(path, |tmp| draw(tmp).map_err(|e| std::io::Error::other(e.to_string())))
         .map_err(|e| anyhow!("{e}"))
         .with_context(|| format!("cannot draw {}", path.display()))
 }
@@ -158,7 +159,7 @@ pub fn rho_heatmap(
         };
         (lo, hi)
     };
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let draw = |path: &Path| -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>> {
         let root = BitMapBackend::new(path, (900, 700)).into_drawing_area();
         root.fill(&WHITE)?;
         let (x0, x1) = (half(xs, 0).0, half(xs, xs.len() - 1).1);
@@ -216,7 +217,8 @@ pub fn rho_heatmap(
         root.present()?;
         Ok(())
     };
-    draw()
+    // Drawn to a temporary file and renamed: a killed run never leaves half a PNG.
+    crate::output::replace_atomic(path, |tmp| draw(tmp).map_err(|e| std::io::Error::other(e.to_string())))
         .map_err(|e| anyhow!("{e}"))
         .with_context(|| format!("cannot draw {}", path.display()))
 }

@@ -1,9 +1,11 @@
 //! `substep run --realtime`: the substructure test against the wall clock (see
 //! `docs/realtime.md`). Writes `history.csv` (as `substep run`, without reference columns),
-//! `realtime.json` (deadline report and latency histograms) and `summary.json`.
+//! `realtime.json` (deadline report and latency histograms) and `summary.json`; after a safety
+//! stop also `substeps.csv` with the tripping sub-step and the ramp to the safe position (the
+//! real-time thread records no sub-steps otherwise: it does no I/O).
 
 use crate::RunArgs;
-use crate::output::num;
+use crate::output::{SubstepWriter, num, prepare_dir, write_atomic};
 use anyhow::{Context, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -61,7 +63,16 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         ..RealtimeOptions::default()
     };
     let runner = RealtimeRunner::new(&def.model, test, accel, options)?;
-    std::fs::create_dir_all(&out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    // Everything above is validation; no output of an earlier run survives into this one.
+    prepare_dir(&out_dir)?;
+    let summary_path = out_dir.join("summary.json");
+    let running = serde_json::json!({
+        "config": config_name,
+        "mode": "realtime",
+        "completed": false,
+        "status": "running (a run that was killed leaves this summary; history.csv holds the steps flushed so far)",
+    });
+    write_json(&summary_path, &running)?;
     let history_path = out_dir.join("history.csv");
     let file =
         std::fs::File::create(&history_path).with_context(|| format!("cannot write {}", history_path.display()))?;
@@ -114,12 +125,36 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let Some(e) = write_error {
         return Err(anyhow::Error::from(e).context(format!("cannot write {}", history_path.display())));
     }
-    let (report, failure) = match result {
-        Ok((report, _)) => (report, None),
-        Err(f) => (f.report, Some(f.error)),
+    let (report, failure, stop) = match result {
+        Ok((report, _)) => (report, None, None),
+        Err(f) => {
+            let f = *f;
+            (f.report, Some(f.error), f.stopped_at.zip(f.stop_log))
+        }
     };
+    let realtime_path = out_dir.join("realtime.json");
+    let mut outputs = vec![history_path.clone(), realtime_path.clone()];
+    let mut ramp_substeps = None;
+    if let Some(((step, j), log)) = &stop {
+        let path = out_dir.join("substeps.csv");
+        let cannot = || format!("cannot write {}", path.display());
+        let mut w =
+            SubstepWriter::create(&path, n_c, def.integrator.dt, sub.substeps, false, true).with_context(cannot)?;
+        log.replay(*step, *j, &mut w);
+        ramp_substeps = Some(w.ramp_rows());
+        w.finish().with_context(cannot)?;
+        outputs.push(path);
+    }
+    outputs.push(summary_path.clone());
     let rt = report_json(&report);
-    write_json(&out_dir.join("realtime.json"), &rt)?;
+    write_json(&realtime_path, &rt)?;
+    let (stopped_at_step, reason) = match &failure {
+        Some(substep::Error::Diverged { step, reason, .. } | substep::Error::Stopped { step, reason, .. }) => {
+            (Some(*step), Some(reason.clone()))
+        }
+        Some(e) => (Some(report.steps + 1), Some(e.to_string())),
+        None => (None, None),
+    };
     let summary = serde_json::json!({
         "config": config_name,
         "mode": "realtime",
@@ -127,19 +162,25 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         "steps": def.integrator.steps,
         "completed": failure.is_none(),
         "steps_done": report.steps,
-        "reason": failure.as_ref().map(|e| e.to_string()),
+        "stopped_at_step": stopped_at_step,
+        "reason": reason,
+        "ramp_substeps": ramp_substeps,
         "missed_deadlines": report.missed,
         "late_steps": report.late_steps,
         "wake_up_latency_p99_us": report.latency_p99.as_secs_f64() * 1e6,
-        "outputs": [history_path.display().to_string(), out_dir.join("realtime.json").display().to_string()],
+        "outputs": outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
     });
-    write_json(&out_dir.join("summary.json"), &summary)?;
+    write_json(&summary_path, &summary)?;
     if !args.quiet {
         print!("{report}");
-        println!(
-            "  outputs in {}: history.csv, realtime.json, summary.json",
-            out_dir.display()
-        );
+        if let Some(n) = ramp_substeps.filter(|&n| n > 0) {
+            println!("  the {n} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)");
+        }
+        let names: Vec<String> = outputs
+            .iter()
+            .filter_map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()))
+            .collect();
+        println!("  outputs in {}: {}", out_dir.display(), names.join(", "));
     }
     match failure {
         Some(e) => Err(e.into()),
@@ -148,6 +189,6 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
 }
 
 fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(v).expect("json") + "\n")
+    write_atomic(path, (serde_json::to_string_pretty(v).expect("json") + "\n").as_bytes())
         .with_context(|| format!("cannot write {}", path.display()))
 }

@@ -1,7 +1,9 @@
 //! `substep run`: load a test definition, step it, record `history.csv`, `substeps.csv`,
 //! `summary.json` and the plots, compare with the monolithic reference, print a summary.
 
-use crate::output::{Decimated, ErrorStats, ErrorTracker, HistoryWriter, Peak, PeakTracker, SubstepWriter};
+use crate::output::{
+    Decimated, ErrorStats, ErrorTracker, HistoryWriter, Peak, PeakTracker, SubstepWriter, prepare_dir, write_atomic,
+};
 use crate::plots::{Curve, line_chart};
 use crate::{DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, RunArgs};
 use anyhow::{Context, Result};
@@ -115,6 +117,9 @@ struct Summary {
     stopped_at_step: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     reason: Option<String>,
+    /// Sub-steps of the ramp to the safe position after a safety stop (in `substeps.csv`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ramp_substeps: Option<usize>,
     /// Wall time of the stepping loop including recording [s].
     wall_time_s: f64,
     /// Compute time of the simulation steps alone per step [µs].
@@ -706,12 +711,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
 
     // Everything above is validation; from here on outputs are written.
     let cannot_write = |p: &Path| format!("cannot write {}", p.display());
-    std::fs::create_dir_all(&out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
-    // A summary from an earlier run must not survive a run that stops early.
+    // No output of an earlier run survives into this one (a stopped run must not leave an old
+    // `completed: true`, nor substeps.csv or plots it did not write).
+    prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
-    if summary_path.exists() {
-        std::fs::remove_file(&summary_path).with_context(|| format!("cannot remove {}", summary_path.display()))?;
-    }
     let history_path = out_dir.join("history.csv");
     let groups = extra_groups(&def);
     let mut extra = vec![0.0; groups.len() * coupling.len()];
@@ -726,6 +729,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 def.integrator.dt,
                 s.substeps,
                 s.phase_lag.is_some(),
+                s.limits.is_some(),
             )
             .with_context(|| cannot_write(&substeps_path))?,
         ),
@@ -743,7 +747,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
         "status": "running (a run that was killed leaves this summary; history.csv holds the steps flushed so far)",
         "config": args.config.as_ref().map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string()),
     });
-    std::fs::write(&summary_path, running.to_string() + "\n").with_context(|| cannot_write(&summary_path))?;
+    write_atomic(&summary_path, (running.to_string() + "\n").as_bytes())
+        .with_context(|| cannot_write(&summary_path))?;
     let mut last_flush = Instant::now();
 
     let mut recorder = Recorder::new(n, &coupling);
@@ -807,6 +812,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     progress.bar.finish_and_clear();
     let wall = progress.started.elapsed().as_secs_f64();
     history.finish().with_context(|| cannot_write(&history_path))?;
+    let ramp_substeps = substep_writer.as_ref().map_or(0, SubstepWriter::ramp_rows);
     if let Some(w) = substep_writer {
         w.finish().with_context(|| cannot_write(&substeps_path))?;
     }
@@ -850,6 +856,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         steps_done: done,
         stopped_at_step,
         reason,
+        ramp_substeps: (ramp_substeps > 0).then_some(ramp_substeps),
         wall_time_s: wall,
         us_per_step: compute.as_secs_f64() * 1e6 / done.max(1) as f64,
         peaks: (0..n)
@@ -894,7 +901,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
     };
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
-    std::fs::write(&summary_path, json + "\n").with_context(|| cannot_write(&summary_path))?;
+    write_atomic(&summary_path, (json + "\n").as_bytes()).with_context(|| cannot_write(&summary_path))?;
 
     if !args.quiet {
         match &failure {
@@ -903,6 +910,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 summary.us_per_step
             ),
             Some(e) => println!("  STOPPED after {done} of {steps} steps: {e}"),
+        }
+        if ramp_substeps > 0 {
+            println!(
+                "  the {ramp_substeps} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)"
+            );
         }
         recorder.print();
         if let Some(e) = &summary.estimation {

@@ -352,3 +352,104 @@ fn bench_prints_json() {
     assert_eq!(cases.len(), 2);
     assert_eq!(v["substructure"]["substeps"], 10);
 }
+
+/// The names of the files in `dir`, sorted.
+fn file_names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn a_run_removes_the_outputs_of_an_earlier_run_and_nothing_else() {
+    let dir = temp_dir("stale");
+    std::fs::write(dir.join("sub.toml"), BASE).unwrap();
+    let out = substep(&dir, &["run", "sub.toml", "--out", "out", "--quiet"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let first = file_names(&dir.join("out"));
+    for f in ["substeps.csv", "displacement.png", "hysteresis.png", "summary.json"] {
+        assert!(first.iter().any(|n| n == f), "{f} in {first:?}");
+    }
+    assert!(
+        !first.iter().any(|n| n.starts_with('.')),
+        "no temporary file left: {first:?}"
+    );
+    std::fs::write(dir.join("out/notes.txt"), "mine").unwrap();
+    std::fs::write(dir.join("out/my_plot.png"), "mine too").unwrap();
+
+    // A diverging monolithic run without plots: nothing of the first run may remain (its
+    // summary said `completed: true`), the user's files stay untouched.
+    let config = "[structure.sdof]\nmass = 1.0\nstiffness = 3947.8417604357433\n\
+                  [ground_motion]\ngenerator = \"harmonic\"\namplitude = 1.0\nfrequency = 1.0\nduration = 30.0\n\
+                  [integrator]\nscheme = \"central_difference\"\ndt = 0.05\n";
+    std::fs::write(dir.join("diverge.toml"), config).unwrap();
+    let out = substep(&dir, &["run", "diverge.toml", "--out", "out", "--no-plots"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    assert_eq!(
+        file_names(&dir.join("out")),
+        ["history.csv", "my_plot.png", "notes.txt", "summary.json"]
+    );
+    assert_eq!(json(&dir.join("out/summary.json"))["completed"], false);
+    assert_eq!(std::fs::read_to_string(dir.join("out/notes.txt")).unwrap(), "mine");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("out/my_plot.png")).unwrap(),
+        "mine too"
+    );
+
+    // The same for a real-time run after an offline one with plots.
+    let out = substep(&dir, &["run", "sub.toml", "--out", "out", "--quiet"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = substep(&dir, &["run", "sub.toml", "--out", "out", "--quiet", "--realtime"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(
+        file_names(&dir.join("out")),
+        [
+            "history.csv",
+            "my_plot.png",
+            "notes.txt",
+            "realtime.json",
+            "summary.json"
+        ]
+    );
+    assert_eq!(json(&dir.join("out/summary.json"))["mode"], "realtime");
+
+    // A config refused as bad input writes and removes nothing.
+    std::fs::write(dir.join("bad.toml"), edit("substeps = 4", "substeps = 0")).unwrap();
+    let out = substep(&dir, &["run", "bad.toml", "--out", "out"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert_eq!(json(&dir.join("out/summary.json"))["mode"], "realtime");
+}
+
+#[test]
+fn an_output_dir_that_cannot_be_used_is_bad_input() {
+    let dir = temp_dir("outdir");
+    std::fs::write(dir.join("cfg.toml"), BASE).unwrap();
+    std::fs::write(dir.join("taken"), "a file, not a directory").unwrap();
+    for realtime in [false, true] {
+        let mut args = vec!["run", "cfg.toml", "--out", "taken/out", "--quiet"];
+        if realtime {
+            args.push("--realtime");
+        }
+        let out = substep(&dir, &args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "realtime {realtime}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+        assert!(
+            stderr.starts_with("error: taken/out: cannot create the output directory: Not a directory"),
+            "{stderr}"
+        );
+    }
+    // a name substep writes is taken by a directory: refused before anything is written
+    std::fs::create_dir_all(dir.join("out/summary.json")).unwrap();
+    let out = substep(&dir, &["run", "cfg.toml", "--out", "out", "--quiet"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.starts_with("error: out/summary.json: is a directory, but substep writes a file of that name here"),
+        "{stderr}"
+    );
+    assert_eq!(file_names(&dir.join("out")), ["summary.json"]);
+}

@@ -223,6 +223,125 @@ fn a_limit_violation_stops_the_test() {
         let f: Vec<f64> = row.split(',').map(|v| v.parse().unwrap()).collect();
         assert!(dm.iter().all(|&i| f[i].abs() <= 0.01));
     }
+    // substeps.csv: the tripping sub-step, then the ramp to 0: 0.2 s in 2.5 ms sub-steps = 80
+    // rows marked ramp = 1..=80, linear from the last command to exactly 0, time running on
+    let offline = ramp_rows(&dir.join("out/substeps.csv"), stopped);
+    assert_eq!(offline.len(), 1 + 80);
+    assert_eq!(summary["ramp_substeps"], 80);
+    check_ramp(&offline, stopped);
+
+    // the same stop in real time: exit 1, the same step (not 0) in the message and the summary,
+    // and the same ramp in substeps.csv (the run equals the offline one up to round-off)
+    let out = bin()
+        .args([
+            "run",
+            "local.toml",
+            "--out",
+            "rt",
+            "--quiet",
+            "--no-plots",
+            "--realtime",
+        ])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let rt_err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{rt_err}");
+    assert!(
+        rt_err.starts_with(&format!("error: stopped at step {stopped} ")),
+        "offline stopped at {stopped}: {rt_err}"
+    );
+    let rt_summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("rt/summary.json")).unwrap()).unwrap();
+    assert_eq!(rt_summary["completed"], false);
+    assert_eq!(rt_summary["stopped_at_step"].as_u64(), Some(stopped as u64));
+    assert_eq!(rt_summary["steps_done"].as_u64(), Some(stopped as u64 - 1));
+    assert_eq!(rt_summary["ramp_substeps"], 80);
+    let rt = ramp_rows(&dir.join("rt/substeps.csv"), stopped);
+    check_ramp(&rt, stopped);
+    for (a, b) in offline.iter().zip(&rt) {
+        assert_eq!(a[..3], b[..3], "step, sub-step, time");
+        for (x, y) in a[3..].iter().zip(&b[3..]) {
+            assert!((x - y).abs() <= 1e-9 * (1.0 + x.abs()), "{a:?} vs {b:?}");
+        }
+    }
+}
+
+/// The rows of `substeps.csv` of step `step` from the tripping sub-step on (all columns).
+fn ramp_rows(path: &Path, step: usize) -> Vec<Vec<f64>> {
+    let csv = std::fs::read_to_string(path).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    assert_eq!(*header.last().unwrap(), "ramp", "{header:?}");
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .filter(|r: &Vec<f64>| r[0] == step as f64)
+        .collect();
+    let first_ramp = rows.iter().position(|r| *r.last().unwrap() > 0.0).unwrap();
+    rows[first_ramp - 1..].to_vec()
+}
+
+/// Row 0 is the tripping sub-step (ramp = 0, a |dm| beyond 0.01 m), then ramp rows 1..: the
+/// commands `cmd1, cmd2` fall linearly to 0 and the sub-step numbers and times run on.
+fn check_ramp(rows: &[Vec<f64>], step: usize) {
+    let (tripped, ramp) = (&rows[0], &rows[1..]);
+    assert_eq!(*tripped.last().unwrap(), 0.0);
+    assert!(tripped[7].abs() > 0.01 || tripped[8].abs() > 0.01, "{tripped:?}");
+    let n = ramp.len() as f64;
+    for (s, r) in ramp.iter().enumerate() {
+        assert_eq!(r[0], step as f64);
+        assert_eq!(r[1], tripped[1] + (s + 1) as f64);
+        assert_eq!(*r.last().unwrap(), (s + 1) as f64);
+        assert!((r[2] - (tripped[2] + (s + 1) as f64 * 0.0025)).abs() < 1e-12, "t {r:?}");
+        for c in [3, 4] {
+            let expected = tripped[c] * (1.0 - (s + 1) as f64 / n);
+            assert!((r[c] - expected).abs() <= 1e-15, "ramp {s}: {} vs {expected}", r[c]);
+        }
+    }
+    assert_eq!(ramp.last().unwrap()[3..5], [0.0, 0.0]);
+}
+
+#[test]
+fn killing_the_site_of_a_realtime_run_is_a_stop_not_bad_input() {
+    let dir = temp_dir("kill-rt");
+    let (mut site, addr) = serve(&dir);
+    std::fs::write(
+        dir.join("remote.toml"),
+        client_config(600.0, Some((&addr, "per_substep")), ""),
+    )
+    .unwrap();
+    let client = bin()
+        .args([
+            "run",
+            "remote.toml",
+            "--out",
+            "out",
+            "--quiet",
+            "--no-plots",
+            "--realtime",
+        ])
+        .current_dir(&dir)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(700));
+    site.kill().unwrap();
+    site.wait().unwrap();
+    let out = client.wait_with_output().unwrap();
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.starts_with("error: stopped at step ") && err.contains("experimental side failed") && err.contains(&addr),
+        "{err}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["completed"], false);
+    let stopped = summary["stopped_at_step"].as_u64().unwrap();
+    assert!(stopped > 10, "the test ran a while before the kill: {stopped}");
+    assert!(err.starts_with(&format!("error: stopped at step {stopped} ")), "{err}");
+    assert_eq!(summary["steps_done"].as_u64(), Some(stopped - 1));
 }
 
 #[test]
@@ -242,6 +361,11 @@ fn bad_remote_and_limit_keys_are_named() {
             "substructure.limits.displacement",
         ),
         ("\n[substructure.limits]\nforce = -1.0\n", "substructure.limits.force"),
+        // a ramp that would never end
+        (
+            "\n[substructure.limits]\nforce = 1e6\nramp_time = 1e6\n",
+            "substructure.limits.ramp_time: 1000000 s is longer than the maximum of 60 s",
+        ),
     ];
     for (extra, key) in cases {
         std::fs::write(dir.join("c.toml"), client_config(1.0, None, extra)).unwrap();

@@ -34,22 +34,39 @@ pub enum Error {
 impl Error {
     pub fn invalid(what: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::InvalidInput {
-            what: what.into(),
-            reason: reason.into(),
+            what: one_line(what.into()),
+            reason: one_line(reason.into()),
         }
     }
     pub fn numerical(what: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::Numerical {
-            what: what.into(),
-            reason: reason.into(),
+            what: one_line(what.into()),
+            reason: one_line(reason.into()),
         }
     }
     pub fn file(path: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::File {
-            path: path.into(),
-            reason: reason.into(),
+            path: one_line(path.into()),
+            reason: one_line(reason.into()),
         }
     }
+}
+
+/// Messages quote input (a header line, a field, a peer's text): control characters in it are
+/// escaped (`\r`, `\u{1b}`), so a message stays one line and cannot drive the terminal.
+fn one_line(s: String) -> String {
+    if !s.chars().any(char::is_control) {
+        return s;
+    }
+    s.chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_default().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
 }
 
 /// Check that a scalar parameter is finite and strictly positive.

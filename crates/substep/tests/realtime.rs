@@ -552,7 +552,15 @@ fn site_failure_stops_the_run_and_flushes_the_records() {
     let (result, records) = realtime(&model, test, &ag, exact_options());
     let failure = result.err().expect("the run fails");
     assert!(failure.to_string().contains("connection lost"), "{failure}");
-    assert!(matches!(failure.error, Error::InvalidInput { .. }));
+    // A controlled stop at the step the offline driver reports (not "bad input", not step 0).
+    let msg = failure.error.to_string();
+    assert!(
+        matches!(failure.error, Error::Stopped { step: 25, .. })
+            && msg.starts_with("stopped at step 25 (t = 0.250000 s): experimental side failed: "),
+        "{msg}"
+    );
+    assert_eq!(failure.stopped_at, Some((25, 6)));
+    assert!(failure.stop_log.is_none(), "no safety limits: nothing was ramped");
     assert_eq!(failure.report.steps, 24);
     assert_eq!(failure.report.substeps, 245);
     assert_eq!(records.len(), 25, "initial state + 24 steps");

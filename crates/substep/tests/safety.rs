@@ -170,3 +170,107 @@ fn limits_are_validated() {
             .contains("substructure.limits.ramp_time")
     );
 }
+
+/// Every sub-step the observer sees: (step, j, ramp s (0 = algorithm), command).
+#[derive(Default)]
+struct Rows(Vec<(usize, usize, usize, f64)>);
+
+impl substep::substructure::SubstepObserver for Rows {
+    fn substep(&mut self, step: usize, j: usize, c: &[f64], _f: &[f64], _d: &[f64]) {
+        self.0.push((step, j, 0, c[0]));
+    }
+    fn ramp(&mut self, step: usize, j: usize, s: usize, c: &[f64], _f: &[f64], _d: &[f64]) {
+        self.0.push((step, j, s, c[0]));
+    }
+}
+
+#[test]
+fn the_ramp_down_reaches_the_observer() {
+    let limits = SafetyLimits {
+        displacement: Some(vec![0.02]),
+        velocity: None,
+        force: None,
+        ramp_time: 0.1,
+    };
+    let (mut test, commands) = test_with(limits);
+    let ag = |i: usize| 2.0 * (2.0 * std::f64::consts::PI * i as f64 * 0.01).sin();
+    let mut rows = Rows::default();
+    let step = (0..2000)
+        .find_map(|i| test.step(ag(i), ag(i + 1), &mut rows).err().map(|_| i + 1))
+        .expect("the limit must be hit");
+    let sent = commands.lock().unwrap();
+    // every command the site received is one observed row, in order: the algorithm's sub-steps
+    // (the tripping one included, its command was sent and measured), then the 40 ramp sub-steps
+    assert_eq!(rows.0.len(), sent.len());
+    for (r, &c) in rows.0.iter().zip(sent.iter()) {
+        assert_eq!(r.3, c);
+    }
+    let ramp: Vec<_> = rows.0.iter().filter(|r| r.2 > 0).collect();
+    assert_eq!(ramp.len(), 40);
+    let tripped = rows.0[rows.0.len() - 41];
+    assert_eq!((tripped.0, tripped.2), (step, 0));
+    assert!(tripped.3.abs() > 0.02, "{tripped:?}");
+    for (s, r) in ramp.iter().enumerate() {
+        // same step, sub-step numbers and time run on after the tripping sub-step
+        assert_eq!((r.0, r.1, r.2), (step, tripped.1 + s + 1, s + 1));
+    }
+    assert_eq!(ramp[39].3, 0.0);
+    // the log is handed over once: a refused later step adds no rows
+    let before = rows.0.len();
+    assert!(test.step(0.0, 0.0, &mut rows).is_err());
+    assert_eq!(rows.0.len(), before);
+}
+
+#[test]
+fn a_refused_command_is_not_recorded_but_the_ramp_is() {
+    let limits = SafetyLimits {
+        displacement: None,
+        velocity: Some(vec![1e-3]),
+        force: None,
+        ramp_time: 0.05,
+    };
+    let (mut test, commands) = test_with(limits);
+    let mut rows = Rows::default();
+    let step = (0..100)
+        .find_map(|i| {
+            test.step(if i == 0 { 0.0 } else { 3.0 }, 3.0, &mut rows)
+                .err()
+                .map(|_| i + 1)
+        })
+        .unwrap();
+    let sent = commands.lock().unwrap();
+    assert_eq!(rows.0.len(), sent.len(), "only commands that were sent are recorded");
+    let ramp: Vec<_> = rows.0.iter().filter(|r| r.2 > 0).collect();
+    assert_eq!(ramp.len(), 20); // 0.05 s of 2.5 ms sub-steps
+    // numbering continues after the last executed sub-step of the step (the refused one was not)
+    let first_j = match rows.0.iter().rev().find(|r| r.2 == 0) {
+        Some(r) if r.0 == step => r.1 + 1,
+        _ => 1,
+    };
+    assert_eq!((ramp[0].0, ramp[0].1), (step, first_j));
+}
+
+#[test]
+fn the_ramp_is_bounded() {
+    let long = SafetyLimits {
+        ramp_time: 1e6,
+        ..SafetyLimits::default()
+    };
+    let msg = long.validate(1).unwrap_err().to_string();
+    assert_eq!(
+        msg,
+        "substructure.limits.ramp_time: 1000000 s is longer than the maximum of 60 s"
+    );
+    let ok = SafetyLimits {
+        ramp_time: substep::substructure::MAX_RAMP_TIME,
+        ..SafetyLimits::default()
+    };
+    ok.validate(1).unwrap();
+    // 60 s in 1 ms sub-steps = 60 000 ramp sub-steps: allowed; in 0.1 ms: 600 000, refused
+    ok.validate_for(1, 1e-3).unwrap();
+    let msg = ok.validate_for(1, 1e-4).unwrap_err().to_string();
+    assert!(
+        msg.starts_with("substructure.limits.ramp_time: 60 s needs 600000 ramp sub-steps of 1e-4 s; at most 100000"),
+        "{msg}"
+    );
+}

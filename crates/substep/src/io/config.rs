@@ -1832,7 +1832,11 @@ impl RawSubstructure {
             error_force,
             beta,
             gamma,
-            limits: self.limits.as_ref().map(|l| l.build(coupling.len())).transpose()?,
+            limits: self
+                .limits
+                .as_ref()
+                .map(|l| l.build(coupling.len(), dt / self.substeps as f64))
+                .transpose()?,
             coupling_dofs: coupling,
             remote,
             phase_lag,
@@ -1897,7 +1901,8 @@ impl RawRemote {
 }
 
 impl RawLimits {
-    fn build(&self, n_c: usize) -> Result<SafetyLimits> {
+    /// `dtau`: the sub-step length (the ramp after a stop runs in sub-steps of it).
+    fn build(&self, n_c: usize, dtau: f64) -> Result<SafetyLimits> {
         let expand = |key: &str, v: &Option<OneOrMany>| -> Result<Option<Vec<f64>>> {
             match v {
                 None => Ok(None),
@@ -1918,7 +1923,7 @@ impl RawLimits {
             force: expand("force", &self.force)?,
             ramp_time: self.ramp_time.unwrap_or(1.0),
         };
-        limits.validate(n_c)?;
+        limits.validate_for(n_c, dtau)?;
         Ok(limits)
     }
 }

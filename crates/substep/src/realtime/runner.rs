@@ -7,7 +7,9 @@ use super::ring::{Consumer, Producer, SpscRing};
 use super::{LatePolicy, RealtimeOptions, RealtimeReport, StepRecordOwned};
 use crate::error::{Error, Result};
 use crate::model::ModelRef;
-use crate::substructure::{ExperimentalSubstructure, StepRecord, SubstepController, SubstructureTest};
+use crate::substructure::{
+    ExperimentalSubstructure, StepRecord, StopLog, SubstepController, SubstructureTest, stopped_at,
+};
 use nalgebra::DVector;
 use std::fmt;
 use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
@@ -20,6 +22,12 @@ use std::time::{Duration, Instant};
 pub struct RealtimeFailure {
     pub error: Error,
     pub report: RealtimeReport,
+    /// Where the experimental side stopped: step (as [`Error::Stopped`] reports it) and
+    /// sub-step `j` (1-based; 0 = a hold sub-step before the step's first).
+    pub stopped_at: Option<(usize, usize)>,
+    /// What a safety stop did (tripping sub-step and ramp), for `substeps.csv`: replay it with
+    /// [`StopLog::replay`] at `stopped_at`.
+    pub stop_log: Option<StopLog>,
 }
 
 impl fmt::Display for RealtimeFailure {
@@ -262,6 +270,7 @@ impl RealtimeRunner {
                     worst: Duration::ZERO,
                     worst_at: (0, 0),
                     fifo: RtSetting::NotRequested,
+                    stopped_at: None,
                 },
             };
             let rt = thread::Builder::new()
@@ -320,7 +329,12 @@ impl RealtimeRunner {
             _ => None,
         };
         match error {
-            Some(error) => Err(Box::new(RealtimeFailure { error, report })),
+            Some(error) => Err(Box::new(RealtimeFailure {
+                error,
+                report,
+                stopped_at: stats.stopped_at,
+                stop_log: self.test.site.take_stop_log(),
+            })),
             None => Ok((report, self.test)),
         }
     }
@@ -521,6 +535,8 @@ struct RtStats {
     worst: Duration,
     worst_at: (usize, usize),
     fifo: RtSetting,
+    /// Step and sub-step where the experimental side failed or stopped.
+    stopped_at: Option<(usize, usize)>,
 }
 
 struct RealTime<'a> {
@@ -598,7 +614,7 @@ impl RealTime<'_> {
                     sleeper.sleep_until(self.t0 + step_start);
                     if !self.take_predictor() {
                         self.stats.late_steps += 1;
-                        holds = self.late_step(&sleeper, step_start, dt_ns, (ag_i, ag_i))?;
+                        holds = self.late_step(&sleeper, n, step_start, dt_ns, (ag_i, ag_i))?;
                     }
                 }
                 self.coupling.begin_next();
@@ -629,8 +645,12 @@ impl RealTime<'_> {
                 let end = self.t0 + step_start + Duration::from_nanos(self.slot_offset(dt_ns, holds, j));
                 let ag = crate::substructure::substep_ground_acceleration(ag_i, ag_next, j, k);
                 let command = self.coupling.next_command();
-                self.site
-                    .substep(command, ag, dtau_slot, &mut self.force, &mut self.displacement)?;
+                if let Err(e) = self
+                    .site
+                    .substep(command, ag, dtau_slot, &mut self.force, &mut self.displacement)
+                {
+                    return Err(self.site_failed(n, j, e));
+                }
                 self.coupling.feedback(&self.force);
                 self.stats.substeps += 1;
                 if j == k {
@@ -678,6 +698,14 @@ impl RealTime<'_> {
         Ok(())
     }
 
+    /// The experimental side failed in sub-step `j` of step `n` (of this run): a controlled
+    /// stop at the step the offline driver would report.
+    fn site_failed(&mut self, n: usize, j: usize, e: Error) -> Halt {
+        let step = self.offset + n + 1;
+        self.stats.stopped_at = Some((step, j));
+        Halt::Failed(stopped_at(step, self.dt, e))
+    }
+
     /// Take the next step's `W_c` if posted.
     fn take_predictor(&mut self) -> bool {
         let c = &mut self.coupling;
@@ -689,6 +717,7 @@ impl RealTime<'_> {
     fn late_step(
         &mut self,
         sleeper: &spin_sleep::SpinSleeper,
+        n: usize,
         step_start: Duration,
         dt_ns: u128,
         ag_hold: (f64, f64),
@@ -705,8 +734,12 @@ impl RealTime<'_> {
                 let end = start + Duration::from_nanos((dt_ns / self.k as u128) as u64);
                 self.stats.wake.record(Instant::now().saturating_duration_since(start));
                 let command = self.coupling.hold_command(holds);
-                self.site
-                    .substep(command, ag_hold, dtau, &mut self.force, &mut self.displacement)?;
+                if let Err(e) = self
+                    .site
+                    .substep(command, ag_hold, dtau, &mut self.force, &mut self.displacement)
+                {
+                    return Err(self.site_failed(n, 0, e));
+                }
                 holds += 1;
                 self.stats.holds += 1;
                 let done = Instant::now();

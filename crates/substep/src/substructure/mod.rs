@@ -16,7 +16,8 @@ mod test_run;
 pub use compensation::{ErrorForceCompensation, ErrorForceSpec};
 pub use controller::{SubstepController, SubstepSettings};
 pub use estimation::{EstimationOutcome, EstimationStats};
-pub use safety::{LimitedSite, SafetyLimits};
+pub use safety::{LimitedSite, MAX_RAMP_SUBSTEPS, MAX_RAMP_TIME, SafetyLimits, StopLog};
+pub(crate) use test_run::stopped_at;
 pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
 
 use crate::error::Result;
@@ -65,6 +66,11 @@ pub trait ExperimentalSubstructure: Send {
     }
     /// Phase-lag compensation of this side, if it has one ([`crate::compensate::CompensatedSite`]).
     fn phase_lag(&self) -> Option<&dyn crate::compensate::PhaseLagReport> {
+        None
+    }
+    /// After a controlled stop of a [`LimitedSite`]: what it did (tripping sub-step and ramp),
+    /// once. Default: `None`.
+    fn take_stop_log(&mut self) -> Option<StopLog> {
         None
     }
 }

@@ -1,5 +1,7 @@
 //! Offline coupling of the controller with an experimental substructure: one call per step.
 
+#[allow(unused_imports)] // doc links
+use super::StopLog;
 use super::{ExperimentalSubstructure, SubstepController};
 use crate::error::{Error, Result};
 use crate::model::ModelRef;
@@ -11,6 +13,10 @@ pub trait SubstepObserver {
     /// With phase-lag compensation: the tracking error `d − y` and the correction `Δu` of the
     /// sub-step, called just before [`substep`](Self::substep) for the same sub-step.
     fn phase_lag(&mut self, _tracking_error: &[f64], _correction: &[f64]) {}
+    /// After a safety stop in step `step`: ramp sub-step `s` (1-based) to the safe position,
+    /// numbered `j` after the step's executed sub-steps (see [`StopLog::replay`]).
+    #[allow(clippy::too_many_arguments)]
+    fn ramp(&mut self, _step: usize, _j: usize, _s: usize, _command: &[f64], _force: &[f64], _displacement: &[f64]) {}
 }
 
 impl SubstepObserver for () {}
@@ -106,6 +112,9 @@ impl SubstructureTest {
                 &mut self.measured_displacement,
             );
             if let Err(e) = result {
+                if let Some(log) = self.site.take_stop_log() {
+                    log.replay(self.step + 1, j, observer);
+                }
                 return Err(self.stopped(e));
             }
             if let Some(p) = self.site.phase_lag() {
@@ -153,16 +162,7 @@ impl SubstructureTest {
     /// The experimental side failed during step `self.step + 1`: a controlled stop (a safety
     /// stop reported by the site keeps its reason).
     fn stopped(&self, e: Error) -> Error {
-        let step = self.step + 1;
-        let time = step as f64 * self.controller.dt();
-        match e {
-            Error::Stopped { reason, .. } => Error::Stopped { step, time, reason },
-            other => Error::Stopped {
-                step,
-                time,
-                reason: format!("experimental side failed: {other}"),
-            },
-        }
+        stopped_at(self.step + 1, self.controller.dt(), e)
     }
 
     pub fn steps_done(&self) -> usize {
@@ -171,5 +171,20 @@ impl SubstructureTest {
 
     pub fn record(&self) -> StepRecord<'_> {
         StepRecord::of(&self.controller, self.step, &self.measured_displacement)
+    }
+}
+
+/// The experimental side failed during step `step` (time step `dt`): a controlled stop at that
+/// step (a safety stop reported by the site keeps its reason). Shared by every driver, so a
+/// stop reports the same step offline and in real time.
+pub(crate) fn stopped_at(step: usize, dt: f64, e: Error) -> Error {
+    let time = step as f64 * dt;
+    match e {
+        Error::Stopped { reason, .. } => Error::Stopped { step, time, reason },
+        other => Error::Stopped {
+            step,
+            time,
+            reason: format!("experimental side failed: {other}"),
+        },
     }
 }
