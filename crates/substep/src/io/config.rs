@@ -887,6 +887,7 @@ impl RawConfig {
             None => None,
             Some(s) => Some(s.build(&model, &name_s, scheme, dt, base, &limits)?),
         };
+        check_exact_range(&self.structure, &model, substructure.as_ref(), scheme, dt)?;
         Ok(TestDefinition {
             source: name.to_string(),
             model,
@@ -1174,6 +1175,166 @@ impl RawStructure {
         limits.check_memory(key, &asked, shape.bytes)?;
         Ok(Some(shape))
     }
+}
+
+/// Largest rate `max(|K_ii|, |C_ii|) / M_ii · Δt` (the diagonal of `A·Δt` of `ż = A z`) that an
+/// exact integration accepts: the matrix exponential is computed up to `‖A·Δt‖₁ =`
+/// [`crate::linalg::EXPM_MAX_NORM`], and the off-diagonal terms add to the diagonal's.
+const EXACT_MAX_RATE: f64 = 1e11;
+
+impl RawStructure {
+    /// Config key of the model's stiffness or damping (`what` = "stiffness" / "damping").
+    fn key(&self, what: &str) -> String {
+        if self.sdof.is_some() {
+            format!("structure.sdof.{what}")
+        } else if self.tmd.is_some() {
+            "structure.tmd".into()
+        } else if self.shear_building.is_some() {
+            "structure.shear_building".into()
+        } else if self.frame.is_some() {
+            "structure.frame".into()
+        } else if what == "damping" && self.rayleigh.is_some() {
+            "structure.rayleigh".into()
+        } else if what == "damping" && self.modal.is_some() {
+            "structure.modal".into()
+        } else {
+            format!("structure.{what}")
+        }
+    }
+}
+
+/// Refuse what the matrix exponentials cannot integrate in f64 (e.g. a stiffness of 1e60 N/m
+/// on 50 kg, or a mass of 1e-300 kg): every DOF of the exact scheme or of the exact reference at
+/// `dt`, specimen internal DOFs and actuator dynamics at the inner step, with the key of the
+/// term that dominates.
+fn check_exact_range(
+    raw: &RawStructure,
+    model: &Model,
+    sub: Option<&SubstructureDefinition>,
+    scheme: Scheme,
+    dt: f64,
+) -> Result<()> {
+    struct Dof {
+        m: f64,
+        k: f64,
+        c: f64,
+        /// Specimen (index) whose stiffness / damping dominates, `None` for the structure.
+        k_owner: Option<usize>,
+        c_owner: Option<usize>,
+        /// Integrated at the inner step only (a specimen's internal DOF).
+        internal: bool,
+    }
+    let n = model.n_dofs();
+    let diagonals = match model {
+        Model::Dense(m) => (m.mass.diagonal(), m.stiffness.diagonal(), m.damping.diagonal()),
+        Model::Sparse(m) => (
+            DVector::from_vec(m.mass.diagonal()),
+            DVector::from_vec(m.stiffness.diagonal()),
+            DVector::from_vec(m.damping.diagonal()),
+        ),
+    };
+    let mut dofs: Vec<Dof> = (0..n)
+        .map(|i| Dof {
+            m: diagonals.0[i],
+            k: diagonals.1[i],
+            c: diagonals.2[i],
+            k_owner: None,
+            c_owner: None,
+            internal: false,
+        })
+        .collect();
+    let mut all_linear = true;
+    let mut dt_inner = dt;
+    if let Some(s) = sub {
+        dt_inner = dt / s.substeps as f64 / s.inner_steps as f64;
+        for (idx, spec) in s.specimens.iter().enumerate() {
+            let Some(lm) = spec.linear_matrices() else {
+                all_linear = false;
+                continue;
+            };
+            for (a, row) in (0..lm.stiffness.nrows()).map(|a| (a, lm.dofs.get(a).copied())) {
+                let (k, c, m) = (lm.stiffness[(a, a)], lm.damping[(a, a)], lm.mass[(a, a)]);
+                match row {
+                    Some(g) if g < n => {
+                        let d = &mut dofs[g];
+                        if k.abs() > d.k.abs() {
+                            d.k_owner = Some(idx);
+                        }
+                        if c.abs() > d.c.abs() {
+                            d.c_owner = Some(idx);
+                        }
+                        d.k += k;
+                        d.c += c;
+                        d.m += m;
+                    }
+                    _ => dofs.push(Dof {
+                        m,
+                        k,
+                        c,
+                        k_owner: Some(idx),
+                        c_owner: Some(idx),
+                        internal: true,
+                    }),
+                }
+            }
+        }
+        let (key, rate) = match s.actuator.dynamics {
+            Dynamics::Ideal => ("", 0.0),
+            Dynamics::FirstOrder { time_constant } => ("time_constant", dt_inner / time_constant),
+            Dynamics::SecondOrder { frequency_hz, zeta } => {
+                let w = 2.0 * std::f64::consts::PI * frequency_hz;
+                ("frequency", (w * w).max(2.0 * zeta * w) * dt_inner)
+            }
+        };
+        if !(rate <= EXACT_MAX_RATE) {
+            return Err(Error::invalid(
+                format!("substructure.actuator.{key}"),
+                format!(
+                    "gives a rate of {rate:.3e} per inner step of {dt_inner:.3e} s (at most {EXACT_MAX_RATE:.0e}): \
+                     outside what f64 can integrate; check the units"
+                ),
+            ));
+        }
+    }
+    let exact = scheme == Scheme::Exact
+        || sub.is_some_and(|s| {
+            !s.specimens.is_empty() && all_linear && dofs.len() <= super::run::EXACT_REFERENCE_MAX_DOFS
+        });
+    for (i, d) in dofs.iter().enumerate() {
+        let h = if d.internal { dt_inner } else { dt };
+        if !(d.internal || exact) || d.m <= 0.0 {
+            continue; // no exponential at this DOF; a mass that is not positive is refused elsewhere
+        }
+        let (rate_k, rate_c) = (d.k.abs() / d.m * h, d.c.abs() / d.m * h);
+        if rate_k <= EXACT_MAX_RATE && rate_c <= EXACT_MAX_RATE {
+            continue;
+        }
+        let (what, value, owner) = if !(rate_c > rate_k) {
+            ("stiffness", d.k, d.k_owner)
+        } else {
+            ("damping", d.c, d.c_owner)
+        };
+        let key = match owner {
+            Some(idx) => format!("substructure.specimen[{}].{what}", idx + 1),
+            None => raw.key(what),
+        };
+        let place = if d.internal {
+            format!("an internal specimen DOF at the inner step {h:.3e} s")
+        } else {
+            format!("DOF {} at dt = {h} s", i + 1)
+        };
+        return Err(Error::invalid(
+            key,
+            format!(
+                "{what} {value:.3e} against a mass of {:.3e} kg at {place} gives a rate {what}/mass·dt = \
+                 {:.3e}, more than {EXACT_MAX_RATE:.0e}: outside what f64 can integrate exactly (matrix \
+                 exponential); check the units of mass, {what} and dt",
+                d.m,
+                rate_k.max(rate_c)
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Refuse an excitation whose samples at `dt` would not fit, before they are generated.
@@ -1507,7 +1668,7 @@ impl RawGroundMotion {
 /// `specimen.<key>` from a specimen constructor becomes `<what>.<key>`.
 fn rekey(e: Error, what: &str) -> Error {
     match e {
-        Error::InvalidInput { what: key, reason } => {
+        Error::InvalidInput { what: key, reason } | Error::Numerical { what: key, reason } => {
             let rest = key.strip_prefix("specimen").unwrap_or(&key);
             Error::invalid(format!("{what}{rest}"), reason)
         }
@@ -2027,8 +2188,19 @@ impl RawSubstructure {
             }
             // Build once to check the specimen's own consistency (mass on attached DOFs, stability).
             spec.build().map_err(|e| match e {
-                Error::InvalidInput { what: w, reason } => {
-                    Error::invalid(format!("{what}.{}", w.trim_start_matches("specimen.")), reason)
+                Error::InvalidInput { what: w, reason } | Error::Numerical { what: w, reason } => {
+                    let rest = w.trim_start_matches("specimen");
+                    Error::invalid(
+                        format!(
+                            "{what}{}",
+                            if rest.starts_with('.') || rest.is_empty() {
+                                rest.to_string()
+                            } else {
+                                format!(".{rest}")
+                            }
+                        ),
+                        reason,
+                    )
                 }
                 other => other,
             })?;
