@@ -100,6 +100,26 @@ impl LinearSpecimen {
             if m.iter().any(|x| !x.is_finite()) {
                 return Err(Error::invalid(name, "contains a non-finite value"));
             }
+            // The monolithic reference assembles these into symmetric model matrices.
+            let scale = m.amax().max(f64::MIN_POSITIVE);
+            for j in 0..n {
+                for i in (j + 1)..n {
+                    if (m[(i, j)] - m[(j, i)]).abs() > 1e-9 * scale {
+                        return Err(Error::invalid(
+                            name,
+                            format!(
+                                "is not symmetric: entry ({}, {}) = {:e} but ({}, {}) = {:e}",
+                                i + 1,
+                                j + 1,
+                                m[(i, j)],
+                                j + 1,
+                                i + 1,
+                                m[(j, i)]
+                            ),
+                        ));
+                    }
+                }
+            }
         }
         if n_c == 0 || n_c > n {
             return Err(Error::invalid(
