@@ -1362,6 +1362,11 @@ impl RawConfig {
             steps,
             ..RunShape::default()
         };
+        limits.check_memory(
+            "integrator.dt",
+            &format!("a {} s excitation at dt = {dt} s ({steps:.0} steps)", steps * dt),
+            shape.excitation_bytes(),
+        )?;
         let mut asked = format!("{steps:.0} steps of a {:.0}-DOF model", m.n);
         if let Some(s) = &self.substructure {
             if s.substeps == 0 || s.coupling_dofs.is_empty() {
