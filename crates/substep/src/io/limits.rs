@@ -172,10 +172,10 @@ pub struct RunShape {
 const CSV_BYTES_PER_VALUE: f64 = 24.0;
 
 impl RunShape {
-    /// Time of one dense step: about 1.2 ns per `n²` (docs/performance.md: 1.1–1.3 ms at
+    /// Time of one dense step: about 1.2–3.9 ns per `n²` (docs/performance.md: 1.1–1.3 ms at
     /// n = 1000), doubled for the reference run alongside.
     pub fn dense_step_seconds(n: f64) -> f64 {
-        2.0 * 1.5e-9 * n * n
+        2.0 * 2e-9 * n * n
     }
     /// Time of one sparse step of a chain: 7 ns per DOF measured, 20 ns taken (with reference).
     pub fn chain_step_seconds(n: f64) -> f64 {
