@@ -568,3 +568,62 @@ fn bad_integrator_input_names_the_key() {
         assert_eq!(Scheme::from_name(name, 0.3, 0.6, -0.2).unwrap(), expected, "{name}");
     }
 }
+
+/// Library callers (not only configs, which `[limits]` checks first) get an error, not a
+/// capacity-overflow panic, for sizes that cannot be indexed.
+#[test]
+fn builders_refuse_sizes_that_cannot_be_indexed() {
+    let b = ShearBuilding {
+        stories: usize::MAX,
+        story_mass: 1.0,
+        first_period: 1.0,
+    };
+    assert!(message(substep::model::shear_building_sparse(&b)).contains("structure.shear_building.stories"));
+    let f = substep::model::Frame2d {
+        bays: usize::MAX / 2,
+        stories: 10,
+        ..Default::default()
+    };
+    assert!(message(substep::model::frame_2d(&f)).contains("cannot be indexed"));
+}
+
+/// The exponential of a matrix far too stiff for its time step is an error, not a panic (was:
+/// `Option::unwrap()` on `None` inside nalgebra at a stiffness of 1e60 N/m), and moderate
+/// norms keep nalgebra's result bit for bit.
+#[test]
+fn matrix_exponential_refuses_instead_of_panicking() {
+    let model = substep::model::sdof(50.0, 62.8, 1e60).unwrap();
+    let e = message(ExactFoh::new(&model, 0.01, &DVector::zeros(1)));
+    assert!(
+        e.starts_with("exact integrator: cannot be computed for ‖A·dt‖₁ = 2.000e56"),
+        "{e}"
+    );
+    let a = dmatrix![0.0, 1.0; -400.0, -2.0];
+    assert_eq!(substep::linalg::expm(&a).unwrap(), a.exp());
+    // Pre-scaled beyond norm 1000: a stiff undamped oscillator keeps |Φ| bounded (rotation).
+    let w = 3.0e4_f64;
+    let phi = substep::linalg::expm(&dmatrix![0.0, 1.0; -w * w, 0.0]).unwrap();
+    let exact = [w.cos(), w.sin() / w, -w * w.sin(), w.cos()];
+    for (got, want) in phi.iter().zip([exact[0], exact[2], exact[1], exact[3]]) {
+        assert!((got - want).abs() <= 1e-6 * want.abs().max(1.0), "{got} vs {want}");
+    }
+    assert!(substep::linalg::expm(&dmatrix![f64::NAN]).is_none());
+}
+
+/// Balancing and eigenvalues terminate on entries near the f64 range (nalgebra's balancing
+/// looped forever on a specimen of stiffness 1e90 or mass 1e-300).
+#[test]
+fn eigenvalues_terminate_on_extreme_matrices() {
+    for a in [
+        dmatrix![0.0, 1.0; -2e303, -1.0],
+        dmatrix![0.0, 1.0; -1e90, -1e-300],
+        dmatrix![1e300, 1e-300; 1e-300, 1e300],
+    ] {
+        let _ = substep::linalg::eigenvalues(&a);
+    }
+    let ev = substep::linalg::eigenvalues(&dmatrix![0.0, 1.0; -4.0, 0.0]).unwrap();
+    assert!(
+        ev.iter()
+            .all(|z| (z.im.abs() - 2.0).abs() < 1e-12 && z.re.abs() < 1e-12)
+    );
+}

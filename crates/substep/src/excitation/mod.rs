@@ -28,7 +28,8 @@ mod record;
 
 pub use generators::{Envelope, KanaiTajimi, harmonic, kanai_tajimi, sine_sweep};
 pub use readers::{
-    parse_at2, parse_single_column, parse_two_column, read_at2, read_record, read_single_column, read_two_column,
+    parse_at2, parse_single_column, parse_two_column, read_at2, read_record, read_record_with, read_single_column,
+    read_two_column,
 };
 pub use record::Record;
 

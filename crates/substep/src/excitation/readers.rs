@@ -12,13 +12,16 @@ use super::record::{Record, from_located_samples};
 use crate::error::{Error, Result, require_positive};
 use std::path::Path;
 
-/// Read a whole file as text; the path as given names the file in messages.
-fn read_text(path: &Path) -> Result<(String, String)> {
-    let name = path.display().to_string();
-    match std::fs::read_to_string(path) {
-        Ok(text) => Ok((name, text)),
-        Err(e) => Err(Error::file(name, format!("cannot read file: {e}"))),
-    }
+/// Read a whole file as text (a regular file of at most `max_bytes`); the path as given names
+/// the file in messages.
+fn read_text(path: &Path, max_bytes: f64) -> Result<(String, String)> {
+    let text = crate::io::limits::read_text(path, max_bytes)?;
+    Ok((path.display().to_string(), text))
+}
+
+/// The default file-size limit of the readers (`[limits] max_file_bytes` of a config).
+fn default_max_bytes() -> f64 {
+    crate::io::Limits::default().max_file_bytes
 }
 
 /// The fields of one line, without a `#` comment (and without a byte-order mark).
@@ -53,7 +56,7 @@ fn data_value(field: &str, name: &str, line_no: usize, what: &str) -> Result<f64
 
 /// Read a two-column `t, a_g` file (s, m/s²); see [`parse_two_column`].
 pub fn read_two_column(path: impl AsRef<Path>) -> Result<Record> {
-    let (name, text) = read_text(path.as_ref())?;
+    let (name, text) = read_text(path.as_ref(), default_max_bytes())?;
     parse_two_column(&text, &name)
 }
 
@@ -100,7 +103,7 @@ pub fn parse_two_column(text: &str, name: &str) -> Result<Record> {
 pub fn read_single_column(path: impl AsRef<Path>, dt: f64) -> Result<Record> {
     let path = path.as_ref();
     require_positive(&format!("{}: dt", path.display()), dt)?;
-    let (name, text) = read_text(path)?;
+    let (name, text) = read_text(path, default_max_bytes())?;
     parse_single_column(&text, dt, &name)
 }
 
@@ -129,7 +132,7 @@ pub fn parse_single_column(text: &str, dt: f64, name: &str) -> Result<Record> {
 /// Read a PEER NGA `.AT2` acceleration file (values in g, converted to m/s²); see
 /// [`parse_at2`].
 pub fn read_at2(path: impl AsRef<Path>) -> Result<Record> {
-    let (name, text) = read_text(path.as_ref())?;
+    let (name, text) = read_text(path.as_ref(), default_max_bytes())?;
     parse_at2(&text, &name)
 }
 
@@ -224,13 +227,20 @@ fn keyed_number(s: &str, key: &str) -> Option<f64> {
 /// AT2 (a given `dt` must then agree with the header's DT); otherwise a single column sampled
 /// at `dt` if `dt` is given, else two columns `t, a_g`.
 pub fn read_record(path: impl AsRef<Path>, dt: Option<f64>) -> Result<Record> {
+    read_record_with(path, dt, default_max_bytes())
+}
+
+/// [`read_record`] of a file of at most `max_bytes` (`[limits] max_file_bytes`).
+pub fn read_record_with(path: impl AsRef<Path>, dt: Option<f64>, max_bytes: f64) -> Result<Record> {
     let path = path.as_ref();
+    let name = path.display().to_string();
     let is_at2 = path
         .extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("at2"));
     if is_at2 {
-        let record = read_at2(path)?;
+        let (_, text) = read_text(path, max_bytes)?;
+        let record = parse_at2(&text, &name)?;
         match dt {
             Some(dt) if dt.is_nan() || (dt - record.dt).abs() > 1e-9 * record.dt => Err(Error::file(
                 path.display().to_string(),
@@ -239,8 +249,11 @@ pub fn read_record(path: impl AsRef<Path>, dt: Option<f64>) -> Result<Record> {
             _ => Ok(record),
         }
     } else if let Some(dt) = dt {
-        read_single_column(path, dt)
+        require_positive(&format!("{name}: dt"), dt)?;
+        let (_, text) = read_text(path, max_bytes)?;
+        parse_single_column(&text, dt, &name)
     } else {
-        read_two_column(path)
+        let (_, text) = read_text(path, max_bytes)?;
+        parse_two_column(&text, &name)
     }
 }

@@ -20,15 +20,17 @@ pub struct FohMap {
 }
 
 impl FohMap {
-    /// Discretise `ż = A z + B w` (A: s×s, B: s×m) over `dt` for `w` linear in time.
-    pub fn new(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> Self {
+    /// Discretise `ż = A z + B w` (A: s×s, B: s×m) over `dt` for `w` linear in time. An error
+    /// (never a panic) when the matrix exponential cannot be computed: non-finite entries, or
+    /// `‖A Δt‖₁` beyond [`crate::linalg::EXPM_MAX_NORM`] (a system far too stiff for `dt`).
+    pub fn new(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> Result<Self> {
         Self::with_rate(a, b, &DMatrix::zeros(a.nrows(), b.ncols()), dt)
     }
 
     /// Discretise `ż = A z + B w + D ẇ` over `dt` for `w` linear in time (so `ẇ = Δw/Δt` is
     /// constant): the augmented matrix is `[[A Δt, B Δt, D], [0, 0, I], [0, 0, 0]]` acting on
     /// `[z; w_i; Δw]`. The rate term is how a dashpot sees a linearly moving support.
-    pub fn with_rate(a: &DMatrix<f64>, b: &DMatrix<f64>, d: &DMatrix<f64>, dt: f64) -> Self {
+    pub fn with_rate(a: &DMatrix<f64>, b: &DMatrix<f64>, d: &DMatrix<f64>, dt: f64) -> Result<Self> {
         let (s, m) = (a.nrows(), b.ncols());
         let mut aug = DMatrix::zeros(s + 2 * m, s + 2 * m);
         aug.view_mut((0, 0), (s, s)).copy_from(&(a * dt));
@@ -37,11 +39,31 @@ impl FohMap {
         for i in 0..m {
             aug[(s + i, s + m + i)] = 1.0;
         }
-        let e = aug.exp();
-        Self {
+        let e = crate::linalg::expm(&aug).ok_or_else(|| {
+            Error::numerical(
+                "matrix exponential",
+                format!(
+                    "cannot be computed for ‖A·dt‖₁ = {:.3e} (at most {:.0e}, finite): the system is \
+                     far too stiff or too heavily damped for dt = {dt} s",
+                    crate::linalg::one_norm(&aug),
+                    crate::linalg::EXPM_MAX_NORM
+                ),
+            )
+        })?;
+        Ok(Self {
             phi: e.view((0, 0), (s, s)).into_owned(),
             gamma0: e.view((0, s), (s, m)).into_owned(),
             gamma1: e.view((0, s + m), (s, m)).into_owned(),
+        })
+    }
+
+    /// A map whose every entry is NaN: what a lazily built map becomes when its exponential
+    /// fails inside a step, so that the run stops as diverged instead of panicking.
+    pub fn not_a_number(s: usize, m: usize) -> Self {
+        Self {
+            phi: DMatrix::from_element(s, s, f64::NAN),
+            gamma0: DMatrix::from_element(s, m, f64::NAN),
+            gamma1: DMatrix::from_element(s, m, f64::NAN),
         }
     }
 
@@ -91,10 +113,10 @@ impl ExactFoh {
         a.view_mut((n, n), (n, n)).copy_from(&(-&minv * &model.damping));
         let mut b = DMatrix::zeros(2 * n, n);
         b.view_mut((n, 0), (n, n)).copy_from(&minv);
-        let map = FohMap::new(&a, &b, dt);
-        if map.phi.iter().any(|x| !x.is_finite()) {
-            return Err(Error::numerical("exact integrator", "matrix exponential is not finite"));
-        }
+        let map = FohMap::new(&a, &b, dt).map_err(|e| match e {
+            Error::Numerical { reason, .. } => Error::numerical("exact integrator", reason),
+            other => other,
+        })?;
         let state = Kinematics::at_rest(model, load0)?;
         Ok(Self {
             dt,

@@ -17,7 +17,8 @@
 //! To add a specimen kind: add a variant to `RawSpecimen` (its keys are the variant's fields)
 //! and one arm to `RawSpecimen::to_spec`.
 
-use super::matrix_market::{read_matrix_market, read_matrix_market_sparse};
+use super::limits::{self, Limits, RunShape};
+use super::matrix_market::{read_matrix_market_sparse_with, read_matrix_market_with};
 use crate::compensate::{ArxPhaseLagSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::excitation::{self, Envelope, KanaiTajimi, Record};
@@ -234,7 +235,7 @@ impl TestDefinition {
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::file(&name, format!("cannot read file: {e}")))?;
+        let text = limits::read_text(path, Limits::default().max_file_bytes)?;
         let base = path.parent().unwrap_or(Path::new(""));
         Self::from_toml(&text, &name, base)
     }
@@ -290,6 +291,29 @@ struct RawConfig {
     substructure: Option<RawSubstructure>,
     #[serde(default)]
     output: RawOutput,
+    limits: Option<RawRunLimits>,
+}
+
+/// `[limits]`: what one run may ask of the machine (docs/limits.md).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRunLimits {
+    max_memory: Option<f64>,
+    max_run_time: Option<f64>,
+    max_output_bytes: Option<f64>,
+    max_file_bytes: Option<f64>,
+}
+
+impl RawRunLimits {
+    fn build(&self) -> Result<Limits> {
+        let d = Limits::default();
+        Ok(Limits {
+            max_memory: limits::limit_value("max_memory", self.max_memory, d.max_memory)?,
+            max_run_time: limits::limit_value("max_run_time", self.max_run_time, d.max_run_time)?,
+            max_output_bytes: limits::limit_value("max_output_bytes", self.max_output_bytes, d.max_output_bytes)?,
+            max_file_bytes: limits::limit_value("max_file_bytes", self.max_file_bytes, d.max_file_bytes)?,
+        })
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -751,10 +775,15 @@ impl<'de> Deserialize<'de> for OneOrMany {
 
 /// A matrix from its config form; `what` is the key path.
 pub(super) fn matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<DMatrix<f64>> {
+    matrix_with(input, what, base, &Limits::default())
+}
+
+/// [`matrix`] with a `.mtx` file read within `limits`.
+fn matrix_with(input: &MatrixInput, what: &str, base: &Path, limits: &Limits) -> Result<DMatrix<f64>> {
     match input {
         MatrixInput::File(path) => {
             let resolved = base.join(path);
-            read_matrix_market(&resolved).map_err(|e| Error::invalid(what, e.to_string()))
+            read_matrix_market_with(&resolved, limits).map_err(|e| Error::invalid(what, e.to_string()))
         }
         MatrixInput::Rows(rows) => {
             let n_rows = rows.len();
@@ -783,14 +812,14 @@ pub(super) fn matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<DMa
 
 /// A model matrix in sparse form: `.mtx` files are read without a dense array; inline rows must
 /// be square.
-fn sparse_matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<CscMatrix> {
+fn sparse_matrix(input: &MatrixInput, what: &str, base: &Path, limits: &Limits) -> Result<CscMatrix> {
     match input {
         MatrixInput::File(path) => {
             let resolved = base.join(path);
-            read_matrix_market_sparse(&resolved).map_err(|e| Error::invalid(what, e.to_string()))
+            read_matrix_market_sparse_with(&resolved, limits).map_err(|e| Error::invalid(what, e.to_string()))
         }
         MatrixInput::Rows(_) => {
-            let m = matrix(input, what, base)?;
+            let m = matrix_with(input, what, base, limits)?;
             if m.nrows() != m.ncols() {
                 return Err(Error::invalid(
                     what,
@@ -827,11 +856,19 @@ fn forbid(prefix: &str, keys: &[(&str, bool)], why: &str) -> Result<()> {
 
 impl RawConfig {
     fn build(self, name: &str, base: &Path) -> Result<TestDefinition> {
+        let limits = self
+            .limits
+            .as_ref()
+            .map_or(Ok(Limits::default()), RawRunLimits::build)?;
         let (name_s, scheme, dt, duration) = self.integrator.build()?;
         // Only the implicit Newmark schemes (and the sub-step controller) run on sparse storage.
         let sparse_capable = matches!(scheme, Scheme::Newmark { beta, .. } if beta > 0.0);
-        let model = self.structure.build(base, sparse_capable)?;
-        let ground_motion = self.ground_motion.build(dt, duration, base)?;
+        // Limits first, from the config alone: nothing big is built, read or run before this.
+        let shape = self.structure.shape(sparse_capable, &limits)?;
+        if let (Some(m), Some(length)) = (shape, self.ground_motion.length_hint(duration)) {
+            self.check_run(&limits, m, (length / dt).floor(), dt)?;
+        }
+        let ground_motion = self.ground_motion.build(dt, duration, base, &limits)?;
         let steps = ground_motion.accel.len() - 1;
         if steps == 0 {
             return Err(Error::invalid(
@@ -839,10 +876,18 @@ impl RawConfig {
                 format!("the run must last at least one step (dt = {dt} s)"),
             ));
         }
+        if let Some(m) = shape {
+            self.check_run(&limits, m, steps as f64, dt)?;
+        }
+        let model = self.structure.build(base, sparse_capable, &limits)?;
+        if shape.is_none() {
+            self.check_run(&limits, ModelShape::of(&model), steps as f64, dt)?;
+        }
         let substructure = match self.substructure {
             None => None,
-            Some(s) => Some(s.build(&model, &name_s, scheme, dt, base)?),
+            Some(s) => Some(s.build(&model, &name_s, scheme, dt, base, &limits)?),
         };
+        check_exact_range(&self.structure, &model, substructure.as_ref(), scheme, dt)?;
         Ok(TestDefinition {
             source: name.to_string(),
             model,
@@ -865,7 +910,7 @@ impl RawConfig {
 impl RawStructure {
     /// The model in the storage `[structure] storage` asks for; `sparse_capable` is false when
     /// the integrator needs dense matrices (then `auto` keeps models dense).
-    fn build(&self, base: &Path, sparse_capable: bool) -> Result<Model> {
+    fn build(&self, base: &Path, sparse_capable: bool, limits: &Limits) -> Result<Model> {
         let matrices = self.mass.is_some() || self.stiffness.is_some();
         let forms = [
             ("mass + stiffness", matrices),
@@ -940,14 +985,14 @@ impl RawStructure {
                 first_period: b.first_period,
             })?;
             let damping = match &self.damping {
-                Some(c) => sparse_matrix(c, "structure.damping", base)?,
+                Some(c) => sparse_matrix(c, "structure.damping", base, limits)?,
                 None => m.damping,
             };
             SparseModel::new(m.mass, damping, m.stiffness, influence)?.into()
         } else if let Some(f) = &self.frame {
             let m = frame_2d(&f.to_frame())?;
             let damping = match &self.damping {
-                Some(c) => sparse_matrix(c, "structure.damping", base)?,
+                Some(c) => sparse_matrix(c, "structure.damping", base, limits)?,
                 None => m.damping,
             };
             SparseModel::new(m.mass, damping, m.stiffness, influence.or(Some(m.influence)))?.into()
@@ -970,18 +1015,18 @@ impl RawStructure {
             let inputs = [Some(mass), Some(stiffness), self.damping.as_ref()];
             if inputs.iter().flatten().any(|m| matches!(m, MatrixInput::File(_))) {
                 // MatrixMarket files are read sparse (they may be large).
-                let mass = sparse_matrix(mass, "structure.mass", base)?;
-                let stiffness = sparse_matrix(stiffness, "structure.stiffness", base)?;
+                let mass = sparse_matrix(mass, "structure.mass", base, limits)?;
+                let stiffness = sparse_matrix(stiffness, "structure.stiffness", base, limits)?;
                 let damping = match &self.damping {
-                    Some(c) => sparse_matrix(c, "structure.damping", base)?,
+                    Some(c) => sparse_matrix(c, "structure.damping", base, limits)?,
                     None => CscMatrix::zeros(mass.n()),
                 };
                 SparseModel::new(mass, damping, stiffness, influence)?.into()
             } else {
-                let mass = matrix(mass, "structure.mass", base)?;
-                let stiffness = matrix(stiffness, "structure.stiffness", base)?;
+                let mass = matrix_with(mass, "structure.mass", base, limits)?;
+                let stiffness = matrix_with(stiffness, "structure.stiffness", base, limits)?;
                 let damping = match &self.damping {
-                    Some(c) => matrix(c, "structure.damping", base)?,
+                    Some(c) => matrix_with(c, "structure.damping", base, limits)?,
                     None => DMatrix::zeros(mass.nrows(), mass.ncols()),
                 };
                 StructuralModel::new(mass, damping, stiffness, influence)?.into()
@@ -1007,6 +1052,16 @@ impl RawStructure {
 /// when the integrator or modal damping needs dense matrices (up to [`DENSE_MAX_DOFS`]).
 fn resolve_storage(model: Model, storage: Storage, sparse_capable: bool, modal: bool) -> Result<Model> {
     let n = model.n_dofs();
+    check_storage(n, storage, sparse_capable, modal)?;
+    match storage {
+        Storage::Auto if modal || !sparse_capable => model.with_storage(Storage::Dense),
+        storage => model.with_storage(storage),
+    }
+}
+
+/// Whether storage `storage` can hold an `n`-DOF model for this scheme and damping (cheap: it
+/// runs before the model is built).
+fn check_storage(n: usize, storage: Storage, sparse_capable: bool, modal: bool) -> Result<()> {
     let needs_dense = if modal {
         Some("modal damping ([structure.modal])")
     } else if !sparse_capable {
@@ -1029,8 +1084,346 @@ fn resolve_storage(model: Model, storage: Storage, sparse_capable: bool, modal: 
                  {DENSE_MAX_DOFS} DOFs here): use [structure.rayleigh] and an implicit Newmark scheme"
             ),
         )),
-        (Storage::Auto, Some(_)) => model.with_storage(Storage::Dense),
-        (storage, _) => model.with_storage(storage),
+        _ => Ok(()),
+    }
+}
+
+/// Size of the numerical model, known before it is built (or from the built model).
+#[derive(Debug, Clone, Copy)]
+struct ModelShape {
+    n: f64,
+    bytes: f64,
+    step_seconds: f64,
+}
+
+impl ModelShape {
+    fn of(model: &Model) -> Self {
+        let n = model.n_dofs() as f64;
+        match model {
+            Model::Dense(_) => Self::dense(n),
+            Model::Sparse(m) => {
+                let nnz = (m.mass.nnz() + m.damping.nnz() + m.stiffness.nnz()) as f64;
+                Self {
+                    n,
+                    bytes: n * limits::CHAIN_BYTES_PER_DOF + nnz * limits::MTX_BYTES_PER_ENTRY,
+                    step_seconds: RunShape::sparse_step_seconds(nnz),
+                }
+            }
+        }
+    }
+    fn dense(n: f64) -> Self {
+        Self {
+            n,
+            bytes: limits::dense_model_bytes(n),
+            step_seconds: RunShape::dense_step_seconds(n),
+        }
+    }
+}
+
+impl RawStructure {
+    /// The model's size from the config alone, refused when over `limits` or when its storage
+    /// contradicts the scheme or the damping; `None` for MatrixMarket files (their size line is
+    /// checked as they are read).
+    fn shape(&self, sparse_capable: bool, limits: &Limits) -> Result<Option<ModelShape>> {
+        let storage = match &self.storage {
+            Some(s) => Storage::from_name(s)?,
+            None => Storage::Auto,
+        };
+        let (n, sparse, key, asked) = if let Some(b) = &self.shear_building {
+            let n = b.stories as f64;
+            let sparse = ModelShape {
+                n,
+                bytes: n * limits::CHAIN_BYTES_PER_DOF,
+                step_seconds: RunShape::chain_step_seconds(n),
+            };
+            let asked = format!("a shear building of {} stories", b.stories);
+            (n, sparse, "structure.shear_building.stories", asked)
+        } else if let Some(f) = &self.frame {
+            let lines = f.bays as f64 + 1.0;
+            let per_floor = if f.rigid_diaphragm {
+                1.0 + 2.0 * lines
+            } else {
+                3.0 * lines
+            };
+            let n = f.stories as f64 * per_floor;
+            let sparse = ModelShape {
+                n,
+                bytes: n * limits::FRAME_BYTES_PER_DOF,
+                step_seconds: RunShape::frame_step_seconds(n, lines),
+            };
+            let asked = format!("a frame of {} bays and {} stories ({n:.0} DOFs)", f.bays, f.stories);
+            (n, sparse, "structure.frame", asked)
+        } else {
+            let n = if self.sdof.is_some() {
+                1
+            } else if self.tmd.is_some() {
+                2
+            } else if let Some(MatrixInput::Rows(rows)) = &self.mass {
+                rows.len()
+            } else {
+                return Ok(None);
+            };
+            return Ok(Some(ModelShape::dense(n as f64)));
+        };
+        let modal = self.modal.is_some();
+        check_storage(n.min(usize::MAX as f64) as usize, storage, sparse_capable, modal)?;
+        let shape = if modal || !sparse_capable || storage == Storage::Dense {
+            ModelShape::dense(n)
+        } else {
+            sparse
+        };
+        limits.check_memory(key, &asked, shape.bytes)?;
+        Ok(Some(shape))
+    }
+}
+
+/// Largest rate `max(|K_ii|, |C_ii|) / M_ii · Δt` (the diagonal of `A·Δt` of `ż = A z`) that an
+/// exact integration accepts: the matrix exponential is computed up to `‖A·Δt‖₁ =`
+/// [`crate::linalg::EXPM_MAX_NORM`], and the off-diagonal terms add to the diagonal's.
+const EXACT_MAX_RATE: f64 = 1e11;
+
+impl RawStructure {
+    /// Config key of the model's stiffness or damping (`what` = "stiffness" / "damping").
+    fn key(&self, what: &str) -> String {
+        if self.sdof.is_some() {
+            format!("structure.sdof.{what}")
+        } else if self.tmd.is_some() {
+            "structure.tmd".into()
+        } else if self.shear_building.is_some() {
+            "structure.shear_building".into()
+        } else if self.frame.is_some() {
+            "structure.frame".into()
+        } else if what == "damping" && self.rayleigh.is_some() {
+            "structure.rayleigh".into()
+        } else if what == "damping" && self.modal.is_some() {
+            "structure.modal".into()
+        } else {
+            format!("structure.{what}")
+        }
+    }
+}
+
+/// Refuse what the matrix exponentials cannot integrate in f64 (e.g. a stiffness of 1e60 N/m
+/// on 50 kg, or a mass of 1e-300 kg): every DOF of the exact scheme or of the exact reference at
+/// `dt`, specimen internal DOFs and actuator dynamics at the inner step, with the key of the
+/// term that dominates.
+fn check_exact_range(
+    raw: &RawStructure,
+    model: &Model,
+    sub: Option<&SubstructureDefinition>,
+    scheme: Scheme,
+    dt: f64,
+) -> Result<()> {
+    struct Dof {
+        m: f64,
+        k: f64,
+        c: f64,
+        /// Specimen (index) whose stiffness / damping dominates, `None` for the structure.
+        k_owner: Option<usize>,
+        c_owner: Option<usize>,
+        /// Integrated at the inner step only (a specimen's internal DOF).
+        internal: bool,
+    }
+    let n = model.n_dofs();
+    let diagonals = match model {
+        Model::Dense(m) => (m.mass.diagonal(), m.stiffness.diagonal(), m.damping.diagonal()),
+        Model::Sparse(m) => (
+            DVector::from_vec(m.mass.diagonal()),
+            DVector::from_vec(m.stiffness.diagonal()),
+            DVector::from_vec(m.damping.diagonal()),
+        ),
+    };
+    let mut dofs: Vec<Dof> = (0..n)
+        .map(|i| Dof {
+            m: diagonals.0[i],
+            k: diagonals.1[i],
+            c: diagonals.2[i],
+            k_owner: None,
+            c_owner: None,
+            internal: false,
+        })
+        .collect();
+    let mut all_linear = true;
+    let mut dt_inner = dt;
+    if let Some(s) = sub {
+        dt_inner = dt / s.substeps as f64 / s.inner_steps as f64;
+        for (idx, spec) in s.specimens.iter().enumerate() {
+            let Some(lm) = spec.linear_matrices() else {
+                all_linear = false;
+                continue;
+            };
+            for (a, row) in (0..lm.stiffness.nrows()).map(|a| (a, lm.dofs.get(a).copied())) {
+                let (k, c, m) = (lm.stiffness[(a, a)], lm.damping[(a, a)], lm.mass[(a, a)]);
+                match row {
+                    Some(g) if g < n => {
+                        let d = &mut dofs[g];
+                        if k.abs() > d.k.abs() {
+                            d.k_owner = Some(idx);
+                        }
+                        if c.abs() > d.c.abs() {
+                            d.c_owner = Some(idx);
+                        }
+                        d.k += k;
+                        d.c += c;
+                        d.m += m;
+                    }
+                    _ => dofs.push(Dof {
+                        m,
+                        k,
+                        c,
+                        k_owner: Some(idx),
+                        c_owner: Some(idx),
+                        internal: true,
+                    }),
+                }
+            }
+        }
+        let (key, rate) = match s.actuator.dynamics {
+            Dynamics::Ideal => ("", 0.0),
+            Dynamics::FirstOrder { time_constant } => ("time_constant", dt_inner / time_constant),
+            Dynamics::SecondOrder { frequency_hz, zeta } => {
+                let w = 2.0 * std::f64::consts::PI * frequency_hz;
+                ("frequency", (w * w).max(2.0 * zeta * w) * dt_inner)
+            }
+        };
+        if !(rate <= EXACT_MAX_RATE) {
+            return Err(Error::invalid(
+                format!("substructure.actuator.{key}"),
+                format!(
+                    "gives a rate of {rate:.3e} per inner step of {dt_inner:.3e} s (at most {EXACT_MAX_RATE:.0e}): \
+                     outside what f64 can integrate; check the units"
+                ),
+            ));
+        }
+    }
+    let exact = scheme == Scheme::Exact
+        || sub.is_some_and(|s| {
+            !s.specimens.is_empty() && all_linear && dofs.len() <= super::run::EXACT_REFERENCE_MAX_DOFS
+        });
+    for (i, d) in dofs.iter().enumerate() {
+        let h = if d.internal { dt_inner } else { dt };
+        if !(d.internal || exact) || d.m <= 0.0 {
+            continue; // no exponential at this DOF; a mass that is not positive is refused elsewhere
+        }
+        let (rate_k, rate_c) = (d.k.abs() / d.m * h, d.c.abs() / d.m * h);
+        if rate_k <= EXACT_MAX_RATE && rate_c <= EXACT_MAX_RATE {
+            continue;
+        }
+        let (what, value, owner) = if !(rate_c > rate_k) {
+            ("stiffness", d.k, d.k_owner)
+        } else {
+            ("damping", d.c, d.c_owner)
+        };
+        let key = match owner {
+            Some(idx) => format!("substructure.specimen[{}].{what}", idx + 1),
+            None => raw.key(what),
+        };
+        let place = if d.internal {
+            format!("an internal specimen DOF at the inner step {h:.3e} s")
+        } else {
+            format!("DOF {} at dt = {h} s", i + 1)
+        };
+        return Err(Error::invalid(
+            key,
+            format!(
+                "{what} {value:.3e} against a mass of {:.3e} kg at {place} gives a rate {what}/mass·dt = \
+                 {:.3e}, more than {EXACT_MAX_RATE:.0e}: outside what f64 can integrate exactly (matrix \
+                 exponential); check the units of mass, {what} and dt",
+                d.m,
+                rate_k.max(rate_c)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuse an excitation whose samples at `dt` would not fit, before they are generated.
+fn check_samples(limits: &Limits, length: f64, dt: f64) -> Result<()> {
+    let steps = (length / dt).floor();
+    let shape = RunShape {
+        steps,
+        ..RunShape::default()
+    };
+    limits.check_memory(
+        "integrator.dt",
+        &format!("a {length} s excitation at dt = {dt} s ({steps:.0} steps)"),
+        shape.excitation_bytes(),
+    )
+}
+
+impl RawConfig {
+    /// Memory, computing time and output of the run (model `m`, `steps` steps of `dt`), checked
+    /// against `limits` before anything of that size exists.
+    fn check_run(&self, limits: &Limits, m: ModelShape, steps: f64, dt: f64) -> Result<()> {
+        let mut shape = RunShape {
+            n_dofs: m.n,
+            model_bytes: m.bytes,
+            step_seconds: m.step_seconds,
+            steps,
+            ..RunShape::default()
+        };
+        limits.check_memory(
+            "integrator.dt",
+            &format!("a {} s excitation at dt = {dt} s ({steps:.0} steps)", steps * dt),
+            shape.excitation_bytes(),
+        )?;
+        let mut asked = format!("{steps:.0} steps of a {:.0}-DOF model", m.n);
+        if let Some(s) = &self.substructure {
+            if s.substeps == 0 || s.coupling_dofs.is_empty() {
+                return Ok(()); // refused with its own message when the substructure is built
+            }
+            let actuator = s.actuator.as_ref().map_or_else(ActuatorSpec::ideal, RawActuator::spec);
+            let inner = match s.inner_steps {
+                Some(k) => k.max(1),
+                None if actuator.dynamics == Dynamics::Ideal && actuator.delay == 0.0 => 1,
+                None => 10,
+            };
+            shape.n_coupling = s.coupling_dofs.len() as f64;
+            shape.substeps = s.substeps as f64;
+            shape.inner_steps = inner as f64;
+            let dt_inner = dt / shape.substeps / shape.inner_steps;
+            if actuator.delay.is_finite() && actuator.delay > 0.0 {
+                shape.delay_samples = 2.0 * ((actuator.delay / dt_inner).ceil() + 2.0);
+            }
+            if s.phase_lag.as_ref().is_some_and(|p| p.kind != "none") {
+                shape.extra_substep_columns = 2.0;
+            }
+            limits.check_memory(
+                "substructure.actuator.delay",
+                &format!(
+                    "a delay of {} s sampled every {dt_inner:.3e} s (dt / substeps / inner_steps: {:.3e} samples \
+                     per actuator)",
+                    actuator.delay, shape.delay_samples
+                ),
+                shape.delay_bytes(),
+            )?;
+            asked = format!(
+                "{asked} with {} sub-steps of {inner} inner steps on {} coupling DOF(s)",
+                s.substeps,
+                s.coupling_dofs.len()
+            );
+        }
+        limits.check_memory("limits", &format!("the whole run ({asked})"), shape.memory())?;
+        let total = shape.run_time();
+        let inner = RunShape {
+            step_seconds: 0.0,
+            ..shape
+        }
+        .run_time();
+        let key = if steps * m.step_seconds >= 0.5 * total || self.substructure.is_none() {
+            "integrator.dt"
+        } else if shape.inner_steps > shape.substeps && inner >= 0.5 * total {
+            "substructure.inner_steps"
+        } else {
+            "substructure.substeps"
+        };
+        limits.check_run_time(key, &asked, total)?;
+        let key = if shape.substeps_bytes() > shape.history_bytes() {
+            "substructure.substeps"
+        } else {
+            "integrator.dt"
+        };
+        limits.check_output(key, &asked, shape.output_bytes())
     }
 }
 
@@ -1112,7 +1505,7 @@ impl RawIntegrator {
 }
 
 impl RawGroundMotion {
-    fn build(&self, dt: f64, duration: Option<f64>, base: &Path) -> Result<GroundMotion> {
+    fn build(&self, dt: f64, duration: Option<f64>, base: &Path, limits: &Limits) -> Result<GroundMotion> {
         let g = "ground_motion.";
         let scale = self.scale.unwrap_or(1.0);
         if !scale.is_finite() {
@@ -1150,7 +1543,7 @@ impl RawGroundMotion {
             (Some(file), None) => {
                 forbid(g, &generator_keys, "only used with generator = ...")?;
                 let path = base.join(file);
-                let record = excitation::read_record(&path, self.dt)
+                let record = excitation::read_record_with(&path, self.dt, limits.max_file_bytes)
                     .map_err(|e| Error::invalid("ground_motion.file", e.to_string()))?;
                 (record, format!("record {}", path.display()))
             }
@@ -1170,6 +1563,7 @@ impl RawGroundMotion {
                         ));
                     }
                 };
+                check_samples(limits, length, dt)?;
                 self.generate(kind, length, dt, &generator_keys)?
             }
         };
@@ -1178,11 +1572,21 @@ impl RawGroundMotion {
         } else {
             format!("{description}, scaled by {scale}")
         };
+        check_samples(limits, duration.unwrap_or(record.duration()), dt)?;
         let accel = record
             .scaled(scale)?
             .resample(dt, duration)
             .map_err(|e| prefixed(e, "ground_motion: "))?;
         Ok(GroundMotion { accel, description })
+    }
+
+    /// Length of the excitation [s] if it is known without reading a file.
+    fn length_hint(&self, duration: Option<f64>) -> Option<f64> {
+        match (&self.file, &self.generator) {
+            (None, Some(_)) => self.duration.or(duration),
+            (Some(_), None) => duration,
+            _ => None,
+        }
     }
 
     fn generate(&self, kind: &str, duration: f64, dt: f64, keys: &[(&str, bool)]) -> Result<(Record, String)> {
@@ -1269,7 +1673,7 @@ impl RawGroundMotion {
 /// `specimen.<key>` from a specimen constructor becomes `<what>.<key>`.
 fn rekey(e: Error, what: &str) -> Error {
     match e {
-        Error::InvalidInput { what: key, reason } => {
+        Error::InvalidInput { what: key, reason } | Error::Numerical { what: key, reason } => {
             let rest = key.strip_prefix("specimen").unwrap_or(&key);
             Error::invalid(format!("{what}{rest}"), reason)
         }
@@ -1280,6 +1684,11 @@ fn rekey(e: Error, what: &str) -> Error {
 impl RawSpecimen {
     /// The library's description; `n` is the number of model DOFs, `what` the key prefix.
     pub(super) fn to_spec(&self, n: usize, what: &str, base: &Path) -> Result<SpecimenSpec> {
+        self.to_spec_with(n, what, base, &Limits::default())
+    }
+
+    /// [`RawSpecimen::to_spec`] with files read within `limits`.
+    fn to_spec_with(&self, n: usize, what: &str, base: &Path, limits: &Limits) -> Result<SpecimenSpec> {
         match self {
             RawSpecimen::BoucWen {
                 dof,
@@ -1364,7 +1773,8 @@ impl RawSpecimen {
                 let (dt, values) = match (file, values) {
                     (Some(f), None) => {
                         let path = base.join(f);
-                        let rec = excitation::read_record(&path, *dt)?;
+                        let rec = excitation::read_record_with(&path, *dt, limits.max_file_bytes)
+                            .map_err(|e| Error::invalid(format!("{what}.file"), e.to_string()))?;
                         (rec.dt, rec.accel)
                     }
                     (None, Some(v)) => {
@@ -1426,14 +1836,14 @@ impl RawSpecimen {
                     }
                     idx.push(i);
                 }
-                let k = matrix(stiffness, &format!("{what}.stiffness"), base)?;
+                let k = matrix_with(stiffness, &format!("{what}.stiffness"), base, limits)?;
                 let size = k.nrows();
                 let m = match mass {
-                    Some(m) => matrix(m, &format!("{what}.mass"), base)?,
+                    Some(m) => matrix_with(m, &format!("{what}.mass"), base, limits)?,
                     None => DMatrix::zeros(size, size),
                 };
                 let c = match damping {
-                    Some(c) => matrix(c, &format!("{what}.damping"), base)?,
+                    Some(c) => matrix_with(c, &format!("{what}.damping"), base, limits)?,
                     None => DMatrix::zeros(size, size),
                 };
                 for (key, mat) in [("stiffness", &k), ("mass", &m), ("damping", &c)] {
@@ -1724,6 +2134,7 @@ impl RawSubstructure {
         scheme: Scheme,
         dt: f64,
         base: &Path,
+        limits: &Limits,
     ) -> Result<SubstructureDefinition> {
         let p = "substructure.";
         let (beta, gamma) = match scheme {
@@ -1765,7 +2176,7 @@ impl RawSubstructure {
         let mut attached = vec![false; coupling.len()];
         for (k, raw) in self.specimen.iter().enumerate() {
             let what = format!("{p}specimen[{}]", k + 1);
-            let spec = raw.to_spec(n, &what, base)?;
+            let spec = raw.to_spec_with(n, &what, base, limits)?;
             for dof in spec.dofs() {
                 let Some(i) = coupling.iter().position(|&c| c == dof) else {
                     let key = if matches!(spec, SpecimenSpec::LinearSdof { .. }) {
@@ -1782,8 +2193,19 @@ impl RawSubstructure {
             }
             // Build once to check the specimen's own consistency (mass on attached DOFs, stability).
             spec.build().map_err(|e| match e {
-                Error::InvalidInput { what: w, reason } => {
-                    Error::invalid(format!("{what}.{}", w.trim_start_matches("specimen.")), reason)
+                Error::InvalidInput { what: w, reason } | Error::Numerical { what: w, reason } => {
+                    let rest = w.trim_start_matches("specimen");
+                    Error::invalid(
+                        format!(
+                            "{what}{}",
+                            if rest.starts_with('.') || rest.is_empty() {
+                                rest.to_string()
+                            } else {
+                                format!(".{rest}")
+                            }
+                        ),
+                        reason,
+                    )
                 }
                 other => other,
             })?;

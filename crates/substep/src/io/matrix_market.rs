@@ -12,6 +12,7 @@
 //! Every error names the file and, where it has one, the line: `K.mtx: line 7: row index 4 is
 //! out of range 1..=3`.
 
+use super::limits::{CHAIN_BYTES_PER_DOF, Limits, MTX_BYTES_PER_ENTRY, bytes, read_text};
 use crate::error::{Error, Result};
 use crate::sparse::CscMatrix;
 use nalgebra::DMatrix;
@@ -32,15 +33,27 @@ enum Symmetry {
 
 /// Read a `.mtx` file into a dense matrix; the path as given names the file in messages.
 pub fn read_matrix_market(path: impl AsRef<Path>) -> Result<DMatrix<f64>> {
+    read_matrix_market_with(path, &Limits::default())
+}
+
+/// [`read_matrix_market`] within `limits` (file size, and the memory the size line asks for).
+pub fn read_matrix_market_with(path: impl AsRef<Path>, limits: &Limits) -> Result<DMatrix<f64>> {
     let path = path.as_ref();
-    let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| Error::file(&name, format!("cannot read file: {e}")))?;
-    parse_matrix_market(&text, &name)
+    let text = read_text(path, limits.max_file_bytes)?;
+    parse_dense(&text, &path.display().to_string(), limits)
 }
 
 /// Parse the text of a `.mtx` file; `name` names it in messages.
 pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
-    let mut dense = Dense::default();
+    parse_dense(text, name, &Limits::default())
+}
+
+fn parse_dense(text: &str, name: &str, limits: &Limits) -> Result<DMatrix<f64>> {
+    let mut dense = Dense {
+        max_memory: limits.max_memory,
+        m: DMatrix::zeros(0, 0),
+        set: Vec::new(),
+    };
     parse_into(text, name, &mut dense)?;
     Ok(dense.m)
 }
@@ -48,42 +61,65 @@ pub fn parse_matrix_market(text: &str, name: &str) -> Result<DMatrix<f64>> {
 /// Read a `.mtx` file into a sparse square matrix; the path as given names the file in
 /// messages.
 pub fn read_matrix_market_sparse(path: impl AsRef<Path>) -> Result<CscMatrix> {
+    read_matrix_market_sparse_with(path, &Limits::default())
+}
+
+/// [`read_matrix_market_sparse`] within `limits` (file size, and the memory the size line
+/// asks for).
+pub fn read_matrix_market_sparse_with(path: impl AsRef<Path>, limits: &Limits) -> Result<CscMatrix> {
     let path = path.as_ref();
-    let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| Error::file(&name, format!("cannot read file: {e}")))?;
-    parse_matrix_market_sparse(&text, &name)
+    let text = read_text(path, limits.max_file_bytes)?;
+    parse_sparse(&text, &path.display().to_string(), limits)
 }
 
 /// Parse the text of a `.mtx` file into a sparse square matrix (stored entries only; explicit
 /// zeros are dropped); `name` names it in messages.
 pub fn parse_matrix_market_sparse(text: &str, name: &str) -> Result<CscMatrix> {
-    let mut sparse = Sparse::default();
+    parse_sparse(text, name, &Limits::default())
+}
+
+fn parse_sparse(text: &str, name: &str, limits: &Limits) -> Result<CscMatrix> {
+    let mut sparse = Sparse {
+        max_memory: limits.max_memory,
+        ..Sparse::default()
+    };
     parse_into(text, name, &mut sparse)?;
     sparse.finish(name)
 }
 
 /// Where parsed entries go.
 trait Target {
-    /// The size line was read; refuse sizes the target cannot hold.
-    fn start(&mut self, rows: usize, cols: usize) -> std::result::Result<(), String>;
+    /// The size line was read (`entries`: the declared entries of a coordinate file, `None`
+    /// for an array); refuse sizes the target cannot hold before anything is allocated.
+    fn start(&mut self, rows: usize, cols: usize, entries: Option<usize>) -> std::result::Result<(), String>;
     /// Entry `(r, c) = v` from file line `line`; `Err(())` if it was already set.
     fn put(&mut self, r: usize, c: usize, v: f64, line: usize) -> std::result::Result<(), ()>;
     /// Whether the file is symmetric or skew-symmetric (for messages).
     fn symmetry(&mut self, _symmetric: bool) {}
 }
 
-#[derive(Default)]
 struct Dense {
+    max_memory: f64,
     m: DMatrix<f64>,
     set: Vec<bool>,
 }
 
+/// The refusal of a size line whose matrix would not fit in `limits.max_memory`.
+fn too_large(rows: usize, cols: usize, how: &str, estimate: f64, max_memory: f64) -> String {
+    format!(
+        "matrix size {rows}x{cols} {how} needs about {} of memory (estimate), more than \
+         limits.max_memory = {}; set [limits] max_memory (bytes) to allow it",
+        bytes(estimate),
+        bytes(max_memory)
+    )
+}
+
 impl Target for Dense {
-    fn start(&mut self, rows: usize, cols: usize) -> std::result::Result<(), String> {
-        // Refuse absurd sizes before allocating (dense storage).
-        const MAX_ENTRIES: usize = 100_000_000;
-        if rows.checked_mul(cols).is_none_or(|n| n > MAX_ENTRIES) {
-            return Err(format!("matrix size {rows}x{cols} is too large for a dense matrix"));
+    fn start(&mut self, rows: usize, cols: usize, _entries: Option<usize>) -> std::result::Result<(), String> {
+        // A value and a "set" flag per entry, checked before allocating.
+        let estimate = 9.0 * rows as f64 * cols as f64;
+        if estimate > self.max_memory || rows.checked_mul(cols).is_none() {
+            return Err(too_large(rows, cols, "as a dense matrix", estimate, self.max_memory));
         }
         self.m = DMatrix::zeros(rows, cols);
         self.set = vec![false; rows * cols];
@@ -102,17 +138,24 @@ impl Target for Dense {
 /// Triplets with their file lines; duplicates are found by sorting at the end.
 #[derive(Default)]
 struct Sparse {
+    max_memory: f64,
     n: usize,
     symmetric_file: bool,
     entries: Vec<(usize, usize, f64, usize)>,
 }
 
 impl Target for Sparse {
-    fn start(&mut self, rows: usize, cols: usize) -> std::result::Result<(), String> {
+    fn start(&mut self, rows: usize, cols: usize, entries: Option<usize>) -> std::result::Result<(), String> {
         if rows != cols {
             return Err(format!(
                 "matrix size {rows}x{cols} is not square (a model matrix must be)"
             ));
+        }
+        // The model built from it: per DOF vectors and factor, per entry triplets, CSC and fill
+        // (an array's values are bounded by the file size, which is checked before reading).
+        let estimate = rows as f64 * CHAIN_BYTES_PER_DOF + entries.unwrap_or(0) as f64 * MTX_BYTES_PER_ENTRY;
+        if estimate > self.max_memory {
+            return Err(too_large(rows, cols, "as a sparse model", estimate, self.max_memory));
         }
         self.n = rows;
         Ok(())
@@ -209,7 +252,12 @@ fn parse_into<T: Target + ?Sized>(text: &str, name: &str, target: &mut T) -> Res
             format!("a symmetric matrix must be square, the size line says {rows}x{cols}"),
         ));
     }
-    target.start(rows, cols).map_err(|r| fail(size_line, r))?;
+    let declared = if layout == Layout::Coordinate {
+        Some(parse_count(dims[2])?)
+    } else {
+        None
+    };
+    target.start(rows, cols, declared).map_err(|r| fail(size_line, r))?;
 
     let value = |line: usize, s: &str| -> Result<f64> {
         let v: f64 = s
@@ -224,12 +272,8 @@ fn parse_into<T: Target + ?Sized>(text: &str, name: &str, target: &mut T) -> Res
 
     match layout {
         Layout::Coordinate => {
-            let nnz = parse_count(dims[2])?;
-            let max_nnz = match symmetry {
-                Symmetry::General => rows * cols,
-                Symmetry::Symmetric => rows * (rows + 1) / 2,
-                Symmetry::SkewSymmetric => rows * (rows - 1) / 2,
-            };
+            let nnz = declared.unwrap_or(0);
+            let max_nnz = stored_count(symmetry, rows, cols);
             if nnz > max_nnz {
                 return Err(fail(
                     size_line,
@@ -296,24 +340,28 @@ fn parse_into<T: Target + ?Sized>(text: &str, name: &str, target: &mut T) -> Res
             }
         }
         Layout::Array => {
-            // Positions in storage order (column-major, lower triangle for symmetric kinds).
-            let positions: Vec<(usize, usize)> = (0..cols)
-                .flat_map(|j| (0..rows).map(move |i| (i, j)))
-                .filter(|&(i, j)| match symmetry {
-                    Symmetry::General => true,
-                    Symmetry::Symmetric => i >= j,
-                    Symmetry::SkewSymmetric => i > j,
-                })
-                .collect();
+            // Positions in storage order (column-major, lower triangle for symmetric kinds),
+            // walked one by one: the size line alone must not allocate.
+            let total = stored_count(symmetry, rows, cols);
+            let first_row = |j: usize| match symmetry {
+                Symmetry::General => 0,
+                Symmetry::Symmetric => j,
+                Symmetry::SkewSymmetric => j + 1,
+            };
+            let (mut i, mut j) = (first_row(0), 0);
             let mut count = 0;
             for (line, l) in data {
                 for field in l.split_whitespace() {
-                    let Some(&(i, j)) = positions.get(count) else {
+                    if count >= total {
                         return Err(fail(
                             line,
-                            format!("more values than the {} a {rows}x{cols} array holds", positions.len()),
+                            format!("more values than the {total} a {rows}x{cols} array holds"),
                         ));
-                    };
+                    }
+                    while i >= rows {
+                        j += 1;
+                        i = first_row(j);
+                    }
                     let v = value(line, field)?;
                     // Array positions are distinct, so `put` cannot report a duplicate here.
                     let _ = target.put(i, j, v, line);
@@ -328,20 +376,27 @@ fn parse_into<T: Target + ?Sized>(text: &str, name: &str, target: &mut T) -> Res
                         }
                     }
                     count += 1;
+                    i += 1;
                 }
             }
-            if count != positions.len() {
+            if count != total {
                 return Err(Error::file(
                     name,
-                    format!(
-                        "a {rows}x{cols} array needs {} values but {count} were found",
-                        positions.len()
-                    ),
+                    format!("a {rows}x{cols} array needs {total} values but {count} were found"),
                 ));
             }
         }
     }
     Ok(())
+}
+
+/// How many entries a file of this symmetry stores for a `rows × cols` matrix (saturating).
+fn stored_count(symmetry: Symmetry, rows: usize, cols: usize) -> usize {
+    match symmetry {
+        Symmetry::General => rows.saturating_mul(cols),
+        Symmetry::Symmetric => rows.saturating_mul(rows.saturating_add(1)) / 2,
+        Symmetry::SkewSymmetric => rows.saturating_mul(rows.saturating_sub(1)) / 2,
+    }
 }
 
 fn parse_header(header: &str) -> std::result::Result<(Layout, Symmetry), String> {

@@ -5,12 +5,15 @@
 //! library types; every error is one line naming the file and line or the config key.
 
 pub mod config;
+pub mod limits;
 pub mod matrix_market;
 pub mod run;
 pub mod site_config;
 
 pub use config::{GroundMotion, IntegratorDefinition, OutputSettings, SubstructureDefinition, TestDefinition};
+pub use limits::Limits;
 pub use matrix_market::{
     parse_matrix_market, parse_matrix_market_sparse, read_matrix_market, read_matrix_market_sparse,
+    read_matrix_market_sparse_with, read_matrix_market_with,
 };
 pub use run::{Reference, Simulation};

@@ -163,6 +163,13 @@ impl ShearBuilding {
                 "must be at least 1",
             ));
         }
+        // The builders index 3 n triplets; configs are held far below this by `[limits]`.
+        if self.stories > usize::MAX / 8 {
+            return Err(crate::error::Error::invalid(
+                "structure.shear_building.stories",
+                format!("{} stories cannot be indexed", self.stories),
+            ));
+        }
         require_positive("structure.shear_building.story_mass", self.story_mass)?;
         require_positive("structure.shear_building.first_period", self.first_period)?;
         Ok(())

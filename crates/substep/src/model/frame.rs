@@ -150,6 +150,18 @@ impl Frame2d {
         if self.stories == 0 {
             return Err(Error::invalid(format!("{p}stories"), "must be at least 1"));
         }
+        // DOF numbers and the 36 stiffness triplets per member must be indexable (configs are
+        // held far below this by `[limits]`).
+        let dofs = (self.bays.checked_add(1))
+            .and_then(|l| l.checked_mul(3))
+            .and_then(|b| b.checked_mul(self.stories))
+            .and_then(|n| n.checked_mul(72));
+        if dofs.is_none() {
+            return Err(Error::invalid(
+                format!("{p}stories"),
+                format!("{} bays x {} stories cannot be indexed", self.bays, self.stories),
+            ));
+        }
         require_positive(&format!("{p}bay_width"), self.bay_width)?;
         require_positive(&format!("{p}story_height"), self.story_height)?;
         require_positive(&format!("{p}elastic_modulus"), self.elastic_modulus)?;

@@ -100,6 +100,26 @@ impl LinearSpecimen {
             if m.iter().any(|x| !x.is_finite()) {
                 return Err(Error::invalid(name, "contains a non-finite value"));
             }
+            // The monolithic reference assembles these into symmetric model matrices.
+            let scale = m.amax().max(f64::MIN_POSITIVE);
+            for j in 0..n {
+                for i in (j + 1)..n {
+                    if (m[(i, j)] - m[(j, i)]).abs() > 1e-9 * scale {
+                        return Err(Error::invalid(
+                            name,
+                            format!(
+                                "is not symmetric: entry ({}, {}) = {:e} but ({}, {}) = {:e}",
+                                i + 1,
+                                j + 1,
+                                m[(i, j)],
+                                j + 1,
+                                i + 1,
+                                m[(j, i)]
+                            ),
+                        ));
+                    }
+                }
+            }
         }
         if n_c == 0 || n_c > n {
             return Err(Error::invalid(
@@ -141,6 +161,17 @@ impl LinearSpecimen {
             b.view_mut((n_s, n_c), (n_s, 1)).copy_from(&(-&minv * (&m_ss * iota_s)));
             d.view_mut((n_s, 0), (n_s, n_c))
                 .copy_from(&(-&minv * part(&damping, n_c, 0, n_s, n_c)));
+            // Eigenvalues and exponentials of entries near the f64 range are meaningless.
+            let a_norm = crate::linalg::one_norm(&a);
+            if !(a_norm <= 1e100) {
+                return Err(Error::invalid(
+                    "specimen",
+                    format!(
+                        "its internal dynamics (M⁻¹K, M⁻¹C of the internal DOFs) reach {a_norm:.3e}, outside what \
+                         f64 can integrate (at most 1e100): check the units of mass, stiffness and damping"
+                    ),
+                ));
+            }
             // An unstable specimen model is almost certainly a typo in its matrices.
             let eig = crate::linalg::eigenvalues(&a)
                 .ok_or_else(|| Error::numerical("specimen", "eigenvalues of the internal dynamics did not converge"))?;
@@ -178,7 +209,9 @@ impl LinearSpecimen {
         };
         if stale {
             // Allocates; happens once per run (or when the real-time runner re-spaces sub-steps).
-            self.map = Some((dt, FohMap::with_rate(&self.a, &self.b, &self.d, dt)));
+            let map = FohMap::with_rate(&self.a, &self.b, &self.d, dt)
+                .unwrap_or_else(|_| FohMap::not_a_number(self.a.nrows(), self.b.ncols()));
+            self.map = Some((dt, map));
         }
         &self.map.as_ref().expect("map was just set").1
     }

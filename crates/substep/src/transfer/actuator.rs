@@ -197,7 +197,9 @@ impl Actuator {
                 let stale = self.map.as_ref().is_none_or(|(h, _)| (h - dt).abs() > 1e-12 * dt);
                 if stale {
                     // Allocates once per run (or per re-spacing of the real-time runner).
-                    self.map = Some((dt, FohMap::new(&self.a, &self.b, dt)));
+                    let map = FohMap::new(&self.a, &self.b, dt)
+                        .unwrap_or_else(|_| FohMap::not_a_number(self.a.nrows(), self.b.ncols()));
+                    self.map = Some((dt, map));
                 }
                 let map = &self.map.as_ref().expect("map set above").1;
                 self.w0[0] = delayed_start;
