@@ -27,9 +27,9 @@ use super::config::{MatrixInput, RawActuator, RawSensors, RawSpecimen, matrix, t
 use crate::error::{Error, Result, require_duration, require_positive};
 use crate::site::openfresco::ElementSpec;
 use crate::site::{Secret, SiteLimits, Transport, VirtualLabSpec};
-use std::net::IpAddr;
 use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec};
 use serde::Deserialize;
+use std::net::IpAddr;
 use std::path::Path;
 use std::time::Duration;
 
@@ -61,7 +61,10 @@ pub enum SiteDefinition {
         lab: VirtualLabSpec,
     },
     /// OpenFresco's generic TCP protocol: one element.
-    OpenFresco { server: ServerSettings, element: ElementSpec },
+    OpenFresco {
+        server: ServerSettings,
+        element: ElementSpec,
+    },
 }
 
 #[derive(Debug, Deserialize)]

@@ -85,7 +85,8 @@ impl Secret {
     /// Read the secret from a regular file (at most [`MAX_SECRET_LEN`] bytes are read).
     pub fn from_file(path: &Path, what: &str) -> Result<Self> {
         let name = format!("{what} ({})", path.display());
-        let meta = std::fs::metadata(path).map_err(|e| Error::invalid(&name, format!("cannot read the secret file: {e}")))?;
+        let meta =
+            std::fs::metadata(path).map_err(|e| Error::invalid(&name, format!("cannot read the secret file: {e}")))?;
         if !meta.is_file() {
             return Err(Error::invalid(&name, "is not a regular file"));
         }
@@ -104,7 +105,13 @@ impl Secret {
         }
     }
 
-    fn hmac(&self, role: Role, site_nonce: &[u8; NONCE_LEN], client_nonce: &[u8; NONCE_LEN], hello: &[u8]) -> Hmac<Sha256> {
+    fn hmac(
+        &self,
+        role: Role,
+        site_nonce: &[u8; NONCE_LEN],
+        client_nonce: &[u8; NONCE_LEN],
+        hello: &[u8],
+    ) -> Hmac<Sha256> {
         let mut m = <Hmac<Sha256> as Mac>::new_from_slice(&self.0).expect("HMAC accepts keys of any length");
         m.update(b"SSTP-1 auth");
         m.update(match role {
@@ -119,8 +126,17 @@ impl Secret {
     }
 
     /// The proof of `role` for a handshake.
-    pub fn mac(&self, role: Role, site_nonce: &[u8; NONCE_LEN], client_nonce: &[u8; NONCE_LEN], hello: &[u8]) -> [u8; MAC_LEN] {
-        self.hmac(role, site_nonce, client_nonce, hello).finalize().into_bytes().into()
+    pub fn mac(
+        &self,
+        role: Role,
+        site_nonce: &[u8; NONCE_LEN],
+        client_nonce: &[u8; NONCE_LEN],
+        hello: &[u8],
+    ) -> [u8; MAC_LEN] {
+        self.hmac(role, site_nonce, client_nonce, hello)
+            .finalize()
+            .into_bytes()
+            .into()
     }
 
     /// Whether `tag` is the proof of `role` (constant-time comparison).
@@ -132,13 +148,20 @@ impl Secret {
         hello: &[u8],
         tag: &[u8; MAC_LEN],
     ) -> bool {
-        self.hmac(role, site_nonce, client_nonce, hello).verify_slice(tag).is_ok()
+        self.hmac(role, site_nonce, client_nonce, hello)
+            .verify_slice(tag)
+            .is_ok()
     }
 }
 
 /// A fresh nonce from the operating system's RNG.
 pub fn nonce() -> Result<[u8; NONCE_LEN]> {
     let mut n = [0u8; NONCE_LEN];
-    getrandom::fill(&mut n).map_err(|e| Error::invalid("site authentication", format!("the OS random number generator failed: {e}")))?;
+    getrandom::fill(&mut n).map_err(|e| {
+        Error::invalid(
+            "site authentication",
+            format!("the OS random number generator failed: {e}"),
+        )
+    })?;
     Ok(n)
 }

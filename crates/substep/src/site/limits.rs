@@ -49,16 +49,28 @@ impl SiteLimits {
     /// Check the limits themselves (config values).
     pub fn validate(&self) -> std::result::Result<(), (&'static str, String)> {
         if self.max_coupling == 0 || self.max_coupling > MAX_COUPLING {
-            return Err(("max_coupling", format!("is {}, must be 1..={MAX_COUPLING}", self.max_coupling)));
+            return Err((
+                "max_coupling",
+                format!("is {}, must be 1..={MAX_COUPLING}", self.max_coupling),
+            ));
         }
         if self.max_substeps == 0 || self.max_substeps > MAX_SUBSTEPS {
-            return Err(("max_substeps", format!("is {}, must be 1..={MAX_SUBSTEPS}", self.max_substeps)));
+            return Err((
+                "max_substeps",
+                format!("is {}, must be 1..={MAX_SUBSTEPS}", self.max_substeps),
+            ));
         }
         if !(self.min_dtau.is_finite() && self.min_dtau > 0.0) {
-            return Err(("min_dtau", format!("must be a finite number > 0, got {}", self.min_dtau)));
+            return Err((
+                "min_dtau",
+                format!("must be a finite number > 0, got {}", self.min_dtau),
+            ));
         }
         if !(self.max_dt.is_finite() && self.max_dt >= self.min_dtau) {
-            return Err(("max_dt", format!("must be a finite number >= min_dtau, got {}", self.max_dt)));
+            return Err((
+                "max_dt",
+                format!("must be a finite number >= min_dtau, got {}", self.max_dt),
+            ));
         }
         if self.max_session_bytes == 0 {
             return Err(("max_session_memory", "must be > 0".into()));

@@ -27,8 +27,8 @@ pub mod protocol;
 pub mod server;
 mod transport;
 
-pub use client::{ClientOptions, RemoteSite, RemoteStepSite, RemoteStepTest, SiteClient, Transport, run_remote_step};
 pub use auth::Secret;
+pub use client::{ClientOptions, RemoteSite, RemoteStepSite, RemoteStepTest, SiteClient, Transport, run_remote_step};
 pub use limits::{SessionCost, SiteLimits};
 pub use protocol::{Hello, Message, MessageType, Mode, StepReply, StepRequest};
 pub use server::{ServeOptions, ServeReport, ServerHandle, SiteServer, VirtualLabSpec};

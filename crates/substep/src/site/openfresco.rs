@@ -656,7 +656,12 @@ fn serve_connection(
     let _ = stream.set_nonblocking(false);
     let _ = stream.set_nodelay(true);
     let mut raw = [0u8; 4 * SIZES_LEN];
-    if let Err(e) = read_full(&mut stream, &mut raw, ServeOptions::deadline(Some(options.handshake_timeout)), stop) {
+    if let Err(e) = read_full(
+        &mut stream,
+        &mut raw,
+        ServeOptions::deadline(Some(options.handshake_timeout)),
+        stop,
+    ) {
         options.log(&format!("openfresco: {peer} rejected: no sizes message: {e}"));
         report.rejected += 1;
         return (false, false);

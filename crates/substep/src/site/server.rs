@@ -237,7 +237,10 @@ pub(crate) fn serve_tcp_sessions(
             Ok(Incoming::Failed(e)) => break Err(e),
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => {
-                break Err(Error::invalid(format!("{tag} server {local}"), "the accept thread ended"));
+                break Err(Error::invalid(
+                    format!("{tag} server {local}"),
+                    "the accept thread ended",
+                ));
             }
         }
     };
@@ -363,7 +366,10 @@ impl SiteServer {
         mut factory: impl FnMut(&Hello) -> Result<Box<dyn ExperimentalSubstructure>>,
         options: &ServeOptions,
     ) -> Result<ServeReport> {
-        options.limits.validate().map_err(|(k, r)| Error::invalid(format!("site.{k}"), r))?;
+        options
+            .limits
+            .validate()
+            .map_err(|(k, r)| Error::invalid(format!("site.{k}"), r))?;
         serve_tcp_sessions(listener, options, "site", tell_busy, |stream, peer, report| Flow {
             opened: serve_tcp_connection(stream, peer, &mut factory, options, report),
             shutdown: false,
@@ -390,7 +396,10 @@ impl SiteServer {
         mut factory: impl FnMut(&Hello) -> Result<Box<dyn ExperimentalSubstructure>>,
         options: &ServeOptions,
     ) -> Result<ServeReport> {
-        options.limits.validate().map_err(|(k, r)| Error::invalid(format!("site.{k}"), r))?;
+        options
+            .limits
+            .validate()
+            .map_err(|(k, r)| Error::invalid(format!("site.{k}"), r))?;
         let local = socket
             .local_addr()
             .map_err(|e| Error::invalid("site server", e.to_string()))?;
@@ -861,8 +870,11 @@ fn handshake_tcp(
         },
     };
     let max_hello = hello_payload_len(options.limits.max_coupling);
-    let header = read_frame(stream, frame, deadline, Duration::ZERO, max_hello, stop).map_err(|e| link_refusal(e, "Hello"))?;
-    let msg = decode_frame(frame, None).map_err(|e| Refusal::reject(e.to_string(), header.seq))?.1;
+    let header =
+        read_frame(stream, frame, deadline, Duration::ZERO, max_hello, stop).map_err(|e| link_refusal(e, "Hello"))?;
+    let msg = decode_frame(frame, None)
+        .map_err(|e| Refusal::reject(e.to_string(), header.seq))?
+        .1;
     let hello = admit_hello(&header, msg, &options.limits)?;
     let Some(secret) = &options.secret else {
         return Ok((hello, 0, None));
@@ -875,9 +887,18 @@ fn handshake_tcp(
         reply: None,
         log: format!("cannot send the Challenge: {e}"),
     })?;
-    let header = read_frame(stream, frame, deadline, Duration::ZERO, NONCE_LEN + MAC_LEN + MAX_REASON, stop)
-        .map_err(|e| link_refusal(e, "Auth"))?;
-    let msg = decode_frame(frame, None).map_err(|e| Refusal::reject(e.to_string(), header.seq))?.1;
+    let header = read_frame(
+        stream,
+        frame,
+        deadline,
+        Duration::ZERO,
+        NONCE_LEN + MAC_LEN + MAX_REASON,
+        stop,
+    )
+    .map_err(|e| link_refusal(e, "Auth"))?;
+    let msg = decode_frame(frame, None)
+        .map_err(|e| Refusal::reject(e.to_string(), header.seq))?
+        .1;
     let mac = check_auth(secret, &site_nonce, &hello_payload, &header, msg)?;
     Ok((hello, 1, Some(mac)))
 }
@@ -1073,7 +1094,11 @@ impl UdpServer {
         };
         let (hello, accept_seq, mac) = if header.kind == MessageType::Hello {
             let payload = &frame[HEADER_LEN..];
-            if let Some(p) = self.pending.iter().find(|p| p.peer == from && p.hello_payload == payload) {
+            if let Some(p) = self
+                .pending
+                .iter()
+                .find(|p| p.peer == from && p.hello_payload == payload)
+            {
                 // The Challenge was lost: the same one again.
                 let _ = self.socket.send_to(&p.challenge, from);
                 return false;
