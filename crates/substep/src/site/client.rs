@@ -368,7 +368,15 @@ fn request_tcp(
 ) -> std::result::Result<Message, RequestError> {
     let deadline = Instant::now().checked_add(timeout).unwrap_or_else(Instant::now);
     write_all(stream, tx, timeout).map_err(RequestError::Link)?;
-    let header = match read_frame(stream, rx, Some(deadline), Duration::ZERO, limits.max_payload(), None) {
+    let header = match read_frame(
+        stream,
+        rx,
+        Some(deadline),
+        Duration::ZERO,
+        limits.max_payload(),
+        "the largest reply of this session",
+        None,
+    ) {
         Ok(h) => h,
         Err(LinkError::TimedOut { got: 0 }) => return Err(RequestError::Timeout { timeout, attempts: 1 }),
         Err(e) => return Err(RequestError::Link(e)),

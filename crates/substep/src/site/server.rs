@@ -236,6 +236,7 @@ pub(crate) fn serve_tcp_sessions(
             }
             Ok(Incoming::Failed(e)) => break Err(e),
             Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) if options.stopped() => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => {
                 break Err(Error::invalid(
                     format!("{tag} server {local}"),
@@ -779,7 +780,15 @@ fn serve_tcp_connection(
     let mut expect: u32 = accept_seq + 1;
     let end = loop {
         let idle = ServeOptions::deadline(options.idle_timeout);
-        let header = match read_frame(&mut stream, &mut frame, idle, io, max_request, stop) {
+        let header = match read_frame(
+            &mut stream,
+            &mut frame,
+            idle,
+            io,
+            max_request,
+            "the largest request of this session",
+            stop,
+        ) {
             Ok(h) => h,
             Err(LinkError::Closed { got: 0 }) => break "client disconnected".to_string(),
             Err(LinkError::Stopped) => break "server stopped; connection dropped".to_string(),
@@ -870,8 +879,16 @@ fn handshake_tcp(
         },
     };
     let max_hello = hello_payload_len(options.limits.max_coupling);
-    let header =
-        read_frame(stream, frame, deadline, Duration::ZERO, max_hello, stop).map_err(|e| link_refusal(e, "Hello"))?;
+    let header = read_frame(
+        stream,
+        frame,
+        deadline,
+        Duration::ZERO,
+        max_hello,
+        "a Hello for at most site.max_coupling coupling DOFs",
+        stop,
+    )
+    .map_err(|e| link_refusal(e, "Hello"))?;
     let msg = decode_frame(frame, None)
         .map_err(|e| Refusal::reject(e.to_string(), header.seq))?
         .1;
@@ -893,6 +910,7 @@ fn handshake_tcp(
         deadline,
         Duration::ZERO,
         NONCE_LEN + MAC_LEN + MAX_REASON,
+        "an Auth",
         stop,
     )
     .map_err(|e| link_refusal(e, "Auth"))?;

@@ -119,14 +119,15 @@ pub(crate) fn write_all(stream: &mut TcpStream, data: &[u8], timeout: Duration) 
 /// Read one `SSTP` frame into `frame` (header + payload). The header must arrive before
 /// `first_deadline`; the payload before the later of `first_deadline` and `rest_timeout` after
 /// the header (a client passes its request deadline and zero). A payload longer than
-/// `max_len` (what this connection can legitimately receive) is refused before anything is
-/// allocated for it.
+/// `max_len` (what this connection can legitimately receive, `max_what` in words) is refused
+/// before anything is allocated for it.
 pub(crate) fn read_frame(
     stream: &mut TcpStream,
     frame: &mut Vec<u8>,
     first_deadline: Option<Instant>,
     rest_timeout: Duration,
     max_len: usize,
+    max_what: &str,
     stop: Option<&AtomicBool>,
 ) -> Result<Header, LinkError> {
     frame.clear();
@@ -138,7 +139,7 @@ pub(crate) fn read_frame(
         return Err(LinkError::Protocol(Error::invalid(
             "site protocol: header.length",
             format!(
-                "a {} of {len} bytes exceeds the {max_len} bytes this connection accepts",
+                "a {} of {len} bytes exceeds the {max_len} bytes of {max_what}",
                 header.kind.name()
             ),
         )));
