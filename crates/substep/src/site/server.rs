@@ -913,7 +913,13 @@ fn handshake_tcp(
         "an Auth",
         stop,
     )
-    .map_err(|e| link_refusal(e, "Auth"))?;
+    .map_err(|e| match e {
+        LinkError::Closed { got: 0 } => Refusal {
+            reply: None,
+            log: "authentication required: the client left after the Challenge (it has no secret configured?)".into(),
+        },
+        e => link_refusal(e, "Auth"),
+    })?;
     let msg = decode_frame(frame, None)
         .map_err(|e| Refusal::reject(e.to_string(), header.seq))?
         .1;
