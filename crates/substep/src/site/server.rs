@@ -1,8 +1,11 @@
 //! The site server: hosts an experimental substructure for remote controllers over the `SSTP`
 //! protocol ([`super::protocol`]), on TCP or UDP.
 //!
-//! One client is served at a time (a lab has one rig); the substructure is built per connection
-//! by the factory from the client's handshake. In per-step mode the server runs the sub-step
+//! One client is served at a time (a lab has one rig): a second one is answered `busy` at once.
+//! The handshake is checked against the site's [`SiteLimits`] and, with a secret, authenticated
+//! ([`super::auth`]) before the substructure is built per connection by the factory; silent
+//! clients are dropped after `handshake_timeout` / `idle_timeout`, and no reply carries a
+//! non-finite number (`docs/security.md`). In per-step mode the server runs the sub-step
 //! loop itself with [`super::CommandRamp`], i.e. with the same floating-point operations as the
 //! controller.
 
