@@ -106,6 +106,27 @@ fn spawn(transport: Transport, options: &ServeOptions, built: &Arc<AtomicUsize>)
 }
 
 fn refusal(addr: SocketAddr, transport: Transport, hello: Hello, options: &ClientOptions) -> String {
+    // the previous client's session may still be closing: "busy" is retried (bounded)
+    for _ in 0..100 {
+        let t0 = Instant::now();
+        let err = SiteClient::connect(addr, transport, hello.clone(), options)
+            .err()
+            .expect("must be refused")
+            .to_string();
+        assert!(
+            t0.elapsed() < options.timeout,
+            "refused at once, not by a timeout: {err}"
+        );
+        if !err.contains("busy") {
+            return err;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("the site stayed busy");
+}
+
+/// The first refusal, "busy" included.
+fn first_refusal(addr: SocketAddr, transport: Transport, hello: Hello, options: &ClientOptions) -> String {
     let t0 = Instant::now();
     let err = SiteClient::connect(addr, transport, hello, options)
         .err()
@@ -116,6 +137,22 @@ fn refusal(addr: SocketAddr, transport: Transport, hello: Hello, options: &Clien
         "refused at once, not by a timeout: {err}"
     );
     err
+}
+
+/// Retry `connect` while the site is busy with the previous client (bounded).
+fn unless_busy<T>(mut connect: impl FnMut() -> substep::Result<T>) -> T {
+    for _ in 0..100 {
+        match connect() {
+            Ok(s) => return s,
+            Err(e) if e.to_string().contains("busy") => std::thread::sleep(Duration::from_millis(20)),
+            Err(e) => panic!("{e}"),
+        }
+    }
+    panic!("the site stayed busy");
+}
+
+fn connect_site(addr: SocketAddr, transport: Transport, hello: Hello, options: &ClientOptions) -> RemoteSite {
+    unless_busy(|| RemoteSite::connect(addr, transport, hello.clone(), options))
 }
 
 /// One per-sub-step round trip; the force must be −K d on each coupling DOF.
@@ -195,8 +232,7 @@ fn hostile_hellos_are_refused_by_the_site_limits_before_anything_is_built() {
         let err = refusal(addr, transport, hello(2, 1000, 0.01, Mode::PerStep), &client_options());
         assert!(err.contains("site.max_request_work"), "{err}");
         // a legitimate client is served afterwards, with the right forces
-        let mut site =
-            RemoteSite::connect(addr, transport, hello(2, 4, 0.01, Mode::PerSubstep), &client_options()).unwrap();
+        let mut site = connect_site(addr, transport, hello(2, 4, 0.01, Mode::PerSubstep), &client_options());
         let mut check = |d: &[f64]| {
             let (mut f, mut dm) = (vec![0.0; 2], vec![0.0; 2]);
             site.substep(d, (0.0, 0.0), 0.0025, &mut f, &mut dm).unwrap();
@@ -259,12 +295,12 @@ fn silent_clients_cannot_hold_the_site() {
     );
     // completes the handshake, then goes silent: dropped after the idle timeout with an Error
     let h = hello(2, 4, 0.01, Mode::PerSubstep);
-    let mut silent = SiteClient::connect(addr, Transport::Tcp, h.clone(), &client_options()).unwrap();
+    let mut silent = unless_busy(|| SiteClient::connect(addr, Transport::Tcp, h.clone(), &client_options()));
     std::thread::sleep(Duration::from_millis(600));
     let err = silent.ping().unwrap_err().to_string();
     assert!(err.contains("idle for more than 0.300 s"), "{err}");
     // and the site serves the next client
-    let mut site = RemoteSite::connect(addr, Transport::Tcp, h, &client_options()).unwrap();
+    let mut site = connect_site(addr, Transport::Tcp, h, &client_options());
     let (mut f, mut dm) = (vec![0.0; 2], vec![0.0; 2]);
     site.substep(&[0.0, 0.0], (0.0, 0.0), 0.0025, &mut f, &mut dm).unwrap();
     assert_eq!(f, vec![0.0, 0.0]);
@@ -286,8 +322,8 @@ fn a_busy_site_answers_busy_at_once() {
         let server = spawn(transport, &opts, &built);
         let addr = server.local_addr();
         let h = hello(2, 4, 0.01, Mode::PerSubstep);
-        let first = RemoteSite::connect(addr, transport, h.clone(), &client_options()).unwrap();
-        let err = refusal(addr, transport, h.clone(), &client_options());
+        let first = connect_site(addr, transport, h.clone(), &client_options());
+        let err = first_refusal(addr, transport, h.clone(), &client_options());
         assert!(
             err.contains("the site is busy with another client"),
             "{transport:?}: {err}"
@@ -295,18 +331,7 @@ fn a_busy_site_answers_busy_at_once() {
         drop(first);
         // once the first client has left, the next one is served (bounded retries: the Stop
         // of the dropped client may still be in flight)
-        let mut second = None;
-        for _ in 0..50 {
-            match RemoteSite::connect(addr, transport, h.clone(), &client_options()) {
-                Ok(s) => {
-                    second = Some(s);
-                    break;
-                }
-                Err(e) if e.to_string().contains("busy") => std::thread::sleep(Duration::from_millis(20)),
-                Err(e) => panic!("{e}"),
-            }
-        }
-        let mut second = second.expect("served after the first client left");
+        let mut second = connect_site(addr, transport, h.clone(), &client_options());
         let (mut f, mut dm) = (vec![0.0; 2], vec![0.0; 2]);
         second
             .substep(&[0.0, 0.0], (0.0, 0.0), 0.0025, &mut f, &mut dm)
@@ -329,13 +354,12 @@ fn no_non_finite_value_goes_on_the_wire() {
     .unwrap();
     let addr = server.local_addr();
     // per sub-step: K · 1e308 overflows; the site replies an Error instead of −inf
-    let mut site = RemoteSite::connect(
+    let mut site = connect_site(
         addr,
         Transport::Tcp,
         hello(2, 4, 0.01, Mode::PerSubstep),
         &client_options(),
-    )
-    .unwrap();
+    );
     check_spring(&mut site, &[1e-3, -4e-3]);
     let (mut f, mut dm) = (vec![0.0; 2], vec![0.0; 2]);
     let err = site
@@ -345,13 +369,12 @@ fn no_non_finite_value_goes_on_the_wire() {
     assert!(err.contains("non-finite force on coupling DOF 1"), "{err}");
     drop(site);
     // a Substep whose Δτ is outside the session's range
-    let mut site = RemoteSite::connect(
+    let mut site = connect_site(
         addr,
         Transport::Tcp,
         hello(2, 4, 0.01, Mode::PerSubstep),
         &client_options(),
-    )
-    .unwrap();
+    );
     let err = site
         .substep(&[0.0, 0.0], (0.0, 0.0), 1e300, &mut f, &mut dm)
         .unwrap_err()
@@ -359,13 +382,14 @@ fn no_non_finite_value_goes_on_the_wire() {
     assert!(err.contains("Substep.dtau = 1e300 s is outside"), "{err}");
     drop(site);
     // per step: the ramp of huge (finite) predictors overflows, or the force does
-    let mut step = RemoteStepSite::connect(
-        addr,
-        Transport::Tcp,
-        hello(2, 4, 0.01, Mode::PerStep),
-        &client_options(),
-    )
-    .unwrap();
+    let mut step = unless_busy(|| {
+        RemoteStepSite::connect(
+            addr,
+            Transport::Tcp,
+            hello(2, 4, 0.01, Mode::PerStep),
+            &client_options(),
+        )
+    });
     let err = step
         .step(&[-1.7e308, 0.0], &[1.7e308, 0.0], &[1.7e308, 0.0], (0.0, 0.0))
         .unwrap_err()
@@ -497,7 +521,7 @@ fn a_site_with_a_secret_serves_only_clients_that_prove_it() {
             0,
             "{transport:?}: nothing reached the actuators"
         );
-        let mut site = RemoteSite::connect(addr, transport, h.clone(), &with_secret(Some(&right))).unwrap();
+        let mut site = connect_site(addr, transport, h.clone(), &with_secret(Some(&right)));
         assert_eq!(built.load(Ordering::SeqCst), 1);
         let (mut f, mut dm) = (vec![0.0; 2], vec![0.0; 2]);
         site.substep(&[2e-3, -1e-3], (0.0, 0.0), 0.0025, &mut f, &mut dm)

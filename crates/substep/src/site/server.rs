@@ -192,7 +192,9 @@ enum Incoming {
 }
 
 /// Busy answers in flight at once; a client beyond that is dropped unanswered.
-const MAX_BUSY_REPLIES: usize = 8;
+const MAX_BUSY_REPLIES: usize = 64;
+/// How long a client arriving at a busy site waits for the slot before it is told "busy".
+const BUSY_GRACE: Duration = Duration::from_millis(100);
 
 /// Accept TCP connections and serve them one at a time until a `once` session ends, a client
 /// asks for shutdown or the stop flag is raised. The accept loop runs in its own thread so a
@@ -232,10 +234,11 @@ pub(crate) fn serve_tcp_sessions(
         match rx.recv_timeout(POLL) {
             Ok(Incoming::Conn(stream, peer)) => {
                 let flow = serve_one(stream, peer, &mut report);
-                occupied.store(false, Ordering::SeqCst);
                 if flow.shutdown || (options.once && flow.opened) {
+                    // still occupied: a client arriving now is told "busy", not dropped
                     break Ok(());
                 }
+                occupied.store(false, Ordering::SeqCst);
             }
             Ok(Incoming::Failed(e)) => break Err(e),
             Err(mpsc::RecvTimeoutError::Timeout) => {}
@@ -260,9 +263,9 @@ fn accept_loop(
     options: &ServeOptions,
     tag: &str,
     busy: fn(TcpStream),
-    occupied: &AtomicBool,
-    done: &AtomicBool,
-    refused: &AtomicUsize,
+    occupied: &Arc<AtomicBool>,
+    done: &Arc<AtomicBool>,
+    refused: &Arc<AtomicUsize>,
     tx: &mpsc::SyncSender<Incoming>,
 ) {
     let replies = Arc::new(AtomicUsize::new(0));
@@ -276,18 +279,50 @@ fn accept_loop(
                     continue;
                 }
                 if occupied.swap(true, Ordering::SeqCst) {
-                    refused.fetch_add(1, Ordering::SeqCst);
-                    options.log(&format!("{tag}: {peer} rejected: the site is busy with another client"));
-                    if replies.fetch_add(1, Ordering::SeqCst) < MAX_BUSY_REPLIES {
-                        let in_flight = replies.clone();
-                        let spawned = std::thread::Builder::new().name(format!("{tag}-busy")).spawn(move || {
-                            busy(stream);
+                    // Busy. A client that reconnects right after its session ended may arrive
+                    // a moment before the slot is free: give it a short grace, then "busy".
+                    if replies.fetch_add(1, Ordering::SeqCst) >= MAX_BUSY_REPLIES {
+                        replies.fetch_sub(1, Ordering::SeqCst);
+                        refused.fetch_add(1, Ordering::SeqCst);
+                        options.log(&format!(
+                            "{tag}: {peer} dropped: the site is busy and answering too many others"
+                        ));
+                        continue;
+                    }
+                    let (in_flight, occupied, refused, done, tx, options) = (
+                        replies.clone(),
+                        occupied.clone(),
+                        refused.clone(),
+                        done.clone(),
+                        tx.clone(),
+                        options.clone(),
+                    );
+                    let tag = tag.to_string();
+                    let spawned = std::thread::Builder::new()
+                        .name(format!("{tag}-busy"))
+                        .stack_size(128 << 10)
+                        .spawn(move || {
+                            let until = Instant::now() + BUSY_GRACE;
+                            let mut stream = Some(stream);
+                            while Instant::now() < until && !done.load(Ordering::SeqCst) {
+                                if occupied
+                                    .compare_exchange(false, true, Ordering::SeqCst, Ordering::SeqCst)
+                                    .is_ok()
+                                {
+                                    let s = stream.take().expect("still here");
+                                    let _ = tx.send(Incoming::Conn(s, peer));
+                                    break;
+                                }
+                                std::thread::sleep(Duration::from_millis(5));
+                            }
+                            if let Some(s) = stream {
+                                refused.fetch_add(1, Ordering::SeqCst);
+                                options.log(&format!("{tag}: {peer} rejected: the site is busy with another client"));
+                                busy(s);
+                            }
                             in_flight.fetch_sub(1, Ordering::SeqCst);
                         });
-                        if spawned.is_err() {
-                            replies.fetch_sub(1, Ordering::SeqCst);
-                        }
-                    } else {
+                    if spawned.is_err() {
                         replies.fetch_sub(1, Ordering::SeqCst);
                     }
                     continue;
@@ -305,6 +340,16 @@ fn accept_loop(
                 ) =>
             {
                 options.log(&format!("{tag}: accept on {local}: {e}"));
+            }
+            // Out of descriptors or memory (e.g. a flood of connections): wait, do not exit.
+            Err(e)
+                if matches!(
+                    e.raw_os_error(),
+                    Some(libc::EMFILE | libc::ENFILE | libc::ENOBUFS | libc::ENOMEM)
+                ) =>
+            {
+                options.log(&format!("{tag}: accept on {local}: {e}; retrying"));
+                std::thread::sleep(POLL * 4);
             }
             Err(e) => {
                 let _ = tx.send(Incoming::Failed(Error::invalid(
