@@ -18,8 +18,16 @@ fn bin() -> Command {
 }
 
 fn run(dir: &Path, cfg: &str, out: &str) -> Output {
-    bin()
-        .args(["run", cfg, "--out", out, "--quiet", "--no-plots"])
+    run_with(dir, cfg, out, &[])
+}
+
+fn run_with(dir: &Path, cfg: &str, out: &str, env: &[(&str, &str)]) -> Output {
+    let mut cmd = bin();
+    cmd.env_remove("SUBSTEP_SITE_SECRET");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.args(["run", cfg, "--out", out, "--quiet", "--no-plots"])
         .current_dir(dir)
         .output()
         .unwrap()
@@ -89,12 +97,22 @@ fn client_config(duration: f64, remote: Option<(&str, &str)>, extra: &str) -> St
 
 /// Start `substep site serve --once` on a free port; returns the child and its address.
 fn serve(dir: &Path) -> (Child, String) {
+    serve_with(dir, "", &[])
+}
+
+/// As [`serve`] with extra `[site]` keys and environment variables.
+fn serve_with(dir: &Path, site_keys: &str, env: &[(&str, &str)]) -> (Child, String) {
     let site = format!(
-        "[site]\nprotocol = \"substep\"\nlisten = \"127.0.0.1:0\"\n{}",
+        "[site]\nprotocol = \"substep\"\nlisten = \"127.0.0.1:0\"\n{site_keys}\n{}",
         SPECIMENS.replace("PREFIX", "")
     );
     std::fs::write(dir.join("site.toml"), site).unwrap();
-    let mut child = bin()
+    let mut cmd = bin();
+    cmd.env_remove("SUBSTEP_SITE_SECRET");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let mut child = cmd
         .args(["site", "serve", "site.toml", "--once"])
         .current_dir(dir)
         .stdout(Stdio::piped())
@@ -395,4 +413,135 @@ fn bad_remote_and_limit_keys_are_named() {
     let err = text(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("site.protocol") && err.contains("carrier_pigeon"), "{err}");
+}
+
+/// History rows without the `fei` columns (which only a local run can record).
+fn without_fei(h: &str) -> Vec<String> {
+    let header: Vec<&str> = h.lines().next().unwrap().split(',').collect();
+    let keep: Vec<usize> = (0..header.len()).filter(|&i| !header[i].starts_with("fei")).collect();
+    h.lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            keep.iter().map(|&i| f[i]).collect::<Vec<_>>().join(",")
+        })
+        .collect()
+}
+
+#[test]
+fn authenticated_remote_runs_equal_the_local_run_bit_for_bit() {
+    let dir = temp_dir("auth");
+    std::fs::write(dir.join("local.toml"), client_config(1.0, None, "")).unwrap();
+    let local = run(&dir, "local.toml", "local");
+    assert!(local.status.success(), "{}", text(&local.stderr));
+    let local_history = std::fs::read_to_string(dir.join("local/history.csv")).unwrap();
+    let local_substeps = std::fs::read_to_string(dir.join("local/substeps.csv")).unwrap();
+    // the site reads its secret from a file, the client from the environment (per_step) or
+    // from its own secret_file (per_substep)
+    std::fs::write(dir.join("site.key"), "3f9a1c07e2b84d6a95c3e1f0a7b2d4c6\n").unwrap();
+    for (mode, client_key, env) in [
+        (
+            "per_step",
+            "",
+            vec![("SUBSTEP_SITE_SECRET", "3f9a1c07e2b84d6a95c3e1f0a7b2d4c6")],
+        ),
+        ("per_substep", "secret_file = \"site.key\"\n", vec![]),
+    ] {
+        let (mut site, addr) = serve_with(&dir, "secret_file = \"site.key\"", &[]);
+        let cfg = format!("auth_{mode}.toml");
+        let config = client_config(1.0, Some((&addr, mode)), "")
+            .replace("timeout = 1.0\n", &format!("timeout = 1.0\n{client_key}"));
+        std::fs::write(dir.join(&cfg), config).unwrap();
+        let out = run_with(&dir, &cfg, mode, &env);
+        assert!(out.status.success(), "{mode}: {}", text(&out.stderr));
+        let history = std::fs::read_to_string(dir.join(mode).join("history.csv")).unwrap();
+        let substeps = std::fs::read_to_string(dir.join(mode).join("substeps.csv")).unwrap();
+        assert!(
+            without_fei(&history) == without_fei(&local_history),
+            "{mode}: history differs"
+        );
+        assert!(substeps == local_substeps, "{mode}: substeps differ from the local run");
+        let status = site.wait().unwrap();
+        assert!(status.success(), "site exit {status:?}");
+    }
+    // without the secret, or with another one: refused before anything runs, exit 2 or 1,
+    // no results written, and the site's log says why
+    for (extra, env, expect) in [
+        ("", vec![], "requires authentication"),
+        (
+            "",
+            vec![("SUBSTEP_SITE_SECRET", "not-the-secret-0000000000")],
+            "authentication failed",
+        ),
+    ] {
+        let (mut site, addr) = serve_with(&dir, "secret_file = \"site.key\"", &[]);
+        std::fs::write(
+            dir.join("bad.toml"),
+            client_config(1.0, Some((&addr, "per_substep")), extra),
+        )
+        .unwrap();
+        let out = run_with(&dir, "bad.toml", "refused", &env);
+        let err = text(&out.stderr);
+        assert_ne!(out.status.code(), Some(0), "{err}");
+        assert!(
+            err.starts_with("error: ") && err.contains(expect) && err.contains(&addr),
+            "{err}"
+        );
+        assert!(
+            !dir.join("refused/history.csv").exists()
+                || std::fs::read_to_string(dir.join("refused/history.csv"))
+                    .unwrap()
+                    .lines()
+                    .count()
+                    <= 1
+        );
+        let _ = site.kill();
+        let _ = site.wait();
+    }
+}
+
+#[test]
+fn remote_durations_and_secrets_are_checked() {
+    let dir = temp_dir("keys");
+    for (extra, key, reason) in [
+        ("timeout = 1e20\n", "substructure.remote.timeout", "at most 1e6 s"),
+        ("timeout = 1e19\n", "substructure.remote.timeout", "at most 1e6 s"),
+        (
+            "secret_file = \"nope.key\"\n",
+            "substructure.remote.secret_file",
+            "cannot read",
+        ),
+    ] {
+        let cfg = format!("\n[substructure.remote]\naddress = \"127.0.0.1:1\"\n{extra}");
+        std::fs::write(dir.join("c.toml"), client_config(1.0, None, &cfg)).unwrap();
+        let out = run(&dir, "c.toml", "out");
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains(key) && err.contains(reason), "{key}: {err}");
+    }
+    std::fs::write(dir.join("short.key"), "tiny\n").unwrap();
+    let cfg = "\n[substructure.remote]\naddress = \"127.0.0.1:1\"\nsecret_file = \"short.key\"\n";
+    std::fs::write(dir.join("c.toml"), client_config(1.0, None, cfg)).unwrap();
+    let out = run(&dir, "c.toml", "out");
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("at least 16"), "{err}");
+    // and the site's own keys
+    for (keys, key) in [
+        ("idle_timeout = 1e20", "site.idle_timeout"),
+        ("idle_timeout = 1e19", "site.idle_timeout"),
+        ("secret_file = \"short.key\"", "site.secret_file"),
+    ] {
+        let site = format!(
+            "[site]\nprotocol = \"substep\"\n{keys}\n[[specimen]]\nkind = \"linear_sdof\"\ndof = 1\nstiffness = 1.0\n"
+        );
+        std::fs::write(dir.join("site.toml"), site).unwrap();
+        let out = bin()
+            .args(["site", "serve", "site.toml", "--once"])
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.starts_with("error: ") && err.contains(key), "{key}: {err}");
+    }
 }

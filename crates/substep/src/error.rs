@@ -81,6 +81,29 @@ pub fn require_positive(what: &str, value: f64) -> Result<f64> {
     }
 }
 
+/// Longest duration accepted from any input, in seconds (about 11.6 days). Far beyond any
+/// timeout a test needs, and far below what `Duration` and `Instant` arithmetic can hold, so
+/// `Instant::now() + d` can never overflow.
+pub const MAX_DURATION_SECS: f64 = 1e6;
+
+/// Convert a duration in seconds from input (a config key, a message) to a `Duration`:
+/// finite, > 0 and at most [`MAX_DURATION_SECS`], else an error naming `what`.
+pub fn require_duration(what: &str, secs: f64) -> Result<std::time::Duration> {
+    if !(secs.is_finite() && secs > 0.0) {
+        return Err(Error::invalid(
+            what,
+            format!("must be a finite number of seconds > 0, got {secs}"),
+        ));
+    }
+    if secs > MAX_DURATION_SECS {
+        return Err(Error::invalid(
+            what,
+            format!("is {secs} s, at most {MAX_DURATION_SECS:e} s is accepted"),
+        ));
+    }
+    Ok(std::time::Duration::from_secs_f64(secs))
+}
+
 /// Check that a scalar parameter is finite and not negative.
 pub fn require_non_negative(what: &str, value: f64) -> Result<f64> {
     if value.is_finite() && value >= 0.0 {

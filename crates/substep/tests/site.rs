@@ -161,6 +161,7 @@ fn client_options(timeout_ms: u64) -> ClientOptions {
         timeout: Duration::from_millis(timeout_ms),
         connect_timeout: Duration::from_secs(2),
         udp_retries: 3,
+        secret: None,
     }
 }
 
@@ -182,7 +183,7 @@ fn serve_options(once: bool) -> (ServeOptions, Log) {
         idle_timeout: Some(Duration::from_secs(10)),
         io_timeout: Duration::from_secs(2),
         log: Some(Arc::new(move |line: &str| sink.lock().unwrap().push(line.to_string()))),
-        stop: None,
+        ..ServeOptions::default()
     };
     (options, log)
 }
@@ -341,6 +342,7 @@ fn udp_lost_replies_are_retried_and_duplicates_ignored() {
         timeout: Duration::from_millis(50),
         connect_timeout: Duration::from_secs(1),
         udp_retries: 8,
+        secret: None,
     };
     let t0 = Instant::now();
     // per sub-step: ~250 requests, every 10th reply lost, every 5th request duplicated
@@ -496,7 +498,10 @@ fn sample_messages() -> (Session, Vec<Message>) {
             gain_cc: vec![1e-6, 2e-7, 2e-7, 3e-6],
             coupling_dofs: vec![4, 0],
         }),
-        Message::Accept { n_coupling: 2 },
+        Message::Accept {
+            n_coupling: 2,
+            mac: None,
+        },
         Message::Reject {
             reason: "busy — Grüße".into(),
         },
@@ -519,6 +524,15 @@ fn sample_messages() -> (Session, Vec<Message>) {
         Message::Heartbeat,
         Message::Stop { reason: "done".into() },
         Message::Error { reason: String::new() },
+        Message::Accept {
+            n_coupling: 2,
+            mac: Some([7; 32]),
+        },
+        Message::Challenge { nonce: [3; 32] },
+        Message::Auth {
+            nonce: [1; 32],
+            mac: [2; 32],
+        },
     ];
     (s, msgs)
 }
@@ -697,6 +711,7 @@ fn site_disappears_mid_test() {
             timeout: Duration::from_millis(300),
             connect_timeout: Duration::from_secs(1),
             udp_retries: 2,
+            secret: None,
         };
         let site = RemoteSite::for_controller(addr, transport, &ctrl, &opts).unwrap();
         let mut test = SubstructureTest::new(&model, ctrl, Box::new(site)).unwrap();
@@ -762,6 +777,7 @@ fn scripted_site(fault: Fault, good: usize) -> (SocketAddr, JoinHandle<()>) {
         let mut out = Vec::new();
         Message::Accept {
             n_coupling: hello.n_coupling,
+            mac: None,
         }
         .encode(0, &mut out);
         stream.write_all(&out).unwrap();

@@ -28,7 +28,7 @@ use crate::model::{
     StructuralModel, TmdSystem, frame_2d, sdof, shear_building_sparse, tmd_two_dof,
 };
 use crate::site::openfresco::OpenFrescoSite;
-use crate::site::{ClientOptions, Mode, RemoteSite, RemoteStepSite, RemoteStepTest, Transport};
+use crate::site::{ClientOptions, Mode, RemoteSite, RemoteStepSite, RemoteStepTest, Secret, Transport};
 use crate::sparse::CscMatrix;
 use crate::specimen::{BoucWenParams, FrictionModel, Pinching, SpecimenSpec};
 use crate::substructure::{
@@ -120,16 +120,20 @@ pub struct RemoteDefinition {
     pub protocol: RemoteProtocol,
     pub transport: Transport,
     pub mode: Mode,
-    /// Reply timeout [s].
+    /// Reply timeout [s] (checked: at most `MAX_DURATION_SECS`).
     pub timeout: f64,
+    /// The site's shared secret (`secret_file`, else `SUBSTEP_SITE_SECRET`).
+    pub secret: Option<Secret>,
 }
 
 impl RemoteDefinition {
     pub fn client_options(&self) -> ClientOptions {
-        let t = Duration::from_secs_f64(self.timeout);
+        // `timeout` was checked by `require_duration` when the config was read.
+        let t = Duration::from_secs_f64(self.timeout.clamp(1e-6, crate::error::MAX_DURATION_SECS));
         ClientOptions {
             timeout: t,
             connect_timeout: t,
+            secret: self.secret.clone(),
             ..ClientOptions::default()
         }
     }
@@ -511,6 +515,7 @@ struct RawRemote {
     transport: Option<String>,
     mode: Option<String>,
     timeout: Option<f64>,
+    secret_file: Option<String>,
 }
 
 /// `[substructure.limits]`: one value for all coupling DOFs or one per DOF.
@@ -2165,7 +2170,7 @@ impl RawSubstructure {
         if self.substeps == 0 {
             return Err(Error::invalid(format!("{p}substeps"), "must be at least 1"));
         }
-        let remote = self.remote.as_ref().map(RawRemote::build).transpose()?;
+        let remote = self.remote.as_ref().map(|r| r.build(base)).transpose()?;
         if self.specimen.is_empty() && remote.is_none() {
             return Err(Error::invalid(
                 format!("{p}specimen"),
@@ -2267,7 +2272,7 @@ impl RawSubstructure {
 }
 
 impl RawRemote {
-    fn build(&self) -> Result<RemoteDefinition> {
+    fn build(&self, base: &Path) -> Result<RemoteDefinition> {
         let p = "substructure.remote.";
         if self.address.parse::<std::net::SocketAddr>().is_err() && !self.address.contains(':') {
             return Err(Error::invalid(
@@ -2311,13 +2316,26 @@ impl RawRemote {
                 "the openfresco protocol runs over tcp, per sub-step",
             ));
         }
-        let timeout = require_positive(&format!("{p}timeout"), self.timeout.unwrap_or(2.0))?;
+        let timeout = self.timeout.unwrap_or(2.0);
+        crate::error::require_duration(&format!("{p}timeout"), timeout)?;
+        let secret = match (&self.secret_file, protocol) {
+            (Some(_), RemoteProtocol::OpenFresco) => {
+                return Err(Error::invalid(
+                    format!("{p}secret_file"),
+                    "the openfresco protocol has no authentication (use the substep protocol for an authenticated site)",
+                ));
+            }
+            (Some(f), RemoteProtocol::Substep) => Some(Secret::from_file(&base.join(f), &format!("{p}secret_file"))?),
+            (None, RemoteProtocol::Substep) => Secret::from_env()?,
+            (None, RemoteProtocol::OpenFresco) => None,
+        };
         Ok(RemoteDefinition {
             address: self.address.clone(),
             protocol,
             transport,
             mode,
             timeout,
+            secret,
         })
     }
 }

@@ -4,10 +4,13 @@
 //! ```toml
 //! [site]
 //! protocol = "substep"        # substep | openfresco
-//! listen = "127.0.0.1:8090"
+//! listen = "127.0.0.1:8090"   # the default; another interface needs a secret (or an allow-list)
 //! transport = "tcp"           # substep protocol: tcp | udp
 //! inner_steps = 10            # as [substructure] inner_steps
-//! idle_timeout = 30.0         # s; drop a silent client
+//! idle_timeout = 10.0         # s; drop a silent client (default 10)
+//! secret_file = "site.key"    # substep protocol: only clients proving this secret (or $SUBSTEP_SITE_SECRET)
+//! allow = ["127.0.0.1"]       # client addresses allowed to connect (default: any)
+//! max_substeps = 1000         # limits of what one client may ask (docs/security.md)
 //!
 //! [[specimen]]                # same kinds as [[substructure.specimen]]; dof = model DOF of the client
 //! kind = "linear_sdof"        # openfresco: also kind = "linear_element" (stiffness, damping, mass
@@ -21,28 +24,45 @@
 //! ```
 
 use super::config::{MatrixInput, RawActuator, RawSensors, RawSpecimen, matrix, toml_error};
-use crate::error::{Error, Result, require_positive};
+use crate::error::{Error, Result, require_duration, require_positive};
 use crate::site::openfresco::ElementSpec;
-use crate::site::{Transport, VirtualLabSpec};
+use crate::site::{Secret, SiteLimits, Transport, VirtualLabSpec};
 use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec};
 use serde::Deserialize;
+use std::net::IpAddr;
 use std::path::Path;
 use std::time::Duration;
+
+/// Address a site listens on when `[site] listen` is not given: this machine only.
+pub const DEFAULT_LISTEN: &str = "127.0.0.1:8090";
+
+/// How a site serves, whatever it hosts: timeouts, limits, who may connect.
+#[derive(Debug, Clone)]
+pub struct ServerSettings {
+    pub listen: String,
+    /// `[site] idle_timeout` (default 10 s).
+    pub idle_timeout: Duration,
+    /// `[site] handshake_timeout` (default 2 s).
+    pub handshake_timeout: Duration,
+    pub limits: SiteLimits,
+    /// `[site] secret_file`, else the environment variable `SUBSTEP_SITE_SECRET`.
+    pub secret: Option<Secret>,
+    /// `[site] allow`.
+    pub allow: Option<Vec<IpAddr>>,
+}
 
 /// What `substep site serve` hosts.
 #[derive(Debug, Clone)]
 pub enum SiteDefinition {
     /// The project's protocol: a virtual lab built for each client's coupling DOFs.
     Substep {
-        listen: String,
+        server: ServerSettings,
         transport: Transport,
-        idle_timeout: Option<Duration>,
         lab: VirtualLabSpec,
     },
     /// OpenFresco's generic TCP protocol: one element.
     OpenFresco {
-        listen: String,
-        idle_timeout: Option<Duration>,
+        server: ServerSettings,
         element: ElementSpec,
     },
 }
@@ -61,10 +81,20 @@ struct RawSite {
 #[serde(deny_unknown_fields)]
 struct RawSiteSection {
     protocol: String,
-    listen: String,
+    listen: Option<String>,
     transport: Option<String>,
     inner_steps: Option<usize>,
     idle_timeout: Option<f64>,
+    handshake_timeout: Option<f64>,
+    secret_file: Option<String>,
+    allow: Option<Vec<String>>,
+    max_coupling: Option<usize>,
+    max_substeps: Option<usize>,
+    min_dtau: Option<f64>,
+    max_dt: Option<f64>,
+    /// [MB]
+    max_session_memory: Option<f64>,
+    max_request_work: Option<f64>,
     /// Time step assumed for velocities of a specimen hosted for OpenFresco clients [s].
     dt: Option<f64>,
 }
@@ -102,20 +132,109 @@ impl SiteDefinition {
     }
 
     pub fn listen(&self) -> &str {
+        &self.server().listen
+    }
+
+    pub fn server(&self) -> &ServerSettings {
         match self {
-            SiteDefinition::Substep { listen, .. } | SiteDefinition::OpenFresco { listen, .. } => listen,
+            SiteDefinition::Substep { server, .. } | SiteDefinition::OpenFresco { server, .. } => server,
         }
+    }
+}
+
+impl RawSiteSection {
+    fn server(&self, base: &Path) -> Result<ServerSettings> {
+        let idle_timeout = require_duration("site.idle_timeout", self.idle_timeout.unwrap_or(10.0))?;
+        let handshake_timeout = require_duration("site.handshake_timeout", self.handshake_timeout.unwrap_or(2.0))?;
+        let d = SiteLimits::default();
+        let count = |key: &str, v: Option<usize>, default: usize| -> Result<usize> {
+            match v {
+                Some(0) => Err(Error::invalid(format!("site.{key}"), "must be at least 1")),
+                Some(x) => Ok(x),
+                None => Ok(default),
+            }
+        };
+        let max_session_bytes = match self.max_session_memory {
+            None => d.max_session_bytes,
+            Some(mb) => {
+                if !(mb.is_finite() && mb > 0.0 && mb <= 1e6) {
+                    return Err(Error::invalid(
+                        "site.max_session_memory",
+                        format!("must be a number of MB in (0, 1e6], got {mb}"),
+                    ));
+                }
+                (mb * 1e6) as usize
+            }
+        };
+        let max_request_work = match self.max_request_work {
+            None => d.max_request_work,
+            Some(w) => {
+                if !(w.is_finite() && (1.0..=1e15).contains(&w)) {
+                    return Err(Error::invalid(
+                        "site.max_request_work",
+                        format!("must be a number in [1, 1e15], got {w}"),
+                    ));
+                }
+                w as u64
+            }
+        };
+        let limits = SiteLimits {
+            max_coupling: count("max_coupling", self.max_coupling, d.max_coupling)?,
+            max_substeps: count("max_substeps", self.max_substeps, d.max_substeps)?,
+            min_dtau: require_positive("site.min_dtau", self.min_dtau.unwrap_or(d.min_dtau))?,
+            max_dt: require_positive("site.max_dt", self.max_dt.unwrap_or(d.max_dt))?,
+            max_session_bytes,
+            max_request_work,
+        };
+        limits
+            .validate()
+            .map_err(|(key, reason)| Error::invalid(format!("site.{key}"), reason))?;
+        let secret = match &self.secret_file {
+            _ if self.protocol == "openfresco" => {
+                if self.secret_file.is_some() {
+                    return Err(Error::invalid(
+                        "site.secret_file",
+                        "the openfresco protocol has no authentication; restrict it with site.allow and run it on a lab network only",
+                    ));
+                }
+                None
+            }
+            Some(f) => Some(Secret::from_file(&base.join(f), "site.secret_file")?),
+            None => Secret::from_env()?,
+        };
+        let allow = self
+            .allow
+            .as_ref()
+            .map(|list| {
+                list.iter()
+                    .enumerate()
+                    .map(|(i, a)| {
+                        a.trim().parse::<IpAddr>().map_err(|_| {
+                            Error::invalid(
+                                format!("site.allow[{}]", i + 1),
+                                format!("'{a}' is not an IP address (e.g. \"192.168.1.20\")"),
+                            )
+                        })
+                    })
+                    .collect::<Result<Vec<_>>>()
+            })
+            .transpose()?;
+        let listen = self.listen.clone().unwrap_or_else(|| DEFAULT_LISTEN.to_string());
+        Ok(ServerSettings {
+            listen,
+            idle_timeout,
+            handshake_timeout,
+            limits,
+            secret,
+            allow,
+        })
     }
 }
 
 impl RawSite {
     fn build(self, base: &Path) -> Result<SiteDefinition> {
         let s = &self.site;
-        let idle_timeout = s
-            .idle_timeout
-            .map(|t| require_positive("site.idle_timeout", t))
-            .transpose()?
-            .map(Duration::from_secs_f64);
+        let server = s.server(base)?;
         if self.specimen.is_empty() {
             return Err(Error::invalid(
                 "specimen",
@@ -171,9 +290,8 @@ impl RawSite {
                     None => 10,
                 };
                 Ok(SiteDefinition::Substep {
-                    listen: s.listen.clone(),
+                    server,
                     transport,
-                    idle_timeout,
                     lab: VirtualLabSpec {
                         specimens,
                         actuator,
@@ -231,11 +349,7 @@ impl RawSite {
                     }
                 };
                 element.build()?; // validate now, not at the first connection
-                Ok(SiteDefinition::OpenFresco {
-                    listen: s.listen.clone(),
-                    idle_timeout,
-                    element,
-                })
+                Ok(SiteDefinition::OpenFresco { server, element })
             }
             other => Err(Error::invalid(
                 "site.protocol",

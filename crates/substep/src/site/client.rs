@@ -9,6 +9,7 @@
 //! Every error names the site's address. A failed request leaves the connection unusable
 //! (its state is unknown); later requests fail at once with the original reason.
 
+use super::auth::{Role, Secret, nonce};
 use super::protocol::{HEADER_LEN, Header, Hello, MAX_DATAGRAM, Message, Mode, Session, StepReply, StepRequest};
 use super::transport::{LinkError, read_frame, write_all};
 use crate::error::{Error, Result};
@@ -47,6 +48,9 @@ pub struct ClientOptions {
     pub connect_timeout: Duration,
     /// UDP: requests re-sent after a timeout (total wait ≤ `(udp_retries + 1) × timeout`).
     pub udp_retries: u32,
+    /// The site's shared secret: prove it to the site, and require the site to prove it back
+    /// (a site without the secret is refused). `None`: a site that asks for it is refused.
+    pub secret: Option<Secret>,
 }
 
 impl Default for ClientOptions {
@@ -55,6 +59,7 @@ impl Default for ClientOptions {
             timeout: Duration::from_secs(2),
             connect_timeout: Duration::from_secs(2),
             udp_retries: 3,
+            secret: None,
         }
     }
 }
@@ -144,27 +149,64 @@ impl SiteClient {
             broken: None,
             closed: false,
         };
-        match client.request(&Message::Hello(hello.clone())) {
-            Ok(Message::Accept { n_coupling }) if n_coupling == hello.n_coupling => Ok(client),
-            Ok(Message::Accept { n_coupling }) => {
-                client.closed = true;
-                Err(client.err(format!(
-                    "the site accepted with {n_coupling} coupling DOFs, the controller has {}",
-                    hello.n_coupling
-                )))
-            }
-            Ok(Message::Reject { reason }) => {
-                client.closed = true;
-                Err(client.err(format!("the site rejected the connection: {reason}")))
-            }
-            Ok(other) => {
-                client.closed = true;
-                Err(client.err(format!("unexpected {} reply to Hello", other.kind().name())))
-            }
+        match client.handshake() {
+            Ok(()) => Ok(client),
             Err(e) => {
                 client.closed = true;
                 Err(e)
             }
+        }
+    }
+
+    /// `Hello`, and with a challenge the `Auth` exchange ([`super::auth`]).
+    fn handshake(&mut self) -> Result<()> {
+        let hello = Message::Hello(self.hello.clone());
+        let mut frame = Vec::new();
+        hello.encode(0, &mut frame);
+        let hello_payload = &frame[HEADER_LEN..];
+        let n_c = self.hello.n_coupling;
+        let (reply, proof) = match self.request(&hello)? {
+            Message::Challenge { nonce: site_nonce } => {
+                let Some(secret) = self.options.secret.clone() else {
+                    return Err(self.err(format!(
+                        "the site requires authentication: configure its secret (substructure.remote.secret_file or the environment variable {})",
+                        super::auth::SECRET_ENV
+                    )));
+                };
+                let client_nonce = nonce()?;
+                let mac = secret.mac(Role::Client, &site_nonce, &client_nonce, hello_payload);
+                let reply = self.request(&Message::Auth {
+                    nonce: client_nonce,
+                    mac,
+                })?;
+                (reply, Some((secret, site_nonce, client_nonce)))
+            }
+            other => (other, None),
+        };
+        match reply {
+            Message::Accept { n_coupling, mac } => {
+                if n_coupling != n_c {
+                    return Err(self.err(format!(
+                        "the site accepted with {n_coupling} coupling DOFs, the controller has {n_c}"
+                    )));
+                }
+                match (&self.options.secret, proof, mac) {
+                    (None, None, _) => Ok(()),
+                    (Some(_), None, _) => Err(self.err(
+                        "the site did not ask for authentication although a secret is configured: it is not the site that holds the secret (refused)",
+                    )),
+                    (_, Some((secret, site_nonce, client_nonce)), Some(mac)) => {
+                        if secret.verify(Role::Site, &site_nonce, &client_nonce, hello_payload, &mac) {
+                            Ok(())
+                        } else {
+                            Err(self.err("the site's proof of the secret is wrong (refused): it holds a different secret"))
+                        }
+                    }
+                    (_, Some(_), None) => Err(self.err("the site accepted without proving the secret (refused)")),
+                }
+            }
+            Message::Reject { reason } => Err(self.err(format!("the site rejected the connection: {reason}"))),
+            other => Err(self.err(format!("unexpected {} reply to the handshake", other.kind().name()))),
         }
     }
 
@@ -324,9 +366,17 @@ fn request_tcp(
     limits: &Session,
     timeout: Duration,
 ) -> std::result::Result<Message, RequestError> {
-    let deadline = Instant::now() + timeout;
+    let deadline = Instant::now().checked_add(timeout).unwrap_or_else(Instant::now);
     write_all(stream, tx, timeout).map_err(RequestError::Link)?;
-    let header = match read_frame(stream, rx, Some(deadline), Duration::ZERO, None) {
+    let header = match read_frame(
+        stream,
+        rx,
+        Some(deadline),
+        Duration::ZERO,
+        limits.max_payload(),
+        "the largest reply of this session",
+        None,
+    ) {
         Ok(h) => h,
         Err(LinkError::TimedOut { got: 0 }) => return Err(RequestError::Timeout { timeout, attempts: 1 }),
         Err(e) => return Err(RequestError::Link(e)),
@@ -363,7 +413,7 @@ fn request_udp(
             Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => return Err(RequestError::Unreachable(e)),
             Err(e) => return Err(RequestError::Link(LinkError::Io(e))),
         }
-        let deadline = Instant::now() + timeout;
+        let deadline = Instant::now().checked_add(timeout).unwrap_or_else(Instant::now);
         loop {
             let now = Instant::now();
             if now >= deadline {

@@ -19,13 +19,17 @@
 //!
 //! Everything uses `std::net` and threads; no async runtime. See `docs/openfresco.md`.
 
+pub mod auth;
 pub mod client;
+pub mod limits;
 pub mod openfresco;
 pub mod protocol;
 pub mod server;
 mod transport;
 
+pub use auth::Secret;
 pub use client::{ClientOptions, RemoteSite, RemoteStepSite, RemoteStepTest, SiteClient, Transport, run_remote_step};
+pub use limits::{SessionCost, SiteLimits};
 pub use protocol::{Hello, Message, MessageType, Mode, StepReply, StepRequest};
 pub use server::{ServeOptions, ServeReport, ServerHandle, SiteServer, VirtualLabSpec};
 

@@ -15,8 +15,8 @@
 //! force **on** the numerical substructure, `f_c = −p`; [`SubstructureElement`] and
 //! [`OpenFrescoSite`] convert.
 
-use super::server::{ServeOptions, ServeReport, ServerHandle};
-use super::transport::{LinkError, POLL, quick_ack, read_full, write_all};
+use super::server::{Flow, ServeOptions, ServeReport, ServerHandle, serve_tcp_sessions};
+use super::transport::{LinkError, quick_ack, read_full, write_all};
 use crate::error::{Error, Result};
 use crate::specimen::SpecimenSpec;
 use crate::substructure::ExperimentalSubstructure;
@@ -599,40 +599,14 @@ impl OpenFrescoServer {
         let local = listener
             .local_addr()
             .map_err(|e| Error::invalid("openfresco server", e.to_string()))?;
-        listener
-            .set_nonblocking(true)
-            .map_err(|e| Error::invalid(format!("openfresco server {local}"), e.to_string()))?;
-        options.log(&format!("openfresco: listening on tcp://{local}"));
-        let mut report = ServeReport::default();
-        loop {
-            if options.stopped() {
-                options.log(&format!("openfresco: tcp://{local} stopped"));
-                return Ok(report);
+        // The protocol has no way to say "busy": a second client is disconnected at once.
+        serve_tcp_sessions(listener, options, "openfresco", drop, |stream, peer, report| {
+            let (opened, shutdown) = serve_connection(stream, peer, &mut factory, options, report);
+            if shutdown {
+                options.log(&format!("openfresco: tcp://{local} shut down by {peer} (action 98)"));
             }
-            match listener.accept() {
-                Ok((stream, peer)) => {
-                    let (opened, shutdown) = serve_connection(stream, peer, &mut factory, options, &mut report);
-                    if shutdown {
-                        options.log(&format!("openfresco: tcp://{local} shut down by {peer} (action 98)"));
-                        return Ok(report);
-                    }
-                    if options.once && opened {
-                        return Ok(report);
-                    }
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(POLL / 5),
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) if e.kind() == std::io::ErrorKind::ConnectionAborted => {
-                    options.log(&format!("openfresco: accept on {local}: {e}"));
-                }
-                Err(e) => {
-                    return Err(Error::invalid(
-                        format!("openfresco server {local}"),
-                        format!("accept failed: {e}"),
-                    ));
-                }
-            }
-        }
+            Flow { opened, shutdown }
+        })
     }
 
     /// [`OpenFrescoServer::serve`] in a new thread.
@@ -682,7 +656,12 @@ fn serve_connection(
     let _ = stream.set_nonblocking(false);
     let _ = stream.set_nodelay(true);
     let mut raw = [0u8; 4 * SIZES_LEN];
-    if let Err(e) = read_full(&mut stream, &mut raw, Some(Instant::now() + io), stop) {
+    if let Err(e) = read_full(
+        &mut stream,
+        &mut raw,
+        ServeOptions::deadline(Some(options.handshake_timeout)),
+        stop,
+    ) {
         options.log(&format!("openfresco: {peer} rejected: no sizes message: {e}"));
         report.rejected += 1;
         return (false, false);
@@ -731,7 +710,7 @@ fn serve_connection(
     let end = loop {
         // The first 8 bytes (the action) may take as long as the client likes (or the idle
         // timeout); the rest of the message must follow within the I/O timeout.
-        let idle = options.idle_timeout.map(|t| Instant::now() + t);
+        let idle = ServeOptions::deadline(options.idle_timeout);
         quick_ack(&stream);
         let got = read_full(&mut stream, &mut rx[..8], idle, stop).and_then(|_| {
             read_full(&mut stream, &mut rx[8..], Some(Instant::now() + io), stop).map_err(|e| match e {
@@ -775,10 +754,30 @@ fn serve_connection(
                     );
                 }
                 let time = blocks[TIME].map(|t| t[0]);
+                // The time increment sizes the specimen's integration step (its matrix
+                // exponential): bounded like a substep client's dt.
+                if let Some(t) = time
+                    && t - site.time() > options.limits.max_dt
+                {
+                    report.errors += 1;
+                    break format!(
+                        "setTrialResponse: trial time {t:e} s is {:e} s after the previous one, more than site.max_dt = {} s",
+                        t - site.time(),
+                        options.limits.max_dt
+                    );
+                }
                 let disp = blocks[DISP].expect("ctrl_disp >= 1 (validated)");
                 if let Err(e) = site.set_trial(disp, blocks[VEL], blocks[ACCEL], time) {
                     report.errors += 1;
                     break format!("setTrialResponse failed: {e}");
+                }
+                if let Some(i) = site.force().iter().position(|f| !f.is_finite()) {
+                    report.errors += 1;
+                    break format!(
+                        "setTrialResponse: the trial displacement {:e} m gives a non-finite force on element DOF {}; connection closed",
+                        disp[i.min(disp.len() - 1)],
+                        i + 1
+                    );
                 }
                 trials += 1;
                 None
@@ -855,6 +854,15 @@ fn serve_connection(
             }
         };
         if let Some(len) = reply_len {
+            // Never a non-finite value on the wire. The protocol has no error reply, so the
+            // connection is closed instead (the client sees a failed receive, not a NaN force).
+            if let Some(i) = reply[..len].iter().position(|x| !x.is_finite()) {
+                report.errors += 1;
+                break format!(
+                    "the reply to action {code} has a non-finite value in slot {i} ({}); connection closed instead of sending it",
+                    reply[i]
+                );
+            }
             reply[len..].iter_mut().for_each(|x| *x = 0.0);
             f64s_to_le(&reply, &mut tx);
             if let Err(e) = write_all(&mut stream, &tx, io) {

@@ -16,7 +16,7 @@
 //! | type | code | payload |
 //! |---|---|---|
 //! | `Hello` | 1 | `u32 version, u32 n, u32 k, u32 mode (0 per sub-step, 1 per step), f64 Δt, f64 Δτ, f64 G_cc[n·n] (column-major), u32 coupling_dof[n] (0-based model DOFs)` |
-//! | `Accept` | 2 | `u32 n` (the site's coupling DOFs) |
+//! | `Accept` | 2 | `u32 n` (the site's coupling DOFs) [, `u8 MAC_s[32]` after an `Auth`] |
 //! | `Reject` | 3 | string reason |
 //! | `Substep` | 4 | `f64 command[n], f64 ag_start, f64 ag_end, f64 Δτ` |
 //! | `Measured` | 5 | `f64 force[n], f64 displacement[n]` |
@@ -25,9 +25,12 @@
 //! | `Heartbeat` | 8 | empty |
 //! | `Stop` | 9 | string reason |
 //! | `Error` | 10 | string reason |
+//! | `Challenge` | 11 | `u8 nonce[32]` (a site with a secret answers `Hello` with it) |
+//! | `Auth` | 12 | `u8 nonce[32], u8 MAC_c[32]` (the client's proof, see [`super::auth`]) |
 //!
 //! Sequence numbers: the client numbers its requests 0, 1, 2, … (`Hello` is 0); every reply
-//! carries the number of the request it answers. Over UDP a request that times out is sent
+//! carries the number of the request it answers. With authentication the handshake is
+//! `Hello #0 → Challenge #0`, `Auth #1 → Accept #1`, and the session's requests start at 2. Over UDP a request that times out is sent
 //! again with the same number; the server answers a repeated number with its cached reply
 //! (the site is not moved twice) and the client ignores replies to older numbers.
 //!
@@ -35,6 +38,7 @@
 //! payload length against the handshake's `n_c`/`k_sub`, finite numbers, UTF-8 strings.
 //! Errors are [`Error::InvalidInput`] whose `what` names the offending field.
 
+use super::auth::{MAC_LEN, NONCE_LEN};
 use crate::error::{Error, Result};
 
 pub const MAGIC: [u8; 4] = *b"SSTP";
@@ -63,6 +67,8 @@ pub enum MessageType {
     Heartbeat = 8,
     Stop = 9,
     Error = 10,
+    Challenge = 11,
+    Auth = 12,
 }
 
 impl MessageType {
@@ -79,6 +85,8 @@ impl MessageType {
             8 => Heartbeat,
             9 => Stop,
             10 => Error,
+            11 => Challenge,
+            12 => Auth,
             _ => return None,
         })
     }
@@ -98,6 +106,8 @@ impl MessageType {
             Heartbeat => "Heartbeat",
             Stop => "Stop",
             Error => "Error",
+            Challenge => "Challenge",
+            Auth => "Auth",
         }
     }
 }
@@ -148,7 +158,7 @@ impl Header {
         }
         let code = u16::from_le_bytes([bytes[6], bytes[7]]);
         let kind = MessageType::from_code(code)
-            .ok_or_else(|| perr("header.type", format!("{code} is not a known message type (1..=10)")))?;
+            .ok_or_else(|| perr("header.type", format!("{code} is not a known message type (1..=12)")))?;
         let seq = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
         let len = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]);
         if len as usize > MAX_PAYLOAD {
@@ -297,6 +307,11 @@ impl Hello {
     }
 }
 
+/// Payload length of a `Hello` for `n` coupling DOFs, in bytes.
+pub fn hello_payload_len(n: usize) -> usize {
+    32 + 8 * n * n + 4 * n
+}
+
 /// What the decoder needs to know from the handshake.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Session {
@@ -308,6 +323,15 @@ impl Session {
     /// Payload length of a `StepResult`, in bytes.
     pub fn step_result_len(&self) -> usize {
         3 * self.n_coupling * self.substeps * 8
+    }
+    /// Largest payload of a request of this session (what a site reads), in bytes.
+    pub fn max_request_payload(&self) -> usize {
+        let n = self.n_coupling;
+        hello_payload_len(n)
+            .max(8 * (3 * n + 2))
+            .max(8 * (n + 3))
+            .max(4 + MAX_REASON)
+            .max(NONCE_LEN + MAC_LEN)
     }
     /// Largest payload of any message of this session, in bytes (for UDP limits).
     pub fn max_payload(&self) -> usize {
@@ -355,6 +379,8 @@ pub enum Message {
     Hello(Hello),
     Accept {
         n_coupling: usize,
+        /// The site's proof after an `Auth` (see [`super::auth`]).
+        mac: Option<[u8; MAC_LEN]>,
     },
     Reject {
         reason: String,
@@ -376,6 +402,13 @@ pub enum Message {
     },
     Error {
         reason: String,
+    },
+    Challenge {
+        nonce: [u8; NONCE_LEN],
+    },
+    Auth {
+        nonce: [u8; NONCE_LEN],
+        mac: [u8; MAC_LEN],
     },
 }
 
@@ -410,6 +443,8 @@ impl Message {
             Message::Heartbeat => MessageType::Heartbeat,
             Message::Stop { .. } => MessageType::Stop,
             Message::Error { .. } => MessageType::Error,
+            Message::Challenge { .. } => MessageType::Challenge,
+            Message::Auth { .. } => MessageType::Auth,
         }
     }
 
@@ -435,7 +470,17 @@ impl Message {
                     put_u32(out, d as u32);
                 }
             }
-            Message::Accept { n_coupling } => put_u32(out, *n_coupling as u32),
+            Message::Accept { n_coupling, mac } => {
+                put_u32(out, *n_coupling as u32);
+                if let Some(m) = mac {
+                    out.extend_from_slice(m);
+                }
+            }
+            Message::Challenge { nonce } => out.extend_from_slice(nonce),
+            Message::Auth { nonce, mac } => {
+                out.extend_from_slice(nonce);
+                out.extend_from_slice(mac);
+            }
             Message::Reject { reason } | Message::Stop { reason } | Message::Error { reason } => put_str(out, reason),
             Message::Substep { command, ag, dtau } => {
                 put_f64s(out, command);
@@ -534,12 +579,32 @@ impl Message {
                 Message::Hello(h)
             }
             MessageType::Accept => {
-                expect_len(4, "one u32".into())?;
+                if payload.len() != 4 && payload.len() != 4 + MAC_LEN {
+                    expect_len(4, format!("one u32, or one u32 and a {MAC_LEN}-byte MAC"))?;
+                }
                 let n = r.u32() as usize;
                 if n == 0 || n > MAX_COUPLING {
                     return Err(perr("Accept.n_coupling", format!("is {n}, must be 1..={MAX_COUPLING}")));
                 }
-                Message::Accept { n_coupling: n }
+                let mac = if payload.len() == 4 + MAC_LEN {
+                    Some(r.bytes::<MAC_LEN>())
+                } else {
+                    None
+                };
+                Message::Accept { n_coupling: n, mac }
+            }
+            MessageType::Challenge => {
+                expect_len(NONCE_LEN, "a nonce".into())?;
+                Message::Challenge {
+                    nonce: r.bytes::<NONCE_LEN>(),
+                }
+            }
+            MessageType::Auth => {
+                expect_len(NONCE_LEN + MAC_LEN, "a nonce and a MAC".into())?;
+                Message::Auth {
+                    nonce: r.bytes::<NONCE_LEN>(),
+                    mac: r.bytes::<MAC_LEN>(),
+                }
             }
             MessageType::Reject => Message::Reject {
                 reason: r.string(name)?,
@@ -635,6 +700,10 @@ impl Reader<'_> {
         let bytes: [u8; N] = self.buf.get(self.pos..end)?.try_into().ok()?;
         self.pos = end;
         Some(bytes)
+    }
+    /// `N` bytes; the caller has checked the payload length (zeros otherwise).
+    fn bytes<const N: usize>(&mut self) -> [u8; N] {
+        self.take::<N>().unwrap_or([0; N])
     }
     fn u32(&mut self) -> u32 {
         self.take::<4>().map(u32::from_le_bytes).unwrap_or(u32::MAX)

@@ -118,12 +118,16 @@ pub(crate) fn write_all(stream: &mut TcpStream, data: &[u8], timeout: Duration) 
 
 /// Read one `SSTP` frame into `frame` (header + payload). The header must arrive before
 /// `first_deadline`; the payload before the later of `first_deadline` and `rest_timeout` after
-/// the header (a client passes its request deadline and zero).
+/// the header (a client passes its request deadline and zero). A payload longer than
+/// `max_len` (what this connection can legitimately receive, `max_what` in words) is refused
+/// before anything is allocated for it.
 pub(crate) fn read_frame(
     stream: &mut TcpStream,
     frame: &mut Vec<u8>,
     first_deadline: Option<Instant>,
     rest_timeout: Duration,
+    max_len: usize,
+    max_what: &str,
     stop: Option<&AtomicBool>,
 ) -> Result<Header, LinkError> {
     frame.clear();
@@ -131,10 +135,20 @@ pub(crate) fn read_frame(
     read_full(stream, &mut frame[..HEADER_LEN], first_deadline, stop)?;
     let header = Header::parse(frame).map_err(LinkError::Protocol)?;
     let len = header.len as usize;
+    if len > max_len {
+        return Err(LinkError::Protocol(Error::invalid(
+            "site protocol: header.length",
+            format!(
+                "a {} of {len} bytes exceeds the {max_len} bytes of {max_what}",
+                header.kind.name()
+            ),
+        )));
+    }
     frame.resize(HEADER_LEN + len, 0);
     // The payload must follow within `rest_timeout` (but never before `first_deadline`).
     let now = Instant::now();
-    let deadline = first_deadline.map_or(now + rest_timeout, |d| d.max(now + rest_timeout));
+    let rest = now.checked_add(rest_timeout).unwrap_or(now);
+    let deadline = first_deadline.map_or(rest, |d| d.max(rest));
     read_full(stream, &mut frame[HEADER_LEN..], Some(deadline), stop).map_err(|e| match e {
         LinkError::Closed { got } => LinkError::Closed { got: got + HEADER_LEN },
         LinkError::TimedOut { got } => LinkError::TimedOut { got: got + HEADER_LEN },
