@@ -22,7 +22,8 @@
 //! ([`reference`]). J1 is the lag of the first maximum of the correlation of `x_m` with `y_n`,
 //! J2/J3 NRMS/peak of `x_m − y_n`, J4/J5 of `x_m − x_r1`, J6–J9 of floors 2 and 3 against the
 //! reference ([`crate::analysis::metrics`]). A run diverges (and stops: `stable = false`) when a
-//! displacement leaves ±[`DIVERGENCE_LIMIT`] or is not finite; `max |F| ≥ 8900 N` flags
+//! displacement leaves ±[`DIVERGENCE_LIMIT`] or is not finite; a run that completes with
+//! J2 > [`UNSTABLE_TRACKING_PERCENT`] is not stable either; `max |F| ≥ 8900 N` flags
 //! `capacity_exceeded`.
 //!
 //! ## With the sub-step algorithm ([`Algorithm::Substep`])
@@ -59,7 +60,7 @@ pub use controller::{Controller, ControllerKind, ControllerSpec, arx_default, sa
 pub use perturb::{PERTURBATION_SIGMA, perturbed_plant, run_perturbed};
 pub use run::{
     Algorithm, Criteria, DIVERGENCE_LIMIT, FORCE_CAPACITY, MAX_LAG, NOISE_POWER_F, NOISE_POWER_X, RthsInput,
-    RthsResult, RunHistory, SAMPLE_TIME, SubstepSpec, Transfer, reference, run,
+    RthsResult, RunHistory, SAMPLE_TIME, SubstepSpec, Transfer, UNSTABLE_TRACKING_PERCENT, reference, run,
 };
 
 /// Published results (Silva et al. 2020, table 3): the sample controller, El Centro at 0.4,

@@ -26,6 +26,9 @@ pub const MAX_LAG: usize = 49;
 /// A displacement beyond this [m] (140× the stroke) stops the run as diverged.
 pub const DIVERGENCE_LIMIT: f64 = 1.0;
 
+/// A run whose tracking error J2 exceeds this [%] counts as unstable.
+pub const UNSTABLE_TRACKING_PERCENT: f64 = 100.0;
+
 /// How the numerical substructure is integrated.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Algorithm {
@@ -463,7 +466,9 @@ pub fn run(input: &RthsInput) -> Result<RthsResult> {
     } else {
         None
     };
-    let stable = diverged_at.is_none();
+    // A loop that did not blow up but tracks worse than not moving at all (J2 > 100 %) is
+    // unstable too (e.g. a compensator oscillating at its bound).
+    let stable = criteria.is_some_and(|c| c.raw[1] <= UNSTABLE_TRACKING_PERCENT);
     Ok(RthsResult {
         case: input.case.number,
         criteria,
