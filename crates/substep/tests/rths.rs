@@ -434,3 +434,16 @@ fn config_parses_and_refuses_unknown_keys() {
         .to_string();
     assert!(e.contains("substep.dt"), "{e}");
 }
+
+#[test]
+fn shared_noise_drives_channels_with_one_sequence() {
+    use substep::transfer::noise::SharedNoise;
+    let mut shared = SharedNoise::new(MinStdPolar::benchmark(), vec![1.6e-5, 2.179761]);
+    let mut single = MinStdPolar::benchmark();
+    let mut out = [0.0; 2];
+    for _ in 0..100 {
+        shared.sample(&mut out);
+        let n = single.normal();
+        assert_eq!(out, [1.6e-5 * n, 2.179761 * n]);
+    }
+}
