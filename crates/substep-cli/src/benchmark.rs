@@ -159,9 +159,13 @@ fn setup(args: &RthsArgs) -> Result<Setup> {
         record: Arc::new(record),
         intensity: args.intensity,
         controller,
-        transfer: Transfer::Plant {
-            params: ServoParams::benchmark(),
-            derivative: config.derivative()?,
+        transfer: if config.ideal_plant()? {
+            Transfer::Ideal
+        } else {
+            Transfer::Plant {
+                params: ServoParams::benchmark(),
+                derivative: config.derivative()?,
+            }
         },
         noise,
         noise_seed,

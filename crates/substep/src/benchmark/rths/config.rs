@@ -36,6 +36,7 @@
 //! p0 = 100.0
 //!
 //! [plant]
+//! kind = "servo"                # or "ideal": x = desired exactly (the loop's own error)
 //! derivative = "finite_difference"   # or "exact"
 //!
 //! [noise]
@@ -131,6 +132,7 @@ struct RawInverseFir {
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPlant {
+    kind: Option<String>,
     derivative: Option<String>,
 }
 
@@ -192,6 +194,7 @@ impl BenchmarkConfig {
         cfg.controller(None).map_err(in_file)?;
         cfg.substep().map_err(in_file)?;
         cfg.derivative().map_err(in_file)?;
+        cfg.ideal_plant().map_err(in_file)?;
         cfg.noise().map_err(in_file)?;
         Ok(cfg)
     }
@@ -348,6 +351,15 @@ impl BenchmarkConfig {
         }
         s.samples_per_step()?;
         Ok(s)
+    }
+
+    /// `true` for `[plant] kind = "ideal"` (x = desired; no plant, the controller is unused).
+    pub fn ideal_plant(&self) -> Result<bool> {
+        match self.raw.plant.as_ref().and_then(|p| p.kind.as_deref()) {
+            None | Some("servo") => Ok(false),
+            Some("ideal") => Ok(true),
+            Some(s) => Err(Error::invalid("plant.kind", format!("unknown `{s}` (servo, ideal)"))),
+        }
     }
 
     pub fn derivative(&self) -> Result<Derivative> {
