@@ -281,6 +281,15 @@ fn fmt_j(j: Option<[f64; 9]>) -> String {
     }
 }
 
+/// The published row applies to the sample controller on the nominal benchmark only.
+fn shows_published(setup: &Setup, args: &RthsArgs) -> bool {
+    setup.kind == ControllerKind::Sample
+        && args.record == "elcentro"
+        && (setup.base.intensity - 0.4).abs() < 1e-12
+        && matches!(setup.base.algorithm, Algorithm::Benchmark)
+        && matches!(setup.base.transfer, Transfer::Plant { .. })
+}
+
 fn table(setup: &Setup, rows: &[Row], args: &RthsArgs) -> String {
     let mut s = String::new();
     let alg = match &setup.base.algorithm {
@@ -313,11 +322,7 @@ fn table(setup: &Setup, rows: &[Row], args: &RthsArgs) -> String {
             if r.stable { "yes" } else { "no" },
             if r.capacity_exceeded { "exceeded" } else { "ok" }
         );
-        if setup.kind == ControllerKind::Sample
-            && args.record == "elcentro"
-            && (setup.base.intensity - 0.4).abs() < 1e-12
-            && matches!(setup.base.algorithm, Algorithm::Benchmark)
-        {
+        if shows_published(setup, args) {
             let _ = writeln!(
                 s,
                 "{:>10} {}",
@@ -373,10 +378,7 @@ fn markdown(setup: &Setup, rows: &[Row], args: &RthsArgs, command: &str, plots: 
             if r.stable { "yes" } else { "no" },
             if r.capacity_exceeded { "exceeded" } else { "ok" }
         );
-        if setup.kind == ControllerKind::Sample
-            && args.record == "elcentro"
-            && matches!(setup.base.algorithm, Algorithm::Benchmark)
-        {
+        if shows_published(setup, args) {
             let _ = writeln!(
                 s,
                 "| {} published | | {} | | | |",
@@ -511,6 +513,12 @@ fn plots(base: &RthsInput, cases: &[Case], dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// Write to stdout; a closed pipe (`| head`) is not an error worth a panic.
+fn out(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+}
+
 pub fn rths(args: &RthsArgs) -> Result<()> {
     let setup = setup(args)?;
     let t0 = std::time::Instant::now();
@@ -569,10 +577,10 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
             }
         }
         obj.insert("cases".into(), Value::Array(cases));
-        println!("{}", serde_json::to_string_pretty(&Value::Object(obj))?);
+        out(&format!("{}\n", serde_json::to_string_pretty(&Value::Object(obj))?));
         return Ok(());
     }
-    print!("{}", table(&setup, &rows, args));
+    out(&table(&setup, &rows, args));
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let files = if args.no_plots {
         Vec::new()
@@ -590,8 +598,8 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     let md = markdown(&setup, &rows, args, &command, &files);
     let path = args.out.join("benchmark.md");
     std::fs::write(&path, md).with_context(|| format!("cannot write {}", path.display()))?;
-    println!(
-        "{} run(s) in {elapsed:.2} s; wrote {}{}",
+    out(&format!(
+        "{} run(s) in {elapsed:.2} s; wrote {}{}\n",
         rows.len() * (1 + args.perturbed.unwrap_or(0)),
         path.display(),
         if files.is_empty() {
@@ -599,6 +607,6 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
         } else {
             format!(" and {} plots", files.len())
         }
-    );
+    ));
     Ok(())
 }
