@@ -9,6 +9,7 @@ mod analyze;
 mod bench;
 mod bench_compare;
 mod bench_models;
+mod benchmark;
 mod output;
 mod plots;
 mod realtime;
@@ -51,6 +52,8 @@ enum Command {
     /// The virtual substructure test study (3-storey frame, TMD specimen, delayed actuator,
     /// 1 % force noise): every compensation method against the exact reference
     Vst(vst::VstArgs),
+    /// Community benchmarks reproduced: `benchmark rths` (the virtual RTHS benchmark, docs/benchmark.md)
+    Benchmark(benchmark::BenchmarkArgs),
 }
 
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -98,6 +101,7 @@ fn main() -> ExitCode {
         Some(Command::Bench(args)) => bench::bench(&args),
         Some(Command::Site(args)) => site::site(&args),
         Some(Command::Vst(args)) => vst::vst(&args),
+        Some(Command::Benchmark(args)) => benchmark::benchmark(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

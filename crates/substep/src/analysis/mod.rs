@@ -7,6 +7,7 @@
 
 pub mod amplification;
 pub mod frequency;
+pub mod metrics;
 pub mod spectral;
 pub mod stability;
 pub mod tmd_case;

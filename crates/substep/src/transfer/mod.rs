@@ -11,10 +11,21 @@
 //! that grid, which costs an `O(h²)` interpolation error (bounded; see `tests/transfer.rs`).
 //! Displacement-sensor filter states and noise generators are not part of the saved state
 //! (they never feed back into the algorithm).
+//!
+//! Lab-grade building blocks (used by the RTHS benchmark, [`crate::benchmark::rths`]): continuous
+//! LTI systems from transfer functions or state space ([`lti`]), Tustin-discretised controllers
+//! ([`discrete`]), the servo-hydraulic actuator with control–structure interaction ([`servo`]),
+//! noise given as power or σ with the benchmark's generator ([`noise`]) and A/D–D/A converters
+//! ([`converter`]).
 
 mod actuator;
+pub mod converter;
+pub mod discrete;
 mod lab;
+pub mod lti;
+pub mod noise;
 mod sensor;
+pub mod servo;
 
 pub use actuator::{Actuator, ActuatorSpec, DelayLine, Dynamics};
 pub use lab::{AttachedSpecimen, VirtualLab};

@@ -1,0 +1,612 @@
+//! `substep benchmark rths`: the RTHS benchmark control problem (Silva et al. 2020) as a
+//! built-in. Thin: parse the flags, call `substep::benchmark::rths`, print, write
+//! `benchmark.md` and plots.
+
+use crate::plots::{Curve, line_chart};
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+use serde_json::{Map, Value, json};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use substep::benchmark::rths::{
+    Algorithm, BenchmarkConfig, Case, ControllerKind, ControllerSpec, GroundRecord, PUBLISHED_SAMPLE, RthsInput,
+    RthsResult, SubstepSpec, Transfer, run, run_perturbed,
+};
+use substep::transfer::servo::ServoParams;
+
+#[derive(Debug, clap::Args)]
+pub struct BenchmarkArgs {
+    #[command(subcommand)]
+    pub which: Which,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum Which {
+    /// The virtual RTHS benchmark (Silva et al. 2020): 3-storey frame, servo-hydraulic actuator
+    /// with CSI, J1–J9 against the exact reference (docs/benchmark.md)
+    Rths(RthsArgs),
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct RthsArgs {
+    /// Reference structure 1..4 (default: all four)
+    #[arg(long)]
+    pub case: Option<u8>,
+    /// Ground motion: `elcentro` (shipped) or a two-column `t,a_g` CSV in m/s²
+    #[arg(long, default_value = "elcentro")]
+    pub record: String,
+    /// Scale of the record (eq_intensity)
+    #[arg(long, default_value_t = 0.4)]
+    pub intensity: f64,
+    /// Tracking controller: none, sample, arx, polynomial, inverse_fir (default: the config's, else sample)
+    #[arg(long)]
+    pub controller: Option<String>,
+    /// Settings of the controller and the sub-step algorithm (TOML, docs/benchmark.md)
+    #[arg(long, value_name = "FILE.toml")]
+    pub config: Option<PathBuf>,
+    /// Also run N perturbed plants per case (in parallel)
+    #[arg(long, value_name = "N")]
+    pub perturbed: Option<usize>,
+    /// Seed of the plant perturbations
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// benchmark (the original loop) or substep (the numerical substructure by the sub-step algorithm)
+    #[arg(long, default_value = "benchmark")]
+    pub algorithm: String,
+    /// With --algorithm substep: run these k_sub values (comma-separated) and print J4–J9 per k_sub
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    pub k_sub: Vec<usize>,
+    /// Print one JSON object instead of the table (no files written)
+    #[arg(long)]
+    pub json: bool,
+    /// Output directory for benchmark.md and the plots
+    #[arg(long, value_name = "DIR", default_value = "results")]
+    pub out: PathBuf,
+    /// No PNG plots
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+/// Most perturbed runs per case.
+const MAX_PERTURBED: usize = 10_000;
+
+pub fn benchmark(args: &BenchmarkArgs) -> Result<()> {
+    match &args.which {
+        Which::Rths(a) => rths(a),
+    }
+}
+
+struct Setup {
+    cases: Vec<Case>,
+    base: RthsInput,
+    k_subs: Vec<Option<usize>>,
+    kind: ControllerKind,
+}
+
+fn setup(args: &RthsArgs) -> Result<Setup> {
+    let cases = match args.case {
+        Some(c) => {
+            vec![Case::new(c).map_err(|e| substep::Error::invalid("--case", e.to_string().replace("case: ", "")))?]
+        }
+        None => Case::all().to_vec(),
+    };
+    if !(args.intensity.is_finite() && args.intensity >= 0.0) {
+        return Err(substep::Error::invalid(
+            "--intensity",
+            format!("must be a finite number >= 0, got {}", args.intensity),
+        )
+        .into());
+    }
+    let record = if args.record == "elcentro" {
+        GroundRecord::elcentro()
+    } else {
+        let text = std::fs::read_to_string(&args.record)
+            .map_err(|e| substep::Error::file(&args.record, format!("cannot read: {e}")))?;
+        GroundRecord::parse_csv(&args.record, &text)?
+    };
+    let config = match &args.config {
+        Some(path) => {
+            let name = path.display().to_string();
+            let text =
+                std::fs::read_to_string(path).map_err(|e| substep::Error::file(&name, format!("cannot read: {e}")))?;
+            BenchmarkConfig::parse(&text, &name)?
+        }
+        None => BenchmarkConfig::default(),
+    };
+    let kind = match &args.controller {
+        Some(k) => Some(
+            ControllerKind::parse(k)
+                .map_err(|e| substep::Error::invalid("--controller", e.to_string().replace("controller: ", "")))?,
+        ),
+        None => config.kind()?,
+    };
+    let controller: ControllerSpec = config.controller(kind)?;
+    let kind = controller.kind;
+    let (noise, noise_seed) = config.noise()?;
+    let algorithm = match args.algorithm.as_str() {
+        "benchmark" => Algorithm::Benchmark,
+        "substep" => Algorithm::Substep(config.substep()?),
+        other => {
+            return Err(
+                substep::Error::invalid("--algorithm", format!("unknown `{other}` (benchmark, substep)")).into(),
+            );
+        }
+    };
+    let k_subs = if args.k_sub.is_empty() {
+        vec![None]
+    } else {
+        let Algorithm::Substep(spec) = &algorithm else {
+            return Err(substep::Error::invalid("--k-sub", "needs --algorithm substep").into());
+        };
+        for &k in &args.k_sub {
+            SubstepSpec {
+                k_sub: k,
+                ..spec.clone()
+            }
+            .samples_per_step()
+            .map_err(|e| substep::Error::invalid("--k-sub", e.to_string()))?;
+        }
+        args.k_sub.iter().map(|&k| Some(k)).collect()
+    };
+    if let Some(n) = args.perturbed
+        && !(1..=MAX_PERTURBED).contains(&n)
+    {
+        return Err(substep::Error::invalid("--perturbed", format!("must be in 1..={MAX_PERTURBED}, got {n}")).into());
+    }
+    let base = RthsInput {
+        case: cases[0],
+        record: Arc::new(record),
+        intensity: args.intensity,
+        controller,
+        transfer: if config.ideal_plant()? {
+            Transfer::Ideal
+        } else {
+            Transfer::Plant {
+                params: ServoParams::benchmark(),
+                derivative: config.derivative()?,
+            }
+        },
+        noise,
+        noise_seed,
+        algorithm,
+        keep_history: false,
+    };
+    Ok(Setup {
+        cases,
+        base,
+        k_subs,
+        kind,
+    })
+}
+
+/// One row of results: a case (and k_sub), its nominal run and the perturbed runs.
+struct Row {
+    case: u8,
+    k_sub: Option<usize>,
+    nominal: RthsResult,
+    perturbed: Vec<(ServoParams, RthsResult)>,
+}
+
+fn j_json(r: &RthsResult, obj: &mut Map<String, Value>) {
+    for i in 0..9 {
+        obj.insert(format!("J{}", i + 1), r.criteria.map_or(Value::Null, |c| json!(c.j[i])));
+    }
+    obj.insert("max_force".into(), json!(r.max_force));
+    obj.insert("stable".into(), json!(r.stable));
+    obj.insert("capacity_exceeded".into(), json!(r.capacity_exceeded));
+    if let Some(t) = r.diverged_at {
+        obj.insert("diverged_at".into(), json!(t));
+    }
+    if let Some(g) = &r.guard_trip {
+        obj.insert("guard_trip".into(), json!(g));
+    }
+}
+
+/// Mean and max of each J over the stable runs.
+fn stats(runs: &[(ServoParams, RthsResult)]) -> ([f64; 9], [f64; 9], usize, usize) {
+    let ok: Vec<[f64; 9]> = runs
+        .iter()
+        .filter(|(_, r)| r.stable)
+        .filter_map(|(_, r)| r.criteria.map(|c| c.j))
+        .collect();
+    let mut mean = [f64::NAN; 9];
+    let mut max = [f64::NAN; 9];
+    if !ok.is_empty() {
+        for i in 0..9 {
+            mean[i] = ok.iter().map(|j| j[i]).sum::<f64>() / ok.len() as f64;
+            max[i] = ok.iter().map(|j| j[i]).fold(f64::MIN, f64::max);
+        }
+    }
+    let stable = runs.iter().filter(|(_, r)| r.stable).count();
+    let under = runs.iter().filter(|(_, r)| r.stable && !r.capacity_exceeded).count();
+    (mean, max, stable, under)
+}
+
+fn num_or_null(v: f64) -> Value {
+    if v.is_finite() {
+        json!((v * 100.0).round() / 100.0)
+    } else {
+        Value::Null
+    }
+}
+
+fn row_json(row: &Row) -> Value {
+    let mut obj = Map::new();
+    obj.insert("case".into(), json!(row.case));
+    if let Some(k) = row.k_sub {
+        obj.insert("k_sub".into(), json!(k));
+    }
+    j_json(&row.nominal, &mut obj);
+    if !row.perturbed.is_empty() {
+        let runs: Vec<Value> = row
+            .perturbed
+            .iter()
+            .enumerate()
+            .map(|(i, (p, r))| {
+                let mut o = Map::new();
+                o.insert("run".into(), json!(i));
+                o.insert("k_e".into(), json!(p.k_e));
+                o.insert("beta1".into(), json!(p.beta1));
+                o.insert("beta2".into(), json!(p.beta2));
+                o.insert("a3".into(), json!(p.a3));
+                j_json(r, &mut o);
+                Value::Object(o)
+            })
+            .collect();
+        let (mean, max, stable, under) = stats(&row.perturbed);
+        let named = |v: &[f64; 9]| -> Value {
+            Value::Object((0..9).map(|i| (format!("J{}", i + 1), num_or_null(v[i]))).collect())
+        };
+        obj.insert(
+            "perturbed".into(),
+            json!({
+                "n": row.perturbed.len(),
+                "stable": stable,
+                "under_capacity": under,
+                "mean": named(&mean),
+                "max": named(&max),
+                "max_force": row.perturbed.iter().map(|(_, r)| r.max_force).fold(0.0, f64::max),
+                "runs": runs,
+            }),
+        );
+    }
+    Value::Object(obj)
+}
+
+fn fmt_j(j: Option<[f64; 9]>) -> String {
+    match j {
+        Some(j) => j.iter().map(|v| format!("{v:>6.2}")).collect::<Vec<_>>().join(" "),
+        None => format!("{:>62}", "diverged"),
+    }
+}
+
+/// The published row applies to the sample controller on the nominal benchmark only.
+fn shows_published(setup: &Setup, args: &RthsArgs) -> bool {
+    setup.kind == ControllerKind::Sample
+        && args.record == "elcentro"
+        && (setup.base.intensity - 0.4).abs() < 1e-12
+        && matches!(setup.base.algorithm, Algorithm::Benchmark)
+        && matches!(setup.base.transfer, Transfer::Plant { .. })
+}
+
+fn table(setup: &Setup, rows: &[Row], args: &RthsArgs) -> String {
+    let mut s = String::new();
+    let alg = match &setup.base.algorithm {
+        Algorithm::Benchmark => "benchmark loop (RK4 at 1/4096 s)".to_string(),
+        Algorithm::Substep(sp) => format!(
+            "sub-step algorithm (Δt = {} s, error force {})",
+            sp.dt,
+            sp.error_force.kind()
+        ),
+    };
+    let _ = writeln!(
+        s,
+        "RTHS benchmark: controller {}, record {} × {}, {}",
+        setup.kind.name(),
+        setup.base.record.name,
+        setup.base.intensity,
+        alg
+    );
+    let head = "    J1     J2     J3     J4     J5     J6     J7     J8     J9";
+    let _ = writeln!(s, "case k_sub {head}  max F [N] stable capacity");
+    for row in rows {
+        let r = &row.nominal;
+        let _ = writeln!(
+            s,
+            "{:>4} {:>5} {}  {:>9.1} {:>6} {:>8}",
+            row.case,
+            row.k_sub.map_or("-".into(), |k| k.to_string()),
+            fmt_j(r.criteria.map(|c| c.j)),
+            r.max_force,
+            if r.stable { "yes" } else { "no" },
+            if r.capacity_exceeded { "exceeded" } else { "ok" }
+        );
+        if shows_published(setup, args) {
+            let _ = writeln!(
+                s,
+                "{:>10} {}",
+                "published",
+                fmt_j(Some(PUBLISHED_SAMPLE[row.case as usize - 1]))
+            );
+        }
+        if !row.perturbed.is_empty() {
+            let (mean, max, stable, under) = stats(&row.perturbed);
+            let _ = writeln!(s, "{:>10} {}", "pert. mean", fmt_j(Some(mean)));
+            let _ = writeln!(
+                s,
+                "{:>10} {}  {:>9.1}  {stable}/{n} stable, {under}/{n} under 8900 N",
+                "pert. max",
+                fmt_j(Some(max)),
+                row.perturbed.iter().map(|(_, r)| r.max_force).fold(0.0, f64::max),
+                n = row.perturbed.len()
+            );
+        }
+    }
+    s.push_str("J1 [ms]; J2–J9 [%] (J2/J3 tracking, J4/J5 floor 1, J6/J7 NRMS and J8/J9 peak of floors 2/3 vs the exact reference)\n");
+    s
+}
+
+fn markdown(setup: &Setup, rows: &[Row], args: &RthsArgs, command: &str, plots: &[PathBuf]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# RTHS benchmark results\n\nCommand: `{command}`\n");
+    let _ = writeln!(
+        s,
+        "Controller `{}`, record `{}` × {}.\n",
+        setup.kind.name(),
+        setup.base.record.name,
+        setup.base.intensity
+    );
+    let _ = writeln!(
+        s,
+        "| case | k_sub | J1 | J2 | J3 | J4 | J5 | J6 | J7 | J8 | J9 | max F [N] | stable | capacity |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let cells = |j: Option<[f64; 9]>| match j {
+        Some(j) => j.iter().map(|v| format!("{v:.2}")).collect::<Vec<_>>().join(" | "),
+        None => vec!["–"; 9].join(" | "),
+    };
+    for row in rows {
+        let r = &row.nominal;
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.1} | {} | {} |",
+            row.case,
+            row.k_sub.map_or("–".into(), |k| k.to_string()),
+            cells(r.criteria.map(|c| c.j)),
+            r.max_force,
+            if r.stable { "yes" } else { "no" },
+            if r.capacity_exceeded { "exceeded" } else { "ok" }
+        );
+        if shows_published(setup, args) {
+            let _ = writeln!(
+                s,
+                "| {} published | | {} | | | |",
+                row.case,
+                cells(Some(PUBLISHED_SAMPLE[row.case as usize - 1]))
+            );
+        }
+        if !row.perturbed.is_empty() {
+            let (mean, max, stable, under) = stats(&row.perturbed);
+            let n = row.perturbed.len();
+            let _ = writeln!(
+                s,
+                "| {} perturbed mean | | {} | | {stable}/{n} | |",
+                row.case,
+                cells(Some(mean))
+            );
+            let _ = writeln!(
+                s,
+                "| {} perturbed max | | {} | {:.1} | | {under}/{n} under 8900 N |",
+                row.case,
+                cells(Some(max)),
+                row.perturbed.iter().map(|(_, r)| r.max_force).fold(0.0, f64::max)
+            );
+        }
+    }
+    s.push_str("\nJ1 [ms]; J2–J9 [%], rounded as the benchmark rounds.\n");
+    if !plots.is_empty() {
+        s.push_str("\nPlots:\n\n");
+        for p in plots {
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let _ = writeln!(s, "* [{name}]({name})");
+        }
+    }
+    s
+}
+
+/// At most `max` points of `(t, y)` (every n-th sample) for full-length plots.
+fn decimate(h: f64, stride: usize, y: &[f64], from: usize, to: usize, max: usize) -> (Vec<f64>, Vec<f64>) {
+    let step = ((to - from) / max).max(1);
+    let idx: Vec<usize> = (from..to).step_by(step).collect();
+    (
+        idx.iter().map(|&i| i as f64 * h * stride as f64).collect(),
+        idx.iter().map(|&i| y[i]).collect(),
+    )
+}
+
+fn curve(label: &str, xy: (Vec<f64>, Vec<f64>), scale: f64) -> Curve {
+    Curve {
+        label: label.into(),
+        x: xy.0,
+        y: xy.1.into_iter().map(|v| v * scale).collect(),
+    }
+}
+
+fn plots(base: &RthsInput, cases: &[Case], dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for case in cases {
+        let mut input = base.clone();
+        input.case = *case;
+        input.keep_history = true;
+        let r = run(&input)?;
+        let Some(hist) = r.history else { continue };
+        let h = hist.h;
+        let n = hist.desired.len();
+        let c = case.number;
+        let path = dir.join(format!("tracking_case{c}.png"));
+        line_chart(
+            &path,
+            &format!("case {c}: desired vs measured actuator displacement"),
+            "t [s]",
+            "displacement [mm]",
+            &[
+                curve("desired y_n", decimate(h, 1, &hist.desired, 0, n, 8000), 1e3),
+                curve("measured x_m", decimate(h, 1, &hist.measured, 0, n, 8000), 1e3),
+            ],
+        )?;
+        files.push(path);
+        // Zoom: 0.5 s around the largest desired displacement.
+        let peak = (0..n)
+            .max_by(|&a, &b| hist.desired[a].abs().total_cmp(&hist.desired[b].abs()))
+            .unwrap_or(0);
+        let half = (0.25 / h) as usize;
+        let (from, to) = (peak.saturating_sub(half), (peak + half).min(n));
+        let path = dir.join(format!("tracking_zoom_case{c}.png"));
+        line_chart(
+            &path,
+            &format!("case {c}: tracking, 0.5 s around the peak"),
+            "t [s]",
+            "displacement [mm]",
+            &[
+                curve("desired y_n", decimate(h, 1, &hist.desired, from, to, 4000), 1e3),
+                curve("measured x_m", decimate(h, 1, &hist.measured, from, to, 4000), 1e3),
+            ],
+        )?;
+        files.push(path);
+        // Floors: 3 s around the peak of the top floor's reference (the whole record is too dense).
+        let stride = hist.floor_stride;
+        let m = hist.floors[0].len();
+        let top: Vec<f64> = hist.reference[2].iter().step_by(stride).copied().take(m).collect();
+        let peak = (0..m)
+            .max_by(|&a, &b| top[a].abs().total_cmp(&top[b].abs()))
+            .unwrap_or(0);
+        let half = (1.5 / (h * stride as f64)) as usize;
+        let (from, to) = (peak.saturating_sub(half), (peak + half).min(m));
+        let mut curves = Vec::new();
+        for i in 0..3 {
+            let reference: Vec<f64> = hist.reference[i].iter().step_by(stride).copied().take(m).collect();
+            curves.push(curve(
+                &format!("floor {} reference", i + 1),
+                decimate(h, stride, &reference, from, to, 4000),
+                1e3,
+            ));
+            curves.push(curve(
+                &format!("floor {} RTHS", i + 1),
+                decimate(h, stride, &hist.floors[i], from, to, 4000),
+                1e3,
+            ));
+        }
+        let path = dir.join(format!("floors_case{c}.png"));
+        line_chart(
+            &path,
+            &format!("case {c}: floor displacements vs the exact reference (3 s around the peak)"),
+            "t [s]",
+            "displacement [mm]",
+            &curves,
+        )?;
+        files.push(path);
+    }
+    Ok(files)
+}
+
+/// Write to stdout; a closed pipe (`| head`) is not an error worth a panic.
+fn out(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+}
+
+pub fn rths(args: &RthsArgs) -> Result<()> {
+    let setup = setup(args)?;
+    let t0 = std::time::Instant::now();
+    let jobs: Vec<(Case, Option<usize>)> = setup
+        .cases
+        .iter()
+        .flat_map(|c| setup.k_subs.iter().map(move |k| (*c, *k)))
+        .collect();
+    let rows: Vec<Row> = jobs
+        .par_iter()
+        .map(|&(case, k_sub)| -> Result<Row> {
+            let mut input = setup.base.clone();
+            input.case = case;
+            if let (Some(k), Algorithm::Substep(spec)) = (k_sub, &mut input.algorithm) {
+                spec.k_sub = k;
+            }
+            let nominal = run(&input)?;
+            let perturbed = match args.perturbed {
+                Some(n) => run_perturbed(&input, n, args.seed)?,
+                None => Vec::new(),
+            };
+            Ok(Row {
+                case: case.number,
+                k_sub,
+                nominal,
+                perturbed,
+            })
+        })
+        .collect::<Result<_>>()?;
+    let elapsed = t0.elapsed().as_secs_f64();
+    if args.json {
+        let mut obj = Map::new();
+        obj.insert("benchmark".into(), json!("rths"));
+        obj.insert("controller".into(), json!(setup.kind.name()));
+        obj.insert("record".into(), json!(setup.base.record.name));
+        obj.insert("intensity".into(), json!(setup.base.intensity));
+        obj.insert(
+            "algorithm".into(),
+            json!(match setup.base.algorithm {
+                Algorithm::Benchmark => "benchmark",
+                Algorithm::Substep(_) => "substep",
+            }),
+        );
+        if let Algorithm::Substep(sp) = &setup.base.algorithm {
+            obj.insert("dt".into(), json!(sp.dt));
+            obj.insert("error_force".into(), json!(sp.error_force.kind()));
+        }
+        if args.perturbed.is_some() {
+            obj.insert("seed".into(), json!(args.seed));
+        }
+        let cases: Vec<Value> = rows.iter().map(row_json).collect();
+        // One case (and one k_sub): its fields at the top level as well.
+        if let [Value::Object(only)] = cases.as_slice() {
+            for (k, v) in only {
+                obj.insert(k.clone(), v.clone());
+            }
+        }
+        obj.insert("cases".into(), Value::Array(cases));
+        out(&format!("{}\n", serde_json::to_string_pretty(&Value::Object(obj))?));
+        return Ok(());
+    }
+    out(&table(&setup, &rows, args));
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    let files = if args.no_plots {
+        Vec::new()
+    } else {
+        let mut base = setup.base.clone();
+        if let (Some(Some(k)), Algorithm::Substep(spec)) = (setup.k_subs.first(), &mut base.algorithm) {
+            spec.k_sub = *k;
+        }
+        plots(&base, &setup.cases, &args.out)?
+    };
+    let command = std::iter::once("substep".to_string())
+        .chain(std::env::args().skip(1))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let md = markdown(&setup, &rows, args, &command, &files);
+    let path = args.out.join("benchmark.md");
+    std::fs::write(&path, md).with_context(|| format!("cannot write {}", path.display()))?;
+    out(&format!(
+        "{} run(s) in {elapsed:.2} s; wrote {}{}\n",
+        rows.len() * (1 + args.perturbed.unwrap_or(0)),
+        path.display(),
+        if files.is_empty() {
+            String::new()
+        } else {
+            format!(" and {} plots", files.len())
+        }
+    ));
+    Ok(())
+}

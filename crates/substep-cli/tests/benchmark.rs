@@ -1,0 +1,230 @@
+//! `substep benchmark rths` end to end: JSON shape, files, and bad input (one `error:` line,
+//! exit code 2).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("substep-bench-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn substep(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_substep"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("the substep binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Exit code 2 and exactly one stderr line, starting with `error:` and containing `needle`.
+fn assert_bad_input(out: &Output, needle: &str) {
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].starts_with("error: ") && lines[0].contains(needle), "{err}");
+}
+
+#[test]
+fn json_has_the_criteria_and_flags() {
+    let dir = temp_dir("json");
+    let out = substep(&dir, &["benchmark", "rths", "--case", "2", "--json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for i in 1..=9 {
+        assert!(v[format!("J{i}")].is_number(), "J{i}");
+    }
+    assert_eq!(v["J1"], 4.6);
+    assert!((v["J4"].as_f64().unwrap() - 33.1).abs() <= 0.1);
+    assert!(v["max_force"].as_f64().unwrap() > 1000.0);
+    assert_eq!(v["stable"], true);
+    assert_eq!(v["capacity_exceeded"], false);
+    assert_eq!(v["cases"].as_array().unwrap().len(), 1);
+    // --json writes nothing.
+    assert!(!dir.join("results").exists());
+}
+
+#[test]
+fn perturbed_json_has_runs_and_statistics() {
+    let dir = temp_dir("perturbed");
+    let out = substep(
+        &dir,
+        &[
+            "benchmark",
+            "rths",
+            "--case",
+            "1",
+            "--controller",
+            "arx",
+            "--perturbed",
+            "3",
+            "--seed",
+            "5",
+            "--json",
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let p = &v["perturbed"];
+    assert_eq!(p["n"], 3);
+    assert_eq!(p["runs"].as_array().unwrap().len(), 3);
+    assert_eq!(p["stable"], 3);
+    assert_eq!(p["under_capacity"], 3);
+    let runs = p["runs"].as_array().unwrap();
+    let max_j2 = runs.iter().map(|r| r["J2"].as_f64().unwrap()).fold(0.0, f64::max);
+    assert!((p["max"]["J2"].as_f64().unwrap() - max_j2).abs() < 1e-9);
+    assert!(runs[0]["k_e"].as_f64().unwrap() != runs[1]["k_e"].as_f64().unwrap());
+    // Seeded: the same command gives the same runs.
+    let again = substep(
+        &dir,
+        &[
+            "benchmark",
+            "rths",
+            "--case",
+            "1",
+            "--controller",
+            "arx",
+            "--perturbed",
+            "3",
+            "--seed",
+            "5",
+            "--json",
+        ],
+    );
+    assert_eq!(out.stdout, again.stdout);
+}
+
+#[test]
+fn table_markdown_and_plots_are_written() {
+    let dir = temp_dir("table");
+    let out = substep(&dir, &["benchmark", "rths", "--case", "3", "--out", "o"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("published"), "{stdout}");
+    let md = std::fs::read_to_string(dir.join("o/benchmark.md")).unwrap();
+    assert!(md.contains("| 3 |") && md.contains("3 published"), "{md}");
+    for f in ["tracking_case3.png", "tracking_zoom_case3.png", "floors_case3.png"] {
+        let b = std::fs::read(dir.join("o").join(f)).unwrap();
+        assert!(b.starts_with(b"\x89PNG") && b.len() > 10_000, "{f}");
+    }
+}
+
+#[test]
+fn substep_algorithm_with_k_sub_list() {
+    let dir = temp_dir("substep");
+    let out = substep(
+        &dir,
+        &[
+            "benchmark",
+            "rths",
+            "--case",
+            "1",
+            "--algorithm",
+            "substep",
+            "--k-sub",
+            "1,2",
+            "--json",
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let cases = v["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2);
+    assert_eq!(cases[0]["k_sub"], 1);
+    assert_eq!(cases[1]["k_sub"], 2);
+    assert!(cases.iter().all(|c| c["stable"] == true));
+}
+
+#[test]
+fn bad_input_is_one_line_and_exit_2() {
+    let dir = temp_dir("bad");
+    assert_bad_input(&substep(&dir, &["benchmark", "rths", "--case", "5"]), "--case");
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--controller", "lqg"]),
+        "--controller",
+    );
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--algorithm", "x"]),
+        "--algorithm",
+    );
+    std::fs::write(dir.join("three.csv"), "t,a_g\n0,0\n0.02,0.1,7\n").unwrap();
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--record", "three.csv"]),
+        "three.csv: line 3",
+    );
+    std::fs::write(dir.join("one.csv"), "0\n0.02\n").unwrap();
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--record", "one.csv"]),
+        "one.csv: line 1",
+    );
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--record", "missing.csv"]),
+        "missing.csv",
+    );
+    std::fs::write(
+        dir.join("zero.toml"),
+        "[controller]\nfeedback = { num = [1.0], den = [0.0, 0.0] }\n",
+    )
+    .unwrap();
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--config", "zero.toml"]),
+        "controller.feedback.den",
+    );
+    std::fs::write(
+        dir.join("unstable.toml"),
+        "[controller]\nfeedback = { num = [1.0], den = [1.0, -20.0] }\n",
+    )
+    .unwrap();
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--config", "unstable.toml"]),
+        "unstable",
+    );
+    std::fs::write(dir.join("unknown.toml"), "[controller]\ngain = 3\n").unwrap();
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--config", "unknown.toml"]),
+        "unknown.toml: line 2",
+    );
+    assert_bad_input(
+        &substep(&dir, &["benchmark", "rths", "--perturbed", "0"]),
+        "--perturbed",
+    );
+    assert_bad_input(&substep(&dir, &["benchmark", "rths", "--k-sub", "2"]), "--k-sub");
+}
+
+#[test]
+fn user_record_runs() {
+    let dir = temp_dir("record");
+    // A 3 s, 2 Hz sine record without a header.
+    let rows: String = (0..=300)
+        .map(|i| {
+            let t = i as f64 * 0.01;
+            format!("{t},{}\n", (2.0 * std::f64::consts::PI * 2.0 * t).sin())
+        })
+        .collect();
+    std::fs::write(dir.join("sine.csv"), rows).unwrap();
+    let out = substep(
+        &dir,
+        &[
+            "benchmark",
+            "rths",
+            "--case",
+            "1",
+            "--record",
+            "sine.csv",
+            "--intensity",
+            "1",
+            "--json",
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["record"], "sine.csv");
+    assert_eq!(v["stable"], true);
+}

@@ -1,0 +1,245 @@
+//! A servo-hydraulic actuator in block form with the specimen in its plant and the natural
+//! velocity feedback of the specimen (control–structure interaction, CSI), as in the RTHS
+//! benchmark (Silva et al. 2020).
+//!
+//! ```text
+//! e = g·u − x                                   (inner displacement loop, gain g)
+//! p = a₁β₀ / (s² + β₁ s + β₂) · e               (servo-valve)
+//! w = p − a₂ D(x)                               (CSI: the specimen's velocity fed back)
+//! F = w / (s + a₃)                              (actuator force)
+//! x = F / (m_e s² + c_e s + k_e)                (specimen)
+//! ```
+//!
+//! Five states `[p, ṗ, F, x, ẋ]`, input `u` held over the step, integrated by classical RK4 at
+//! the step `h` (the benchmark's integrator; see [`crate::transfer::lti`]). `D(x)` is either
+//! the exact derivative `ẋ` ([`Derivative::Exact`]) or the benchmark's finite-difference
+//! "derivative block" ([`Derivative::FiniteDifference`]): at the start of step `k`,
+//! `D = (x_k − x_{k−1})/h` (0 at `k = 0`); at an RK4 stage `t_k + τ`, `D = (x(t_k + τ) − x_k)/τ`.
+//!
+//! With the exact derivative the plant is
+//! `G_p(s) = g a₁β₀ / ((s² + β₁ s + β₂)((s + a₃)(m_e s² + c_e s + k_e) + a₂ s) + a₁β₀)`
+//! ([`ServoParams::closed_form`]).
+//!
+//! [`DifferenceForce`] is the load cell as the benchmark builds it from the measured motion:
+//! `f_k = k_e x_k + c_e D1_k + m_e D2_k`, `D1_k = (x_k − x_{k−1})/h`, `D2_k = (D1_k − D1_{k−1})/h`
+//! (both 0 at `k = 0`).
+
+use super::lti::{TransferFunction, poly_add, poly_mul};
+use crate::error::{Error, Result};
+
+/// Parameters of the servo-hydraulic plant (SI: m, N, s, kg).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoParams {
+    /// Inner-loop gain `g` on the command.
+    pub g: f64,
+    /// Servo-valve gain `a₁β₀`.
+    pub a1_beta0: f64,
+    pub beta1: f64,
+    pub beta2: f64,
+    /// Velocity-feedback (CSI) coefficient `a₂`.
+    pub a2: f64,
+    pub a3: f64,
+    /// Specimen mass, damping, stiffness.
+    pub m_e: f64,
+    pub c_e: f64,
+    pub k_e: f64,
+}
+
+impl ServoParams {
+    /// The benchmark's nominal plant.
+    pub fn benchmark() -> Self {
+        Self {
+            g: 1.0261,
+            a1_beta0: 2.1283e13,
+            beta1: 425.0,
+            beta2: 9.9976e4,
+            a2: 4.2297e6,
+            a3: 3.3,
+            m_e: 29.13,
+            c_e: 114.2208671,
+            k_e: 1.19e6,
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let all = [
+            ("g", self.g),
+            ("a1_beta0", self.a1_beta0),
+            ("beta1", self.beta1),
+            ("beta2", self.beta2),
+            ("a2", self.a2),
+            ("a3", self.a3),
+            ("m_e", self.m_e),
+            ("c_e", self.c_e),
+            ("k_e", self.k_e),
+        ];
+        for (name, v) in all {
+            if !v.is_finite() {
+                return Err(Error::invalid(
+                    format!("plant.{name}"),
+                    format!("must be finite, got {v}"),
+                ));
+            }
+        }
+        crate::error::require_positive("plant.m_e", self.m_e)?;
+        Ok(())
+    }
+
+    /// `G_p(s) = x/u` with the exact derivative (module docs).
+    pub fn closed_form(&self) -> Result<TransferFunction> {
+        let servo_den = [1.0, self.beta1, self.beta2];
+        let act_spec = poly_mul(&[1.0, self.a3], &[self.m_e, self.c_e, self.k_e]);
+        let inner = poly_add(&act_spec, &[self.a2, 0.0]);
+        let den = poly_add(&poly_mul(&servo_den, &inner), &[self.a1_beta0]);
+        TransferFunction::new("plant", &[self.g * self.a1_beta0], &den)
+    }
+}
+
+/// How the CSI feedback differentiates the specimen displacement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Derivative {
+    /// The benchmark's finite-difference derivative block (module docs).
+    #[default]
+    FiniteDifference,
+    /// `ẋ` from the state.
+    Exact,
+}
+
+/// The plant, integrated by RK4 at `h` with the command held.
+#[derive(Debug, Clone)]
+pub struct ServoActuator {
+    p: ServoParams,
+    derivative: Derivative,
+    h: f64,
+    /// `[p, ṗ, F, x, ẋ]`.
+    s: [f64; 5],
+    x_prev: f64,
+    steps: u64,
+}
+
+impl ServoActuator {
+    pub fn new(params: ServoParams, derivative: Derivative, h: f64) -> Result<Self> {
+        params.validate()?;
+        crate::error::require_positive("plant.h", h)?;
+        Ok(Self {
+            p: params,
+            derivative,
+            h,
+            s: [0.0; 5],
+            x_prev: 0.0,
+            steps: 0,
+        })
+    }
+
+    pub fn params(&self) -> &ServoParams {
+        &self.p
+    }
+    /// Specimen displacement `x` [m].
+    #[inline]
+    pub fn displacement(&self) -> f64 {
+        self.s[3]
+    }
+    /// Actuator force `F` [N].
+    #[inline]
+    pub fn force(&self) -> f64 {
+        self.s[2]
+    }
+    pub fn state(&self) -> &[f64; 5] {
+        &self.s
+    }
+
+    #[inline]
+    fn rhs(&self, s: &[f64; 5], u: f64, dx: f64) -> [f64; 5] {
+        let p = &self.p;
+        let e = p.g * u - s[3];
+        [
+            s[1],
+            p.a1_beta0 * e - p.beta1 * s[1] - p.beta2 * s[0],
+            -p.a3 * s[2] + s[0] - p.a2 * dx,
+            s[4],
+            (s[2] - p.c_e * s[4] - p.k_e * s[3]) / p.m_e,
+        ]
+    }
+
+    #[inline]
+    fn dx(&self, st: &[f64; 5], x0: f64, tau: f64) -> f64 {
+        match self.derivative {
+            Derivative::Exact => st[4],
+            Derivative::FiniteDifference => (st[3] - x0) / tau,
+        }
+    }
+
+    /// Advance one step `h` with the command `u` held.
+    #[inline]
+    pub fn step(&mut self, u: f64) {
+        let h = self.h;
+        let s0 = self.s;
+        let x0 = s0[3];
+        let d1 = match self.derivative {
+            Derivative::Exact => s0[4],
+            Derivative::FiniteDifference if self.steps == 0 => 0.0,
+            Derivative::FiniteDifference => (x0 - self.x_prev) / h,
+        };
+        let k1 = self.rhs(&s0, u, d1);
+        let s2 = add(&s0, 0.5 * h, &k1);
+        let k2 = self.rhs(&s2, u, self.dx(&s2, x0, 0.5 * h));
+        let s3 = add(&s0, 0.5 * h, &k2);
+        let k3 = self.rhs(&s3, u, self.dx(&s3, x0, 0.5 * h));
+        let s4 = add(&s0, h, &k3);
+        let k4 = self.rhs(&s4, u, self.dx(&s4, x0, h));
+        for i in 0..5 {
+            self.s[i] = s0[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        self.x_prev = x0;
+        self.steps += 1;
+    }
+}
+
+#[inline]
+fn add(a: &[f64; 5], w: f64, b: &[f64; 5]) -> [f64; 5] {
+    let mut out = *a;
+    for i in 0..5 {
+        out[i] += w * b[i];
+    }
+    out
+}
+
+/// The load-cell force from backward differences of the measured displacement (module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DifferenceForce {
+    m: f64,
+    c: f64,
+    k: f64,
+    h: f64,
+    x_prev: f64,
+    d1_prev: f64,
+    started: bool,
+}
+
+impl DifferenceForce {
+    pub fn new(m: f64, c: f64, k: f64, h: f64) -> Self {
+        Self {
+            m,
+            c,
+            k,
+            h,
+            x_prev: 0.0,
+            d1_prev: 0.0,
+            started: false,
+        }
+    }
+    /// The force at the sample with displacement `x`; stores the difference states.
+    #[inline]
+    pub fn force(&mut self, x: f64) -> f64 {
+        let (d1, d2) = if self.started {
+            let d1 = (x - self.x_prev) / self.h;
+            (d1, (d1 - self.d1_prev) / self.h)
+        } else {
+            (0.0, 0.0)
+        };
+        self.started = true;
+        self.x_prev = x;
+        self.d1_prev = d1;
+        self.k * x + self.c * d1 + self.m * d2
+    }
+}
