@@ -1,5 +1,5 @@
 //! `substep analyze`: stability maps, accuracy (peak errors), verification runs and a test
-//! planner (spec §7). See docs/analysis.md for the contract and a reading of the results.
+//! planner (docs/theory.md §9). See docs/analysis.md for the contract and a reading of the results.
 
 use crate::plots::{Curve, line_chart, rho_heatmap};
 use anyhow::{Context, Result, bail};
@@ -45,7 +45,7 @@ pub enum AnalyzeCommand {
     Plan(PlanArgs),
 }
 
-/// The analysis model of spec §7.1 (dimensionless: m = 1, ω = 1).
+/// The analysis model of docs/theory.md §9.3 (dimensionless: m = 1, ω = 1).
 #[derive(Debug, Clone, Args)]
 pub struct CaseArgs {
     /// Base case: `typical` (η_m 5 %, ζ 5 %, ζ_s 10 %, η_f 1) or `large_mass_ratio` (η_m 50 %, ζ = ζ_s = 5 %)
@@ -583,7 +583,7 @@ pub struct VerifyArgs {
     pub quiet: bool,
 }
 
-/// Spec §7.4: sine-sweep peaks vs the frequency-domain peaks; check points inside, on and
+/// docs/theory.md §9.6: sine-sweep peaks vs the frequency-domain peaks; check points inside, on and
 /// outside the stability boundary run in the time domain; a PID-stabilised point.
 fn verify(a: &VerifyArgs) -> Result<()> {
     create_out(&a.out)?;

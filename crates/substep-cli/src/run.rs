@@ -10,11 +10,27 @@ use serde::Serialize;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+use substep::analysis::tracking::{ErrorAccumulator, TrackingMetrics};
 use substep::compensate::{PhaseLagDefinition, PhaseLagSpec};
 use substep::io::{Reference, Simulation, SubstructureDefinition, TestDefinition};
 use substep::specimen::SpecimenSpec;
 use substep::substructure::ErrorForceSpec;
+use substep::substructure::SubstepObserver;
 use substep::transfer::Dynamics;
+
+/// Two sub-step observers fed in turn (the `substeps.csv` writer and the tracking metrics).
+struct Both<'a, A, B>(&'a mut A, &'a mut B);
+
+impl<A: SubstepObserver, B: SubstepObserver> SubstepObserver for Both<'_, A, B> {
+    fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.0.substep(step, j, command, force, displacement);
+        self.1.substep(step, j, command, force, displacement);
+    }
+    fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
+        self.0.phase_lag(tracking_error, correction);
+        self.1.phase_lag(tracking_error, correction);
+    }
+}
 
 /// Rows kept for the plots (decimated beyond that).
 const PLOT_ROWS: usize = 20_000;
@@ -41,13 +57,32 @@ struct DofError {
     dof: usize,
     #[serde(flatten)]
     displacement: ErrorStats,
+    /// J-style `std(u − u_ref) / std(u_ref)` (the benchmark's J4/J6 normalisation).
+    nrms_error: f64,
 }
 
 #[derive(Debug, Serialize)]
 struct CouplingError {
     dof: usize,
     displacement: ErrorStats,
+    /// J-style `std(u − u_ref) / std(u_ref)` of the coupling DOF's displacement.
+    displacement_nrms_error: f64,
     force: ErrorStats,
+}
+
+/// How well the measured displacement of a coupling DOF follows the command `d^{(j)}`, over
+/// all sub-steps (the benchmark's J1–J3 for any test).
+#[derive(Debug, Serialize)]
+struct TrackingSummary {
+    dof: usize,
+    /// Cross-correlation lag of the measured displacement behind the command [s]; null when
+    /// the command does not move. Equal to `max_delay_s` means "at least that".
+    delay_s: Option<f64>,
+    max_delay_s: f64,
+    /// `std(x_m − d) / std(d)`.
+    nrms_error: f64,
+    /// `max|x_m − d| / max|d|`.
+    peak_error: f64,
 }
 
 #[derive(Debug, Serialize)]
@@ -87,6 +122,8 @@ struct Summary {
     peaks: Vec<DofPeaks>,
     #[serde(skip_serializing_if = "Option::is_none")]
     coupling_peaks: Option<Vec<CouplingPeaks>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tracking: Option<Vec<TrackingSummary>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     reference: Option<ReferenceSummary>,
     /// Error-force compensation by estimation: how the steps were closed.
@@ -342,6 +379,7 @@ struct Recorder {
     peak_fe: PeakTracker,
     err_u: ErrorTracker,
     err_f: ErrorTracker,
+    nrms_u: Vec<ErrorAccumulator>,
 }
 
 impl Recorder {
@@ -362,6 +400,7 @@ impl Recorder {
             peak_fe: PeakTracker::new(n_c),
             err_u: ErrorTracker::new(n),
             err_f: ErrorTracker::new(n_c),
+            nrms_u: vec![ErrorAccumulator::new(); n],
         }
     }
 
@@ -402,6 +441,9 @@ impl Recorder {
         }
         if let Some(r) = reference {
             self.err_u.update(s.u.as_slice(), r.u());
+            for (acc, (&u, &u_ref)) in self.nrms_u.iter_mut().zip(s.u.iter().zip(r.u())) {
+                acc.push(u, u_ref);
+            }
             self.err_f.update(&self.force, r.coupling_force());
         }
         self.table.push(&self.row);
@@ -412,6 +454,7 @@ impl Recorder {
             .map(|k| DofError {
                 dof: k + 1,
                 displacement: self.err_u.stats(k),
+                nrms_error: self.nrms_u[k].nrms(),
             })
             .collect();
         let coupling: Vec<CouplingError> = self
@@ -421,6 +464,7 @@ impl Recorder {
             .map(|(k, &c)| CouplingError {
                 dof: c + 1,
                 displacement: self.err_u.stats(c),
+                displacement_nrms_error: self.nrms_u[c].nrms(),
                 force: self.err_f.stats(k),
             })
             .collect();
@@ -703,6 +747,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let mut last_flush = Instant::now();
 
     let mut recorder = Recorder::new(n, &coupling);
+    let substep_length = def
+        .substructure
+        .as_ref()
+        .map_or(def.integrator.dt, |s| def.integrator.dt / s.substeps as f64);
+    let mut tracking = TrackingMetrics::new(coupling.len(), substep_length);
     // t, f_u, its ideal value and the tracking error of the first coupling DOF.
     let mut comp_table = Decimated::new(4, PLOT_ROWS);
     let mut progress = Progress::new(steps, !args.quiet);
@@ -743,8 +792,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
         let t0 = Instant::now();
         let result = match &mut substep_writer {
-            Some(w) => sim.step(w),
-            None => sim.step(&mut ()),
+            Some(w) => sim.step(&mut Both(w, &mut tracking)),
+            None => sim.step(&mut tracking),
         };
         compute += t0.elapsed();
         if let Err(e) = result {
@@ -819,6 +868,22 @@ pub fn run(args: &RunArgs) -> Result<()> {
                     dof: c + 1,
                     force: recorder.peak_fc.0[k],
                     error_force: recorder.peak_fe.0[k],
+                })
+                .collect()
+        }),
+        tracking: def.substructure.as_ref().map(|_| {
+            coupling
+                .iter()
+                .enumerate()
+                .map(|(k, &c)| {
+                    let t = tracking.result(k);
+                    TrackingSummary {
+                        dof: c + 1,
+                        delay_s: t.delay,
+                        max_delay_s: t.max_delay,
+                        nrms_error: t.nrms,
+                        peak_error: t.peak,
+                    }
                 })
                 .collect()
         }),

@@ -8,7 +8,8 @@
 //! Large numerical substructures use sparse storage ([`model::SparseModel`], [`sparse`]):
 //! banded or sparse Cholesky of the effective stiffness, factorised once, allocation-free steps.
 //!
-//! Equations and sign conventions follow `shared/spec/algorithm.md`; units are SI throughout.
+//! Equations and sign conventions are those of `docs/theory.md` (layers:
+//! `docs/architecture.md`); units are SI throughout.
 //! The numerical core does no I/O; readers for ground-motion files live in [`excitation`],
 //! MatrixMarket and TOML test definitions (and the runner for a defined test) in [`io`].
 

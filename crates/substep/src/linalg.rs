@@ -5,7 +5,7 @@ use nalgebra::{Complex, DMatrix};
 /// Eigenvalues of a general real matrix, computed the safe way: Parlett–Reinsch balancing, then
 /// a Schur decomposition with a bounded number of iterations (nalgebra's plain
 /// `complex_eigenvalues` can loop forever on companion/shift matrices, see
-/// `shared/research/rust_stack.md` §3.2). Returns `None` if the iteration does not converge.
+/// docs/theory.md §11.1). Returns `None` if the iteration does not converge.
 pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
     let n = m.nrows();
     if n == 0 {

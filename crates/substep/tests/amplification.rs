@@ -1,5 +1,5 @@
 //! Free-vibration behaviour of the integrators on an SDOF: amplification factors against the
-//! characteristic polynomial of spec §2.1, the HHT amplification matrix and characteristic
+//! characteristic polynomial of docs/theory.md §2.7, the HHT amplification matrix and characteristic
 //! cubic derived by hand, and the stability limits.
 //!
 //! All runs use an SDOF with `m = 1`, `Δt = 0.01 s`, `ω = Ω/Δt`, `c = 2ζω`, started at rest
@@ -32,7 +32,7 @@ fn displacements(states: &[Kinematics]) -> Vec<f64> {
     states.iter().map(|s| s.u[0]).collect()
 }
 
-/// Coefficients `[a, b, c]` of `a ρ² + b ρ + c` of spec §2.1 with `m = 1`, `Δt c = 2ζΩ`,
+/// Coefficients `[a, b, c]` of `a ρ² + b ρ + c` of docs/theory.md §2.7 with `m = 1`, `Δt c = 2ζΩ`,
 /// `Δt² k = Ω²`.
 fn char_poly(beta: f64, gamma: f64, omega_dt: f64, zeta: f64) -> [f64; 3] {
     let (dc, dk) = (2.0 * zeta * omega_dt, omega_dt * omega_dt);
@@ -64,7 +64,7 @@ fn identify_recurrence(u: &[f64], from: usize, to: usize) -> (f64, f64) {
     (x[0], x[1])
 }
 
-/// `(|ρ|, ξ̄, T̄/T − 1)` of a complex root (spec §2.1).
+/// `(|ρ|, ξ̄, T̄/T − 1)` of a complex root (docs/theory.md §2.7).
 fn damping_and_elongation(rho: Complex<f64>, omega_dt: f64) -> (f64, f64, f64) {
     let (r, th) = (rho.norm(), rho.arg().abs());
     (r, -r.ln() / th, omega_dt / th - 1.0)
@@ -78,7 +78,7 @@ fn omega_grid(max: f64) -> Vec<f64> {
 }
 
 /// Acceptance 2: for each three-point scheme, the simulated free vibration obeys the
-/// recurrence whose coefficients are those of the characteristic polynomial of spec §2.1,
+/// recurrence whose coefficients are those of the characteristic polynomial of docs/theory.md §2.7,
 /// and the identified roots give the closed-form |ρ|, ξ̄ and period elongation.
 #[test]
 fn three_point_schemes_match_characteristic_polynomial() {
@@ -207,7 +207,7 @@ fn poly_mul(p: &[f64], q: &[f64]) -> Vec<f64> {
 /// derived by expanding `det(λ L − R)`:
 /// `χ(λ) = λ(λ−1)² + c̄ (λ−1)(γλ + 1−γ)((1+α)λ − α)
 ///        + k̄ ((1+α)λ − α)(βλ² + (½−2β+γ)λ + (½+β−γ))`,  `c̄ = 2ζΩ`, `k̄ = Ω²`.
-/// (With α = 0 the factor λ splits off and the rest is spec §2.1's quadratic.)
+/// (With α = 0 the factor λ splits off and the rest is the quadratic of docs/theory.md §2.7.)
 fn hht_cubic(alpha: f64, omega_dt: f64, zeta: f64) -> [f64; 4] {
     let (gamma, beta) = hht_constants(alpha);
     let (cb, kb) = (2.0 * zeta * omega_dt, omega_dt * omega_dt);
@@ -286,7 +286,7 @@ fn hht_state_map_is_hand_built_amplification_matrix() {
     println!("HHT/α-OS state map vs hand-built amplification matrix: max rel error {worst:.1e}");
 }
 
-/// With α = 0 the HHT cubic is λ·(spec §2.1 quadratic of average acceleration).
+/// With α = 0 the HHT cubic is λ·(quadratic of docs/theory.md §2.7 for average acceleration).
 #[test]
 fn hht_cubic_reduces_to_newmark_quadratic() {
     for w in [0.1, 1.0, 5.0] {

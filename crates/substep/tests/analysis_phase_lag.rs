@@ -1,4 +1,4 @@
-//! The stability map of the analysis model with a frozen phase-lag compensator (spec §6, §7.2):
+//! The stability map of the analysis model with a frozen phase-lag compensator (docs/theory.md §6.7, §9.1):
 //! the actuator delay shrinks the stable region, polynomial extrapolation with the lead
 //! `η_p · k_sub` sub-steps (frozen, a fixed linear filter) enlarges it again.
 

@@ -1,4 +1,4 @@
-//! Phase-lag compensators on simulated actuators (spec §6), driven directly through the
+//! Phase-lag compensators on simulated actuators (docs/theory.md §6), driven directly through the
 //! `ExperimentalSubstructure` trait with a smooth command sampled at Δτ = 1 ms.
 
 use rand::SeedableRng;
@@ -326,7 +326,7 @@ fn fast_sine(j: usize) -> f64 {
 
 #[test]
 fn arx_is_robust_over_long_runs() {
-    // 60 s (60 000 sub-steps) per run; the spec's regressor bursts within 10 s on these.
+    // 60 s (60 000 sub-steps) per run; the dissertation's regressor (docs/theory.md §6.4) bursts within 10 s on these.
     for (name, target) in [("1 Hz + 3.7 Hz", two_sines as fn(usize) -> f64), ("5 Hz", fast_sine)] {
         for (act_name, actuator, k_lags) in [
             ("pure delay 10 ms", pure_delay(), [8usize, 10, 13]),
@@ -353,7 +353,7 @@ fn arx_is_robust_over_long_runs() {
 
 #[test]
 fn arx_variants() {
-    // The spec's regressor as written converges without noise when k_lag equals the delay;
+    // The dissertation's regressor as written converges without noise when k_lag equals the delay;
     // with displacement noise it bursts and the guard disables it (see `ArxPhaseLag` docs).
     let as_written =
         |k| Box::new(ArxPhaseLag::new(ArxPhaseLagSpec::as_written(k)).unwrap()) as Box<dyn PhaseLagCompensator>;

@@ -1,4 +1,4 @@
-//! Error-force compensation by estimation (spec §4) on the typical TMD system (spec §7.1):
+//! Error-force compensation by estimation (docs/theory.md §4.4) on the typical TMD system (§9.3):
 //! numerical primary SDOF (1000 kg, 1 Hz, 5 %), TMD specimen (5 %, tuned, 10 %) on an ideal
 //! actuator, Δt = 0.01 s, k_sub = 4, 20 s sine sweep 0.2 → 3 Hz.
 

@@ -96,7 +96,7 @@ fn every_example_parses_and_runs() {
 fn default_example_is_close_to_the_exact_solution() {
     let def = TestDefinition::from_file(examples_dir().join("default.toml")).unwrap();
     let s = def.substructure.as_ref().unwrap();
-    // The contract of the default example (spec §7.1's typical TMD system).
+    // The contract of the default example (the typical TMD system of docs/theory.md §1.5).
     assert_eq!((s.substeps, def.integrator.dt, def.integrator.steps), (4, 0.01, 2000));
     let (err, ferr) = run(&def, usize::MAX).unwrap();
     assert!(err < 0.05, "max displacement error {err} against the exact solution");

@@ -1,5 +1,5 @@
 //! Forced-response verification of the integrators against independent implementations
-//! written here (acceleration-form Newmark, the three-point recurrence of spec §2.1, a
+//! written here (acceleration-form Newmark, the three-point recurrence of docs/theory.md §2.1, a
 //! monolithic block solve of the HHT equations, a closed-form modal solution) and against
 //! closed-form solutions.
 
@@ -43,7 +43,7 @@ fn newmark_acceleration_form(
     out
 }
 
-/// The three-point recurrence of spec §2.1 for displacements only, started from `u_0 = 0`
+/// The three-point recurrence of docs/theory.md §2.1 for displacements only, started from `u_0 = 0`
 /// and the given `u_1`.
 fn three_point_displacements(
     model: &StructuralModel,
@@ -67,7 +67,7 @@ fn three_point_displacements(
     u
 }
 
-/// HHT-α (spec §2.3) as one monolithic linear system per step in the unknowns
+/// HHT-α (docs/theory.md §2.4) as one monolithic linear system per step in the unknowns
 /// `[u_{i+1}; v_{i+1}; a_{i+1}]` (3n × 3n, LU): the two Newmark relations and the HHT
 /// equilibrium `M a' + (1+α)(C v' + K u') − α(C v + K u) = (1+α) f' − α f`.
 fn hht_block_reference(model: &StructuralModel, dt: f64, alpha: f64, loads: &[DVector<f64>]) -> Vec<Kinematics> {
@@ -226,7 +226,7 @@ fn average_acceleration_matches_modal_solution_on_1000_story_building() {
     let [eu, ev, ea] = rel_errors(&sim, &reference);
     println!("1000-story: library Newmark vs modal solution: u {eu:.2e}, v {ev:.2e}, a {ea:.2e}");
     assert!(eu < 1e-10, "u: relative error {eu:.3e}");
-    // Velocity and acceleration are looser: the effective-stiffness form (spec §2.2) pushes
+    // Velocity and acceleration are looser: the effective-stiffness form (docs/theory.md §2.2) pushes
     // the whole displacement through the dense 1000×1000 solve and then differences it,
     // `a_{i+1} = a0 (u_{i+1} − u_i) − …` with a0 = 4/Δt² = 4e4, so its round-off is about
     // ten times that of the acceleration form (measured 1.3e-10 / 1.5e-10 here).
@@ -285,7 +285,7 @@ fn hht_alpha_zero_is_average_acceleration() {
     }
 }
 
-/// α-OS with a linear restoring force `K ũ` is algebraically HHT (spec §2.4).
+/// α-OS with a linear restoring force `K ũ` is algebraically HHT (docs/theory.md §2.5).
 #[test]
 fn alpha_os_equals_hht_for_linear_model() {
     let dt = 0.01;

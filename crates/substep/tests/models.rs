@@ -217,7 +217,7 @@ fn rayleigh_damping_hits_the_two_chosen_modes() {
     assert_eq!(c, explicit);
 }
 
-/// The "typical TMD system" of spec §7.1 with a 1000 kg, 1 Hz primary structure:
+/// The "typical TMD system" of docs/theory.md §1.5 with a 1000 kg, 1 Hz primary structure:
 /// m = 1000 kg, k = 39478.4176 N/m, c = 628.3185 N·s/m; m_s = 50 kg, k_s = 1973.9209 N/m,
 /// c_s = 62.8319 N·s/m.
 #[test]

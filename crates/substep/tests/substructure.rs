@@ -293,7 +293,7 @@ impl SubstepObserver for SecondToLast {
     }
 }
 
-/// Spec §3 step 5: the equilibrium residual with the last measured force equals Sᵀ(f^(k) − f^(k−1)).
+/// docs/theory.md §3.7: the equilibrium residual with the last measured force equals Sᵀ(f^(k) − f^(k−1)).
 #[test]
 fn error_force_identity_holds_every_step() {
     // 2-DOF numerical model, TMD on DOF 2, k_sub = 4, first-order actuator, PID compensation.

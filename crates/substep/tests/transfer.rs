@@ -1,4 +1,4 @@
-//! Verification of the transfer systems (spec §5): actuators (ideal, pure delay, first and
+//! Verification of the transfer systems (docs/theory.md §7): actuators (ideal, pure delay, first and
 //! second order) against closed forms, sensors (noise, low-pass, quantisation) against their
 //! definitions, and the virtual lab (inner steps, sensor placement, state round trip, input
 //! checks).

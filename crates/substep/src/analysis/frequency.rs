@@ -1,4 +1,4 @@
-//! Transfer functions, peaks, amplitude and period errors (spec §7.3).
+//! Transfer functions, peaks, amplitude and period errors (docs/theory.md §9.5).
 //!
 //! For the analysis model the response quantity is the dynamic amplification of the primary
 //! (coupling) DOF, `h = |u₁| ω² / |a_g|`, as a function of the frequency ratio `r = ω_exc/ω`.

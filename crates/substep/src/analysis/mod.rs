@@ -1,4 +1,4 @@
-//! Accuracy and stability analysis of the complete sub-step algorithm (spec §7).
+//! Accuracy and stability analysis of the complete sub-step algorithm (docs/theory.md §9).
 //!
 //! The one-step map `X_{i+1} = 𝔸 X_i + 𝔹₀ a_g,i + 𝔹₁ a_g,i+1` is probed from the library's own
 //! step function ([`amplification::StepMap::probe`]), so the analysis and the simulation cannot
@@ -11,6 +11,7 @@ pub mod metrics;
 pub mod spectral;
 pub mod stability;
 pub mod tmd_case;
+pub mod tracking;
 pub mod verify;
 
 pub use amplification::{Stability, StepMap};

@@ -1,4 +1,4 @@
-//! The analysis model of spec §7.1: numerical SDOF (`m`, `c`, `k`) with a TMD specimen
+//! The analysis model of docs/theory.md §9.3: numerical SDOF (`m`, `c`, `k`) with a TMD specimen
 //! (`m_s`, `c_s`, `k_s`) on an actuator, in dimensionless form (`m = 1`, `ω = 1`, so
 //! `Δt = Ω`, `T = 2π`).
 

@@ -1,4 +1,4 @@
-//! Time-domain verification of the analysis (spec §7.4): steady-state harmonic runs against the
+//! Time-domain verification of the analysis (docs/theory.md §9.6): steady-state harmonic runs against the
 //! discrete frequency response, and free-vibration growth against the spectral radius.
 
 use super::AnalysisCase;

@@ -1,4 +1,4 @@
-//! The dissertation's phase-lag compensation by on-line identification (spec §6).
+//! The dissertation's phase-lag compensation by on-line identification (docs/theory.md §6.4).
 
 use super::{Guard, GuardTrip, History, PhaseLagCompensator};
 use crate::error::{Error, Result};
@@ -10,8 +10,8 @@ pub const MAX_HISTORY: usize = 1 << 14;
 /// Which signals the regressor holds at each lag `l·k_lag`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Regressor {
-    /// Spec §6 as written: `[−Δu, v, ε]` (`θ` has `3 n_u` entries). Nearly collinear in closed
-    /// loop (see [`ArxPhaseLag`]); kept for comparison.
+    /// The dissertation's form (docs/theory.md §6.4): `[−Δu, v, ε]` (`θ` has `3 n_u` entries).
+    /// Nearly collinear in closed loop (see [`ArxPhaseLag`]); kept for comparison.
     Full,
     /// `[−Δu, v]` (`2 n_u` entries): an ARX model of the correction driven by the command
     /// velocity. Its autoregressive part can drift to an unstable polynomial.
@@ -44,14 +44,14 @@ impl Regressor {
 /// Which regressor the tracking error observed at the end of sub-step `n` updates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ErrorPairing {
-    /// Spec §6 as written: `θ ← θ + K ε_n` with `K` from `φ_n` and
+    /// The dissertation's form (docs/theory.md §6.4): `θ ← θ + K ε_n` with `K` from `φ_n` and
     /// `ε_n = (d_n − y_n) − (1 − h_n) Δu_n`.
     Current,
     /// The correction that reached the specimen at `n` was computed `k_lag` sub-steps earlier
     /// from `φ_{n−k_lag}`: fit `φ_{n−k_lag}ᵀθ` to the correction that would have cancelled the
     /// error, `h_{n−k_lag} Δu_{n−k_lag} + (d_n − y_n)`; i.e. `θ ← θ + K e` with `K` from
-    /// `φ_{n−k_lag}` and `e = h Δu_{n−k_lag} + (d_n − y_n) − φ_{n−k_lag}ᵀθ` (which is the spec's
-    /// `ε_n` with the correction taken at `n − k_lag`, if `θ` did not change since). The
+    /// `φ_{n−k_lag}` and `e = h Δu_{n−k_lag} + (d_n − y_n) − φ_{n−k_lag}ᵀθ` (which is the
+    /// dissertation's `ε_n` with the correction taken at `n − k_lag`, if `θ` did not change since). The
     /// tracking-error signal is then `ε_n = (d_n − y_n) − (1 − h_{n−k_lag}) Δu_{n−k_lag}`.
     #[default]
     Delayed,
@@ -97,7 +97,7 @@ impl ArxPhaseLagSpec {
         }
     }
 
-    /// The spec's method exactly as written: [`Regressor::Full`], [`ErrorPairing::Current`].
+    /// The dissertation's method as written (docs/theory.md §6.4): [`Regressor::Full`], [`ErrorPairing::Current`].
     pub fn as_written(k_lag: usize) -> Self {
         Self {
             regressor: Regressor::Full,
@@ -160,7 +160,7 @@ impl ArxPhaseLagSpec {
     }
 }
 
-/// Phase-lag compensation by on-line identification (spec §6); see the module docs of
+/// Phase-lag compensation by on-line identification (docs/theory.md §6.4); see the module docs of
 /// [`crate::compensate`] for the timing. Per sub-step `j`, with `L = k_lag`:
 ///
 /// ```text
@@ -172,14 +172,14 @@ impl ArxPhaseLagSpec {
 ///
 /// Every `L` sub-steps (`j ≡ 0 mod L`) `θ` is updated by the RLS law
 /// `K = Pφ/(λ + φᵀPφ)`, `θ ← θ + K e`, `P ← (P − Kφᵀ P)/λ` driven by the observed tracking
-/// error: `(φ, e) = (φ_{j−1}, ε_{j−1})` as written in the spec ([`ErrorPairing::Current`]), or
+/// error: `(φ, e) = (φ_{j−1}, ε_{j−1})` as written in the dissertation ([`ErrorPairing::Current`]), or
 /// the delayed pairing of [`ErrorPairing::Delayed`]. Regressor and error are scaled by `1/s`
 /// (`s` = running maximum of `|v|` and `|d − y|`), which keeps `p0` meaningful in any unit and
 /// cancels in `Δu = φᵀθ`. The `θ_j` in use is blended linearly from its value at the update to
 /// the new estimate over the `L` sub-steps of the interval (no jumps in the command). `θ = 0`
 /// at the start: no pre-test.
 ///
-/// **Deviations from the spec (the defaults), and why.** Measured with the virtual lab at
+/// **Deviations from the dissertation (the defaults), and why.** Measured with the virtual lab at
 /// Δτ = 1 ms (`tests/compensate.rs`; the survey of all 8 regressor/pairing combinations on
 /// 1 Hz, 1 + 3.7 Hz and 5 Hz commands, a 10 ms delay or a 20 Hz second-order actuator with 5 ms
 /// delay, 0 or 1 % displacement noise and three `k_lag` each is the ignored test
@@ -191,7 +191,7 @@ impl ArxPhaseLagSpec {
 ///    data do not constrain `θ`; the covariance stays large there, and any disturbance
 ///    (displacement noise, `k_lag ≠ D`) lets `θ` drift until the loop `Δu → y → ε → Δu` that
 ///    the `−Δu` and `ε` coefficients parameterise turns unstable ("bursting"; the guard then
-///    disables the compensator). The spec form converges noise-free with `k_lag = D` (1 Hz
+///    disables the compensator). The dissertation's form converges noise-free with `k_lag = D` (1 Hz
 ///    sine: ≈ 4500×) but bursts with 1 % displacement noise or `k_lag ≠ D` (in 58 of the
 ///    survey's 72 runs with either pairing it bursts). Dropping the `ε` or the `−Δu` block
 ///    removes the collinearity, but each keeps a recursive loop whose polynomial the fit drives
@@ -207,7 +207,7 @@ impl ArxPhaseLagSpec {
 ///    the target. With the `v` regressor both pairings are stable; the delayed one is more
 ///    accurate when the actuator has dynamics (5 Hz, second-order actuator, `k_lag` = 16:
 ///    50 000× against 97× noise-free, 1 200× against 99× with noise). With the recursive
-///    regressors the spec pairing bursts in most two-sine and 5 Hz runs.
+///    regressors the dissertation's pairing bursts in most two-sine and 5 Hz runs.
 /// 3. *Velocity.* `v_j = d_j − d_{j−L}` (the mean command velocity over one interval, times the
 ///    interval) rather than a one-sub-step difference: the same signal with `L`-fold less
 ///    amplification of noise carried by the command.

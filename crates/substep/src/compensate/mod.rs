@@ -1,4 +1,4 @@
-//! Phase-lag compensation of the actuators (spec §6).
+//! Phase-lag compensation of the actuators (docs/theory.md §6).
 //!
 //! The command sent to the actuator of a coupling DOF is
 //!

@@ -5,7 +5,7 @@ use crate::error::{Error, Result};
 use crate::substructure::ExperimentalSubstructure;
 
 /// Wraps an experimental substructure and replaces each command `d` by `d_cmd = d + h Δu`
-/// (spec §6), one [`PhaseLagCompensator`] per coupling DOF; the measured force and displacement
+/// (docs/theory.md §6.1), one [`PhaseLagCompensator`] per coupling DOF; the measured force and displacement
 /// are passed back unchanged.
 ///
 /// The ramp `h` is evaluated at the count of sub-steps executed through the wrapper. While the

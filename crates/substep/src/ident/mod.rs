@@ -1,5 +1,5 @@
-//! On-line identification: recursive least squares with forgetting (spec §4, §6) and an ARX
-//! model helper.
+//! On-line identification: recursive least squares with forgetting (docs/theory.md §5, used by
+//! §4.4 and §6.4) and an ARX model helper.
 //!
 //! * [`Rls`] — full-covariance RLS. For a regressor `φ` and a measurement `y`:
 //!
@@ -12,14 +12,14 @@
 //!
 //!   A datum `l` updates old weighs `λ^l` in the cost `Σ λ^{t−s} (y_s − φ_sᵀθ)²`; the start
 //!   `θ = 0`, `P = p0·I` is a ridge regularisation of weight `1/p0`.
-//! * [`ScalarRls`] — the cheap form with `P = p·I` kept scalar (spec §6: small real-time
+//! * [`ScalarRls`] — the cheap form with `P = p·I` kept scalar (docs/theory.md §5.3: small real-time
 //!   targets). Its scalar is updated so that the trace of `P` follows the full update:
 //!   `p ← (p − p²‖φ‖² / (n (λ + p‖φ‖²))) / λ`. It behaves like a normalised LMS whose step size
 //!   settles where the forgetting and the information gain balance.
 //! * [`Arx`] — an ARX model `y_j = Σ_{l=1}^{na} a_l y_{j−l} + Σ_{l=0}^{nb} b_l u_{j−l}` identified
 //!   with [`Rls`], keeping the regressor history.
 //!
-//! Robustness (spec §4: regularised start, covariance bounds, no divergence under poor
+//! Robustness (docs/theory.md §5.2: regularised start, covariance bounds, no divergence under poor
 //! excitation), shared by both estimators:
 //!
 //! * updates with a non-finite or all-zero regressor, a non-finite error, or a non-finite
@@ -53,7 +53,7 @@ pub trait Estimator: Send {
         if e.is_finite() { e } else { 0.0 }
     }
     /// RLS step driven by an externally measured a-priori error `e` (`θ ← θ + K e`): the form
-    /// used when the error is observed rather than computed from a target (spec §6).
+    /// used when the error is observed rather than computed from a target (docs/theory.md §5.1; use: §6.4).
     /// Returns whether the update was applied.
     fn update_with_error(&mut self, phi: &[f64], e: f64) -> bool;
     fn theta(&self) -> &[f64];

@@ -1,5 +1,5 @@
 //! Exact discretisation of a linear model under a piecewise-linear load (first-order hold,
-//! spec §2.5), the reference for all accuracy checks.
+//! docs/theory.md §2.6), the reference for all accuracy checks.
 //!
 //! With `z = [u; u̇]`, `ż = A z + B f`, the step map comes from
 //! `expm(Δt [[A, B, 0], [0, 0, I/Δt], [0, 0, 0]])`, whose first block row gives

@@ -1,4 +1,4 @@
-//! Four-point schemes: HHT-α (spec §2.3) and operator splitting α-OS (spec §2.4).
+//! Four-point schemes: HHT-α (docs/theory.md §2.4) and operator splitting α-OS (docs/theory.md §2.5).
 //! Both are written in acceleration form with the matrix
 //! `M + (1+α)γΔt C + (1+α)βΔt² K`, `γ = ½ − α`, `β = (1 − α)²/4`, factorised once.
 

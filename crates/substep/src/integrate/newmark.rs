@@ -1,4 +1,4 @@
-//! Newmark(β, γ) in effective-stiffness form (spec §2.2) and its explicit member (β = 0).
+//! Newmark(β, γ) in effective-stiffness form (docs/theory.md §2.2) and its explicit member (β = 0).
 
 use super::{Integrator, Kinematics};
 use crate::error::{Error, Result};
@@ -6,7 +6,7 @@ use crate::model::{ModelRef, StructuralModel};
 use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 
-/// The constants `a0 … a7` of spec §2.2.
+/// The constants `a0 … a7` of docs/theory.md §2.2.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NewmarkConstants {
     pub beta: f64,
@@ -316,7 +316,7 @@ impl Integrator for Newmark {
 
 /// Explicit Newmark (β = 0): `u_{i+1} = u_i + Δt v_i + Δt²/2 a_i`, then
 /// `(M + γΔt C) a_{i+1} = f_{i+1} − C (v_i + (1−γ)Δt a_i) − K u_{i+1}`. With γ = ½ this is
-/// algebraically the three-point central-difference scheme of spec §2.1.
+/// algebraically the three-point central-difference scheme of docs/theory.md §2.1 (explicit form: §2.3).
 pub struct ExplicitNewmark {
     dt: f64,
     gamma: f64,

@@ -15,7 +15,7 @@ pub fn sdof(mass: f64, damping: f64, stiffness: f64) -> Result<StructuralModel> 
     StructuralModel::new(dmatrix![mass], dmatrix![damping], dmatrix![stiffness], None)
 }
 
-/// Primary structure with a tuned mass damper (spec §7.1 parameters).
+/// Primary structure with a tuned mass damper (docs/theory.md §1.5; parameters: §9.3).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TmdSystem {
     /// Primary mass `m` [kg].

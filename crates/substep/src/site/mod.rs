@@ -42,9 +42,10 @@ pub type LogFn = Arc<dyn Fn(&str) + Send + Sync>;
 /// An `Err` rejects the connection with the error's message.
 pub type SiteFactory = Box<dyn FnMut(&Hello) -> Result<Box<dyn ExperimentalSubstructure>> + Send>;
 
-/// The command ramp of the sub-step algorithm (spec §3 step 2), computed with exactly the same
-/// floating-point operations as [`crate::substructure::SubstepController::next_command`], so a
-/// site that runs the sub-steps itself reproduces the controller's commands bit for bit:
+/// The command ramp of the sub-step algorithm (docs/theory.md §3.4; per-step sites: §3.11),
+/// computed with exactly the same floating-point operations as
+/// [`crate::substructure::SubstepController::next_command`], so a site that runs the sub-steps
+/// itself reproduces the controller's commands bit for bit:
 /// `d^{(j)} = (1 − r_j) x̂_c^{(i)} + r_j x̂_c + G_cc f^{(j−1)}`, `r_j = j/k` (`j` 1-based).
 pub struct CommandRamp {
     k_sub: usize,

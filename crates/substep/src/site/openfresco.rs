@@ -1,4 +1,4 @@
-//! The OpenFresco / OpenSees `genericClient` protocol (`shared/spec/openfresco.md`).
+//! The OpenFresco / OpenSees `genericClient` protocol (docs/theory.md §10.2; use: `docs/openfresco.md`).
 //!
 //! * [`OpenFrescoServer`] serves as a SimAppSiteServer for OpenSees' `genericClient` element (or
 //!   any OpenFresco generic client): the client sends 11 `i32` sizes, then every message in

@@ -3,7 +3,7 @@
 //!
 //! # Model (normalised form, `z` in displacement units)
 //!
-//! Force on the structure (spec §1 sign: a spring to ground pulls back):
+//! Force on the structure (sign of docs/theory.md §1.2: a spring to ground pulls back):
 //!
 //! ```text
 //! f = −(α k u + (1 − α) k z) − c u̇

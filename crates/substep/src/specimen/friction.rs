@@ -1,7 +1,7 @@
 //! Friction damper on one coupling DOF: Coulomb friction with slip force `F_s`, plus an optional
 //! linear viscous part `c`.
 //!
-//! Two models (forces on the structure, spec §1 sign):
+//! Two models (forces on the structure, sign of docs/theory.md §1.2):
 //!
 //! * `stick_slip` (default in configs): an elasto-plastic spring — elastic pre-slip stiffness `k`,
 //!   slip at `|q| = F_s`. With the slip displacement `u_p`, `q = k (u − u_p)`, `|q| ≤ F_s`, and

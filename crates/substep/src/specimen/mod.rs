@@ -3,7 +3,7 @@
 //! A specimen is attached to one or more coupling DOFs. The transfer system moves those DOFs
 //! along a piecewise-linear trajectory; over each piece the specimen advances from its
 //! committed state and reports the force it exerts **on the numerical substructure** (the sign
-//! a load cell is wired to give, spec §1). `commit` accepts the trial state. Displacements are
+//! a load cell is wired to give, docs/theory.md §1.2). `commit` accepts the trial state. Displacements are
 //! relative to the ground; the ground acceleration is given as well, for specimens with mass.
 
 mod assemble;

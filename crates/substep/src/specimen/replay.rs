@@ -1,6 +1,6 @@
 //! Replay of a measured force record on one coupling DOF, regardless of the motion.
 //!
-//! The record holds the force on the structure (spec §1 sign, as the load cell gives it) at
+//! The record holds the force on the structure (sign of docs/theory.md §1.2, as the load cell gives it) at
 //! `t_j = j Δt_rec`, `j = 0 … N−1`, `t = 0` at the start of the test. Each instance keeps its own
 //! elapsed time `t` (its state); `advance` reports the record at `t + dt`, linearly interpolated
 //! between samples, and `0` after the last sample (`t > (N−1) Δt_rec`). The specimen never reads

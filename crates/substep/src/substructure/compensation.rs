@@ -1,4 +1,4 @@
-//! Error-force compensation (spec §4): from the error force `e_{i+1} = f^{(k)} − f^{(k−1)}`
+//! Error-force compensation (docs/theory.md §4): from the error force `e_{i+1} = f^{(k)} − f^{(k−1)}`
 //! (per coupling DOF) compute the compensation force `f_u,i+1` that enters the next predictor.
 
 use crate::error::{Error, Result};
@@ -12,7 +12,7 @@ pub enum ErrorForceSpec {
     /// OpenHySL's variant: residual `r_{i+1} = e_{i+1} − f_u,i`, `f_u,i+1 = P r_{i+1}`
     /// (recursion `r_{i+1} + P r_i = e_{i+1}`, pole at `−P`). Only to reproduce OpenHySL runs.
     PidResidual { p: f64 },
-    /// Estimation by on-line identification (spec §4): an ARX model of order `order` (`n_u`,
+    /// Estimation by on-line identification (docs/theory.md §4.4): an ARX model of order `order` (`n_u`,
     /// 2..=12) per coupling DOF, RLS with forgetting factor `lambda` and initial covariance `p0`
     /// (of the normalised regressor). The last sub-step's force is predicted, the last command
     /// solved consistently with it, and `f_u = e = f^{(k)} − f̂^{(k)}` (P = 1). See

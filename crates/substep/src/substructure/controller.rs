@@ -1,4 +1,4 @@
-//! The sub-step controller (spec §3).
+//! The sub-step controller (docs/theory.md §3).
 //!
 //! One step `i → i+1` runs in phases so that a real-time loop can call the sub-steps at its
 //! own rate: [`SubstepController::begin_step`] (predictor), then `k_sub` times
@@ -234,8 +234,8 @@ impl SubstepController {
 
     /// Residual of the equation of motion with the last measured force,
     /// `f_l + Sᵀ f_u,i + Sᵀ f_c,i+1 − (M a + C v + K u)`, for the state after `finish_step`;
-    /// `compensation_used` is the `f_u` that entered this step's predictor. (A check of spec
-    /// §3 step 5; allocates, not for the hot path.)
+    /// `compensation_used` is the `f_u` that entered this step's predictor. (A check of
+    /// docs/theory.md §3.7; allocates, not for the hot path.)
     pub fn equilibrium_residual(&self, load: &DVector<f64>, compensation_used: &[f64]) -> DVector<f64> {
         let s = &self.state;
         let mut r = load.clone();
@@ -355,7 +355,8 @@ impl SubstepController {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Error-force compensation by estimation (spec §4) and the ideal error force of virtual tests.
+// Error-force compensation by estimation (docs/theory.md §4.4) and the ideal error force of virtual
+// tests (§4.7).
 // ---------------------------------------------------------------------------------------------
 
 /// State of the estimation and of the noise-free bookkeeping; see [`super::estimation`].

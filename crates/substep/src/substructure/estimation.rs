@@ -1,4 +1,4 @@
-//! Error-force compensation by estimation (spec §4, "estimation (on-line identification)").
+//! Error-force compensation by estimation (on-line identification, docs/theory.md §4.4).
 //!
 //! Per coupling DOF `m` an ARX model of the sub-step sequence of the measured force `f`, the
 //! command `d` and the external load `w` on that DOF,
@@ -23,7 +23,7 @@
 //! `f_u = e` (P = 1). The plain algorithm with P = 1 is the same scheme with the zero-order
 //! predictor `f̂^{(k)} = f^{(k−1)}`; the estimation replaces that predictor by the identified one.
 //!
-//! **Deviations from the spec's model, and why** (measured on the typical TMD system,
+//! **Deviations from the dissertation's model (docs/theory.md §4.5), and why** (measured on the typical TMD system,
 //! `tests/error_force_estimation.rs`):
 //!
 //! 1. *Load input `w`.* A specimen with its own mass (a TMD) responds to the absolute motion of

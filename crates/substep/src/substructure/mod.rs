@@ -1,5 +1,5 @@
-//! The substructure algorithm with sub-step control (spec §3) and error-force compensation
-//! (spec §4).
+//! The substructure algorithm with sub-step control (docs/theory.md §3) and error-force
+//! compensation (docs/theory.md §4).
 //!
 //! [`SubstepController`] is the numerical side: it integrates the numerical substructure with
 //! Newmark in effective-stiffness form and drives the coupling DOFs through `k_sub` sub-steps
@@ -22,7 +22,7 @@ pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
 use crate::error::Result;
 
 /// Ground acceleration at the start and end of sub-step `j` (1-based) of `k`, interpolated
-/// linearly between `a_g(t_i) = ag_i` and `a_g(t_{i+1}) = ag_next` (spec §3 step 2). Every driver
+/// linearly between `a_g(t_i) = ag_i` and `a_g(t_{i+1}) = ag_next` (docs/theory.md §1.3). Every driver
 /// of the controller (offline, real time, remote per-step sites, benchmarks) uses this one, so
 /// their results agree bit for bit.
 pub fn substep_ground_acceleration(ag_i: f64, ag_next: f64, j: usize, k: usize) -> (f64, f64) {

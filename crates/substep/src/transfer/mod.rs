@@ -1,4 +1,4 @@
-//! Transfer systems (spec §5): what happens between the command `d^{(j)}` computed by the
+//! Transfer systems (docs/theory.md §7): what happens between the command `d^{(j)}` computed by the
 //! sub-step controller and the force measured on the specimen — actuator dynamics, delays,
 //! sensors with noise, quantisation and filtering — and the [`VirtualLab`] that composes them
 //! with virtual specimens.

@@ -8,7 +8,7 @@ use std::f64::consts::PI;
 use substep::integrate::{Kinematics, Scheme};
 use substep::model::StructuralModel;
 
-/// The named three-point schemes of spec §2.1 `(name, β, γ)`, plus one general Newmark
+/// The named three-point schemes of docs/theory.md §2.1 `(name, β, γ)`, plus one general Newmark
 /// member (`γ = 0.6`, `β = (γ + ½)²/4`).
 pub const FAMILY: [(&str, f64, f64); 7] = [
     ("central difference", 0.0, 0.5),
@@ -32,7 +32,7 @@ pub fn sine_sweep(f0: f64, f1: f64, duration: f64, dt: f64, amp: f64) -> Vec<f64
         .collect()
 }
 
-/// Ground-motion loads `f_i = −M ι a_g,i` (spec §1).
+/// Ground-motion loads `f_i = −M ι a_g,i` (docs/theory.md §1.3).
 pub fn ground_loads(model: &StructuralModel, ag: &[f64]) -> Vec<DVector<f64>> {
     let m_iota = &model.mass * &model.influence;
     ag.iter().map(|&a| &m_iota * (-a)).collect()
