@@ -257,6 +257,8 @@ fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result<TestDefini
         }),
         remote: None,
         limits: None,
+        lab: Default::default(),
+        controller: None,
     };
     Ok(TestDefinition {
         source: format!("vst: {}", method.name),
