@@ -227,7 +227,10 @@ fn substructure_json(s: &SubstructureDefinition) -> Value {
             },
         },
         "force": if s.lab.force_from_motion { "from_motion" } else { "model" },
-        "controller": s.controller.as_ref().map(|c| json!({ "num": c.num(), "den": c.den() })),
+        "controller": s.controller.as_ref().map(|c| json!({
+            "num": c.num(), "den": c.den(),
+            "feedforward": s.controller_feedforward.as_ref().map(|f| json!({ "num": f.num(), "den": f.den() })),
+        })),
         "error_force": error_force,
         "phase_lag": s.phase_lag.as_ref().map(phase_lag_json),
     })

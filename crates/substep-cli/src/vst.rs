@@ -259,6 +259,7 @@ fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result<TestDefini
         limits: None,
         lab: Default::default(),
         controller: None,
+        controller_feedforward: None,
     };
     Ok(TestDefinition {
         source: format!("vst: {}", method.name),

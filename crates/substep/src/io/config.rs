@@ -110,8 +110,11 @@ pub struct SubstructureDefinition {
     /// D/A converter on the commands and how the lab builds the force (`[substructure] force`).
     pub lab: LabOptions,
     /// Tracking controller `C(s)` (`[substructure.controller]`), Tustin-discretised at the
-    /// sub-step length, between the (compensated) command and the actuator.
+    /// sub-step length, between the (compensated) command and the actuator
+    /// ([`ControlledSite`]).
     pub controller: Option<TransferFunction>,
+    /// Its feedforward filter `F(s)` (`feedforward_num`, `feedforward_den`), if any.
+    pub controller_feedforward: Option<TransferFunction>,
 }
 
 /// Protocol of a remote site.
@@ -188,6 +191,7 @@ impl SubstructureDefinition {
                 site,
                 "substructure.controller",
                 c,
+                self.controller_feedforward.as_ref(),
                 dt / self.substeps as f64,
             )?),
         };
@@ -511,6 +515,9 @@ struct RawSubstructure {
 struct RawController {
     num: Vec<f64>,
     den: Vec<f64>,
+    /// Feedforward `F(s)` on the command before the feedback.
+    feedforward_num: Option<Vec<f64>>,
+    feedforward_den: Option<Vec<f64>>,
 }
 
 /// `[substructure.remote]`: drive a site served by `substep site serve` (or an OpenFresco site).
@@ -2196,17 +2203,37 @@ impl RawSubstructure {
                 ));
             }
         }
-        let controller = match &self.controller {
-            None => None,
+        // Refuse a bad or unstable controller now, with the sub-step length of the run.
+        let controller_tf = |key: &str, num: &[f64], den: &[f64]| -> Result<TransferFunction> {
+            if den.iter().all(|&v| v == 0.0) {
+                return Err(Error::invalid(format!("{key}.den"), "is zero (no transfer function)"));
+            }
+            let tf = TransferFunction::new(key, num, den)?;
+            crate::transfer::discrete::DiscreteFilter::tustin(key, &tf, dt / self.substeps as f64)?;
+            Ok(tf)
+        };
+        let (controller, controller_feedforward) = match &self.controller {
+            None => (None, None),
             Some(c) => {
                 let key = format!("{p}controller");
-                if c.den.iter().all(|&v| v == 0.0) {
-                    return Err(Error::invalid(format!("{key}.den"), "is zero (no transfer function)"));
-                }
-                let tf = TransferFunction::new(&key, &c.num, &c.den)?;
-                // Refuse an unstable discretisation now, with the sub-step length of the run.
-                crate::transfer::discrete::DiscreteFilter::tustin(&key, &tf, dt / self.substeps as f64)?;
-                Some(tf)
+                let fb = controller_tf(&key, &c.num, &c.den)?;
+                let ff = match (&c.feedforward_num, &c.feedforward_den) {
+                    (Some(num), Some(den)) => Some(controller_tf(&format!("{key}.feedforward"), num, den)?),
+                    (None, None) => None,
+                    (Some(_), None) => {
+                        return Err(Error::invalid(
+                            format!("{key}.feedforward_den"),
+                            "is missing (feedforward_num is given)",
+                        ));
+                    }
+                    (None, Some(_)) => {
+                        return Err(Error::invalid(
+                            format!("{key}.feedforward_num"),
+                            "is missing (feedforward_den is given)",
+                        ));
+                    }
+                };
+                (Some(fb), ff)
             }
         };
         let inner_steps = match self.inner_steps {
@@ -2254,6 +2281,7 @@ impl RawSubstructure {
                 force_from_motion,
             },
             controller,
+            controller_feedforward,
         })
     }
 }

@@ -1,9 +1,10 @@
-//! A site driven through a discrete tracking controller: each command `d` of the sub-step
-//! algorithm (after the phase-lag compensator, if any) becomes the actuator command
-//! `u_j = C(z)(d_j − y_{j−1})`, with `C(z)` the Tustin discretisation of a continuous `C(s)` at
-//! the sub-step length and `y_{j−1}` the displacement measured at the end of the previous
-//! sub-step (the newest one a real controller has when it issues `u_j`). With an integrator in
-//! `C(s)` (PI), `y → d` at steady state, whatever the actuator's static gain.
+//! A site driven through a discrete tracking controller in the RTHS benchmark's structure: each
+//! command `d` of the sub-step algorithm (after the phase-lag compensator, if any) becomes the
+//! actuator command `u_j = C(z)(F(z) d_j − y_{j−1})`, with `C(z)` (feedback) and the optional
+//! `F(z)` (feedforward, e.g. a phase lead; 1 if absent) the Tustin discretisations of continuous
+//! `C(s)`, `F(s)` at the sub-step length, and `y_{j−1}` the displacement measured at the end of
+//! the previous sub-step (the newest one a real controller has when it issues `u_j`). With an
+//! integrator in `C(s)` (PI), `y → d` at steady state, whatever the actuator's static gain.
 
 use super::discrete::DiscreteFilter;
 use super::lti::TransferFunction;
@@ -12,6 +13,7 @@ use crate::substructure::ExperimentalSubstructure;
 
 pub struct ControlledSite {
     filters: Vec<DiscreteFilter>,
+    feedforward: Vec<DiscreteFilter>,
     measured_prev: Vec<f64>,
     command: Vec<f64>,
     inner: Box<dyn ExperimentalSubstructure>,
@@ -24,12 +26,18 @@ impl ControlledSite {
         inner: Box<dyn ExperimentalSubstructure>,
         what: &str,
         controller: &TransferFunction,
+        feedforward: Option<&TransferFunction>,
         dtau: f64,
     ) -> Result<Self> {
         let n_c = inner.n_coupling();
         let filter = DiscreteFilter::tustin(what, controller, dtau)?;
+        let feedforward = match feedforward {
+            Some(f) => vec![DiscreteFilter::tustin(&format!("{what}.feedforward"), f, dtau)?; n_c],
+            None => Vec::new(),
+        };
         Ok(Self {
             filters: vec![filter; n_c],
+            feedforward,
             measured_prev: vec![0.0; n_c],
             command: vec![0.0; n_c],
             inner,
@@ -56,7 +64,11 @@ impl ExperimentalSubstructure for ControlledSite {
         displacement: &mut [f64],
     ) -> Result<()> {
         for (i, f) in self.filters.iter_mut().enumerate() {
-            self.command[i] = f.step(command[i] - self.measured_prev[i]);
+            let target = match self.feedforward.get_mut(i) {
+                Some(ff) => ff.step(command[i]),
+                None => command[i],
+            };
+            self.command[i] = f.step(target - self.measured_prev[i]);
         }
         if let Some(i) = self.command.iter().position(|u| !u.is_finite()) {
             return Err(Error::numerical(
@@ -80,9 +92,16 @@ impl ExperimentalSubstructure for ControlledSite {
         self.inner.is_linear()
     }
 
-    /// `[inner state, y_{j−1} per DOF, filter states…]`.
+    /// `[inner state, y_{j−1} per DOF, feedback filter states…, feedforward filter states…]`.
     fn state_len(&self) -> usize {
-        self.inner.state_len() + self.measured_prev.len() + self.filters.iter().map(|f| f.state().len()).sum::<usize>()
+        self.inner.state_len()
+            + self.measured_prev.len()
+            + self
+                .filters
+                .iter()
+                .chain(&self.feedforward)
+                .map(|f| f.state().len())
+                .sum::<usize>()
     }
     fn write_state(&self, out: &mut [f64]) {
         let n = self.inner.state_len();
@@ -90,7 +109,7 @@ impl ExperimentalSubstructure for ControlledSite {
         let n_c = self.measured_prev.len();
         out[n..n + n_c].copy_from_slice(&self.measured_prev);
         let mut at = n + n_c;
-        for f in &self.filters {
+        for f in self.filters.iter().chain(&self.feedforward) {
             let l = f.state().len();
             out[at..at + l].copy_from_slice(f.state());
             at += l;
@@ -102,7 +121,7 @@ impl ExperimentalSubstructure for ControlledSite {
         let n_c = self.measured_prev.len();
         self.measured_prev.copy_from_slice(&s[n..n + n_c]);
         let mut at = n + n_c;
-        for f in &mut self.filters {
+        for f in self.filters.iter_mut().chain(self.feedforward.iter_mut()) {
             let l = f.state().len();
             f.set_state(&s[at..at + l]);
             at += l;
