@@ -144,8 +144,8 @@ struct Summary {
 }
 
 fn substructure_json(s: &SubstructureDefinition) -> Value {
-    let a = s.actuator;
-    let actuator = match a.dynamics {
+    let a = &s.actuator;
+    let mut actuator = match &a.dynamics {
         Dynamics::Ideal => json!({ "kind": "ideal", "delay": a.delay }),
         Dynamics::FirstOrder { time_constant } => {
             json!({ "kind": "first_order", "time_constant": time_constant, "delay": a.delay })
@@ -153,7 +153,32 @@ fn substructure_json(s: &SubstructureDefinition) -> Value {
         Dynamics::SecondOrder { frequency_hz, zeta } => {
             json!({ "kind": "second_order", "frequency": frequency_hz, "zeta": zeta, "delay": a.delay })
         }
+        Dynamics::Lti(ss) => json!({
+            "kind": "lti",
+            "a": ss.a.row_iter().map(|r| r.iter().copied().collect::<Vec<f64>>()).collect::<Vec<_>>(),
+            "b": ss.b.as_slice(),
+            "c": ss.c.as_slice(),
+            "d": ss.d,
+            "delay": a.delay,
+        }),
+        Dynamics::ServoHydraulic(p) => json!({
+            "kind": "servo_hydraulic",
+            "g": p.g,
+            "a1_beta0": p.a1_beta0,
+            "beta1": p.beta1,
+            "beta2": p.beta2,
+            "a2": p.a2,
+            "a3": p.a3,
+            "csi_derivative": match p.derivative {
+                substep::transfer::servo::Derivative::Exact => "exact",
+                substep::transfer::servo::Derivative::FiniteDifference => "finite_difference",
+            },
+            "delay": a.delay,
+        }),
     };
+    if let Some(c) = &s.lab.command_converter {
+        actuator["da_converter"] = json!({ "range": c.range(), "quantum": c.quantum() });
+    }
     let error_force = match s.error_force {
         ErrorForceSpec::None => json!({ "kind": "none" }),
         ErrorForceSpec::Pid { p, i, d } => json!({ "kind": "pid", "p": p, "i": i, "d": d }),
@@ -176,6 +201,14 @@ fn substructure_json(s: &SubstructureDefinition) -> Value {
                 } => {
                     json!({ "kind": sp.kind(), "dofs": dofs, "mass": mass, "stiffness": stiffness, "damping": damping })
                 }
+                SpecimenSpec::LumpedSdof {
+                    mass,
+                    stiffness,
+                    damping,
+                    ..
+                } => {
+                    json!({ "kind": sp.kind(), "dofs": dofs, "mass": mass, "stiffness": stiffness, "damping": damping })
+                }
                 _ => json!({ "kind": sp.kind(), "dofs": dofs }),
             }
         })
@@ -191,7 +224,18 @@ fn substructure_json(s: &SubstructureDefinition) -> Value {
         "sensors": {
             "force_noise": f.noise_std, "displacement_noise": d.noise_std,
             "adc_bits": f.adc_bits.or(d.adc_bits), "lowpass_hz": f.lowpass_hz,
+            "force_quantum": f.converter().map(|c| c.quantum()),
+            "displacement_quantum": d.converter().map(|c| c.quantum()),
+            "generator": match f.generator {
+                substep::transfer::NoiseGenerator::ChaCha => "chacha",
+                substep::transfer::NoiseGenerator::Benchmark => "benchmark",
+            },
         },
+        "force": if s.lab.force_from_motion { "from_motion" } else { "model" },
+        "controller": s.controller.as_ref().map(|c| json!({
+            "num": c.num(), "den": c.den(),
+            "feedforward": s.controller_feedforward.as_ref().map(|f| json!({ "num": f.num(), "den": f.den() })),
+        })),
         "error_force": error_force,
         "phase_lag": s.phase_lag.as_ref().map(phase_lag_json),
     })

@@ -257,6 +257,9 @@ fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result<TestDefini
         }),
         remote: None,
         limits: None,
+        lab: Default::default(),
+        controller: None,
+        controller_feedforward: None,
     };
     Ok(TestDefinition {
         source: format!("vst: {}", method.name),

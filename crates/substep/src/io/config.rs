@@ -35,7 +35,13 @@ use crate::substructure::{
     ErrorForceSpec, ExperimentalSubstructure, LimitedSite, SafetyLimits, SubstepController, SubstepSettings,
     SubstructureTest,
 };
-use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab, channel_seed};
+use crate::transfer::converter::Converter;
+use crate::transfer::lti::{StateSpace, TransferFunction};
+use crate::transfer::noise::BENCHMARK_SEED;
+use crate::transfer::servo::Derivative;
+use crate::transfer::{
+    ActuatorSpec, ControlledSite, Dynamics, LabOptions, NoiseGenerator, SensorSpec, ServoSpec, VirtualLab, channel_seed,
+};
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::fmt;
@@ -102,6 +108,14 @@ pub struct SubstructureDefinition {
     pub remote: Option<RemoteDefinition>,
     /// Safety limits with a controlled stop.
     pub limits: Option<SafetyLimits>,
+    /// D/A converter on the commands and how the lab builds the force (`[substructure] force`).
+    pub lab: LabOptions,
+    /// Tracking controller `C(s)` (`[substructure.controller]`), Tustin-discretised at the
+    /// sub-step length, between the (compensated) command and the actuator
+    /// ([`ControlledSite`]).
+    pub controller: Option<TransferFunction>,
+    /// Its feedforward filter `F(s)` (`feedforward_num`, `feedforward_den`), if any.
+    pub controller_feedforward: Option<TransferFunction>,
 }
 
 /// Protocol of a remote site.
@@ -145,15 +159,19 @@ impl SubstructureDefinition {
     pub fn build_site(&self, controller: &SubstepController, dt: f64) -> Result<Box<dyn ExperimentalSubstructure>> {
         let n_c = self.coupling_dofs.len();
         let site: Box<dyn ExperimentalSubstructure> = match &self.remote {
-            None => Box::new(VirtualLab::from_specs(
-                &self.coupling_dofs,
-                &self.specimens,
-                &vec![self.actuator; n_c],
-                &self.force_sensors,
-                &self.displacement_sensors,
-                dt / self.substeps as f64,
-                self.inner_steps,
-            )?),
+            None => Box::new(
+                VirtualLab::from_specs_with(
+                    &self.coupling_dofs,
+                    &self.specimens,
+                    &vec![self.actuator.clone(); n_c],
+                    &self.force_sensors,
+                    &self.displacement_sensors,
+                    dt / self.substeps as f64,
+                    self.inner_steps,
+                    &self.lab,
+                )
+                .map_err(|e| prefixed(e, "substructure."))?,
+            ),
             Some(r) => match (r.protocol, r.mode) {
                 (RemoteProtocol::Substep, Mode::PerSubstep) => Box::new(RemoteSite::for_controller(
                     r.address.as_str(),
@@ -171,6 +189,16 @@ impl SubstructureDefinition {
                     ));
                 }
             },
+        };
+        let site: Box<dyn ExperimentalSubstructure> = match &self.controller {
+            None => site,
+            Some(c) => Box::new(ControlledSite::new(
+                site,
+                "substructure.controller",
+                c,
+                self.controller_feedforward.as_ref(),
+                dt / self.substeps as f64,
+            )?),
         };
         let site: Box<dyn ExperimentalSubstructure> = match &self.phase_lag {
             None => site,
@@ -504,6 +532,20 @@ struct RawSubstructure {
     phase_lag: Option<RawPhaseLag>,
     remote: Option<RawRemote>,
     limits: Option<RawLimits>,
+    /// `"model"` (default) or `"from_motion"`.
+    force: Option<String>,
+    controller: Option<RawController>,
+}
+
+/// `[substructure.controller]`: the tracking controller `C(s) = num/den` (descending powers of s).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawController {
+    num: Vec<f64>,
+    den: Vec<f64>,
+    /// Feedforward `F(s)` on the command before the feedback.
+    feedforward_num: Option<Vec<f64>>,
+    feedforward_den: Option<Vec<f64>>,
 }
 
 /// `[substructure.remote]`: drive a site served by `substep site serve` (or an OpenFresco site).
@@ -532,6 +574,15 @@ struct RawLimits {
 #[derive(Debug, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub(super) enum RawSpecimen {
+    /// Mass, dashpot and spring at the coupling DOF itself.
+    LumpedSdof {
+        dof: usize,
+        mass: f64,
+        #[serde(default)]
+        damping: f64,
+        #[serde(default)]
+        stiffness: f64,
+    },
     LinearSdof {
         dof: usize,
         mass: Option<f64>,
@@ -609,6 +660,35 @@ pub(super) enum RawActuator {
         #[serde(default)]
         delay: f64,
     },
+    /// `num / den` in descending powers of s.
+    TransferFunction {
+        num: Vec<f64>,
+        den: Vec<f64>,
+        #[serde(default)]
+        delay: f64,
+    },
+    StateSpace {
+        a: Vec<Vec<f64>>,
+        b: Vec<f64>,
+        c: Vec<f64>,
+        #[serde(default)]
+        d: f64,
+        #[serde(default)]
+        delay: f64,
+    },
+    /// Defaults: the benchmark's nominal plant ([`ServoSpec::benchmark`]).
+    ServoHydraulic {
+        g: Option<f64>,
+        a1_beta0: Option<f64>,
+        beta1: Option<f64>,
+        beta2: Option<f64>,
+        a2: Option<f64>,
+        a3: Option<f64>,
+        /// `"finite_difference"` (default, the benchmark's block) or `"exact"`.
+        csi_derivative: Option<String>,
+        #[serde(default)]
+        delay: f64,
+    },
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -621,13 +701,24 @@ pub(super) struct RawSensors {
     adc_bits: Option<u32>,
     force_range: Option<f64>,
     displacement_range: Option<f64>,
+    /// A/D step instead of `adc_bits` [N], [m].
+    force_quantum: Option<f64>,
+    displacement_quantum: Option<f64>,
     lowpass_hz: Option<f64>,
-    #[serde(default = "default_seed")]
-    seed: u64,
-}
-
-fn default_seed() -> u64 {
-    1
+    /// Band-limited white-noise power [N² s], [m² s] at `noise_sample_time` [s]: σ² = P / T_s.
+    force_noise_power: Option<f64>,
+    displacement_noise_power: Option<f64>,
+    noise_sample_time: Option<f64>,
+    /// The same noise sequence on every channel.
+    #[serde(default)]
+    shared_noise: bool,
+    /// `"chacha"` (default) or `"benchmark"`.
+    generator: Option<String>,
+    /// D/A converter on the actuator commands [m].
+    command_range: Option<f64>,
+    command_quantum: Option<f64>,
+    command_bits: Option<u32>,
+    seed: Option<u64>,
 }
 
 fn one() -> f64 {
@@ -1804,6 +1895,22 @@ impl RawSpecimen {
                 spec.build().map_err(|e| rekey(e, what))?;
                 Ok(spec)
             }
+            RawSpecimen::LumpedSdof {
+                dof,
+                mass,
+                damping,
+                stiffness,
+            } => {
+                require_positive(&format!("{what}.mass"), *mass)?;
+                require_non_negative(&format!("{what}.stiffness"), *stiffness)?;
+                require_non_negative(&format!("{what}.damping"), *damping)?;
+                Ok(SpecimenSpec::LumpedSdof {
+                    dof: dof_index(&format!("{what}.dof"), *dof, n)?,
+                    mass: *mass,
+                    damping: *damping,
+                    stiffness: *stiffness,
+                })
+            }
             RawSpecimen::LinearSdof {
                 dof,
                 mass,
@@ -1886,24 +1993,107 @@ impl RawSpecimen {
 }
 
 impl RawActuator {
-    pub(super) fn spec(&self) -> ActuatorSpec {
-        match *self {
+    /// Errors name keys as `actuator.KEY` (the caller prefixes the section).
+    pub(super) fn spec(&self) -> Result<ActuatorSpec> {
+        Ok(match self {
             RawActuator::Ideal { delay } | RawActuator::Delay { delay } => ActuatorSpec {
                 dynamics: Dynamics::Ideal,
-                delay,
+                delay: *delay,
             },
             RawActuator::FirstOrder { time_constant, delay } => ActuatorSpec {
-                dynamics: Dynamics::FirstOrder { time_constant },
-                delay,
+                dynamics: Dynamics::FirstOrder {
+                    time_constant: *time_constant,
+                },
+                delay: *delay,
             },
             RawActuator::SecondOrder { frequency, zeta, delay } => ActuatorSpec {
                 dynamics: Dynamics::SecondOrder {
-                    frequency_hz: frequency,
-                    zeta,
+                    frequency_hz: *frequency,
+                    zeta: *zeta,
                 },
-                delay,
+                delay: *delay,
             },
-        }
+            RawActuator::TransferFunction { num, den, delay } => {
+                if den.iter().all(|&v| v == 0.0) {
+                    return Err(Error::invalid("actuator.den", "is zero (no transfer function)"));
+                }
+                let tf = TransferFunction::new("actuator", num, den)?;
+                ActuatorSpec {
+                    dynamics: Dynamics::Lti(tf.to_state_space()),
+                    delay: *delay,
+                }
+            }
+            RawActuator::StateSpace { a, b, c, d, delay } => {
+                let n = a.len();
+                if n == 0 {
+                    return Err(Error::invalid("actuator.a", "is empty"));
+                }
+                if let Some(r) = a.iter().position(|row| row.len() != n) {
+                    return Err(Error::invalid(
+                        "actuator.a",
+                        format!(
+                            "must be square: row {} has {} entries, A has {n} rows",
+                            r + 1,
+                            a[r].len()
+                        ),
+                    ));
+                }
+                for (key, v) in [("b", b), ("c", c)] {
+                    if v.len() != n {
+                        return Err(Error::invalid(
+                            format!("actuator.{key}"),
+                            format!("has {} entries, A is {n}x{n}", v.len()),
+                        ));
+                    }
+                }
+                let am = DMatrix::from_fn(n, n, |i, j| a[i][j]);
+                let ss = StateSpace::new(
+                    "actuator",
+                    am,
+                    DVector::from_column_slice(b),
+                    DVector::from_column_slice(c),
+                    *d,
+                )?;
+                ActuatorSpec {
+                    dynamics: Dynamics::Lti(ss),
+                    delay: *delay,
+                }
+            }
+            RawActuator::ServoHydraulic {
+                g,
+                a1_beta0,
+                beta1,
+                beta2,
+                a2,
+                a3,
+                csi_derivative,
+                delay,
+            } => {
+                let base = ServoSpec::benchmark();
+                let derivative = match csi_derivative.as_deref().unwrap_or("finite_difference") {
+                    "finite_difference" => Derivative::FiniteDifference,
+                    "exact" => Derivative::Exact,
+                    other => {
+                        return Err(Error::invalid(
+                            "actuator.csi_derivative",
+                            format!("unknown '{other}' (expected finite_difference or exact)"),
+                        ));
+                    }
+                };
+                ActuatorSpec {
+                    dynamics: Dynamics::ServoHydraulic(ServoSpec {
+                        g: g.unwrap_or(base.g),
+                        a1_beta0: a1_beta0.unwrap_or(base.a1_beta0),
+                        beta1: beta1.unwrap_or(base.beta1),
+                        beta2: beta2.unwrap_or(base.beta2),
+                        a2: a2.unwrap_or(base.a2),
+                        a3: a3.unwrap_or(base.a3),
+                        derivative,
+                    }),
+                    delay: *delay,
+                }
+            }
+        })
     }
 }
 
@@ -1915,14 +2105,74 @@ impl RawSensors {
         let (f, d) = self.specs(1)?;
         Ok((
             SensorSpec {
-                seed: self.seed,
+                seed: self.seed(),
                 ..f[0]
             },
             SensorSpec {
-                seed: self.seed,
+                seed: self.seed(),
                 ..d[0]
             },
         ))
+    }
+
+    fn generator(&self) -> Result<NoiseGenerator> {
+        match self.generator.as_deref().unwrap_or("chacha") {
+            "chacha" => Ok(NoiseGenerator::ChaCha),
+            "benchmark" => Ok(NoiseGenerator::Benchmark),
+            other => Err(Error::invalid(
+                "substructure.sensors.generator",
+                format!("unknown generator '{other}' (expected chacha or benchmark)"),
+            )),
+        }
+    }
+
+    /// The configured seed; by default 1, or the benchmark's start state for its generator.
+    fn seed(&self) -> u64 {
+        match (self.seed, self.generator.as_deref()) {
+            (Some(s), _) => s,
+            (None, Some("benchmark")) => u64::from(BENCHMARK_SEED),
+            (None, _) => 1,
+        }
+    }
+
+    /// The D/A converter on the commands, if configured.
+    pub(super) fn command_converter(&self) -> Result<Option<Converter>> {
+        let p = "substructure.sensors.";
+        let Some(r) = self.command_range else {
+            forbid(
+                p,
+                &[
+                    ("command_quantum", self.command_quantum.is_some()),
+                    ("command_bits", self.command_bits.is_some()),
+                ],
+                "needs command_range (the D/A converter's range)",
+            )?;
+            return Ok(None);
+        };
+        require_positive(&format!("{p}command_range"), r)?;
+        let q = match (self.command_quantum, self.command_bits) {
+            (Some(_), Some(_)) => {
+                return Err(Error::invalid(
+                    format!("{p}command_bits"),
+                    "give either command_quantum or command_bits, not both",
+                ));
+            }
+            (Some(q), None) => require_positive(&format!("{p}command_quantum"), q)?,
+            (None, Some(bits)) if (2..=32).contains(&bits) => 2.0 * r / (2f64).powi(bits as i32),
+            (None, Some(bits)) => {
+                return Err(Error::invalid(
+                    format!("{p}command_bits"),
+                    format!("must be in 2..=32, got {bits}"),
+                ));
+            }
+            (None, None) => {
+                return Err(Error::invalid(
+                    format!("{p}command_range"),
+                    "needs command_quantum or command_bits (the D/A converter's step)",
+                ));
+            }
+        };
+        Ok(Some(Converter::new(r, q)?))
     }
 
     /// `(force sensors, displacement sensors)`, one per coupling DOF.
@@ -1930,6 +2180,87 @@ impl RawSensors {
         let p = "substructure.sensors.";
         require_non_negative(&format!("{p}force_noise"), self.force_noise)?;
         require_non_negative(&format!("{p}displacement_noise"), self.displacement_noise)?;
+        let generator = self.generator()?;
+        // σ from a band-limited white-noise power: σ² = P / T_s.
+        let sigma = |sigma: f64, key: &str, power: Option<f64>| -> Result<f64> {
+            let Some(pw) = power else { return Ok(sigma) };
+            if sigma != 0.0 {
+                return Err(Error::invalid(
+                    format!("{p}{key}_power"),
+                    format!("give either {key} (σ) or {key}_power, not both"),
+                ));
+            }
+            require_non_negative(&format!("{p}{key}_power"), pw)?;
+            let ts = self.noise_sample_time.ok_or_else(|| {
+                Error::invalid(
+                    format!("{p}{key}_power"),
+                    "needs noise_sample_time (the sample time of the band-limited white noise, σ² = P / T_s)",
+                )
+            })?;
+            require_positive(&format!("{p}noise_sample_time"), ts)?;
+            Ok((pw / ts).sqrt())
+        };
+        let force_sigma = sigma(self.force_noise, "force_noise", self.force_noise_power)?;
+        let disp_sigma = sigma(
+            self.displacement_noise,
+            "displacement_noise",
+            self.displacement_noise_power,
+        )?;
+        if self.noise_sample_time.is_some()
+            && self.force_noise_power.is_none()
+            && self.displacement_noise_power.is_none()
+        {
+            return Err(Error::invalid(
+                format!("{p}noise_sample_time"),
+                "only used with force_noise_power or displacement_noise_power",
+            ));
+        }
+        if let Some(s) = self.seed
+            && generator == NoiseGenerator::Benchmark
+            && !(1..=2_147_483_646).contains(&s)
+        {
+            return Err(Error::invalid(
+                format!("{p}seed"),
+                format!("the benchmark generator needs a seed in 1..=2147483646, got {s}"),
+            ));
+        }
+        let seed = self.seed();
+        // Per-channel seeds, kept in the benchmark generator's range for that generator.
+        let channel = |ch: u64| -> u64 {
+            if self.shared_noise {
+                return seed;
+            }
+            let s = channel_seed(seed, ch);
+            match generator {
+                NoiseGenerator::ChaCha => s,
+                NoiseGenerator::Benchmark => s % 2_147_483_646 + 1,
+            }
+        };
+        for (key, q, range) in [
+            ("force_quantum", self.force_quantum, self.force_range),
+            (
+                "displacement_quantum",
+                self.displacement_quantum,
+                self.displacement_range,
+            ),
+        ] {
+            if let Some(q) = q {
+                require_positive(&format!("{p}{key}"), q)?;
+                if self.adc_bits.is_some() {
+                    return Err(Error::invalid(
+                        format!("{p}{key}"),
+                        "give either adc_bits or a quantum, not both",
+                    ));
+                }
+                if range.is_none() {
+                    return Err(Error::invalid(
+                        format!("{p}{key}"),
+                        format!("needs {} (the converter's range)", key.replace("quantum", "range")),
+                    ));
+                }
+            }
+        }
+        let any_quantum = self.force_quantum.is_some() || self.displacement_quantum.is_some();
         if let Some(f) = self.lowpass_hz {
             require_positive(&format!("{p}lowpass_hz"), f)?;
         }
@@ -1948,34 +2279,53 @@ impl RawSensors {
                     ));
                 }
             }
+            None if any_quantum => {}
             None => forbid(
                 p,
                 &[
                     ("force_range", self.force_range.is_some()),
                     ("displacement_range", self.displacement_range.is_some()),
                 ],
-                "only used with adc_bits",
+                "only used with adc_bits, force_quantum or displacement_quantum",
             )?,
         }
-        let sensor = |noise: f64, range: Option<f64>, key: &str, channel: u64| -> Result<SensorSpec> {
+        let sensor = |noise: f64, range: Option<f64>, quantum: Option<f64>, key: &str, ch: u64| -> Result<SensorSpec> {
             if let Some(r) = range {
                 require_positive(&format!("{p}{key}"), r)?;
+                if self.adc_bits.is_none() && quantum.is_none() {
+                    return Err(Error::invalid(
+                        format!("{p}{key}"),
+                        format!(
+                            "needs adc_bits or {} (the converter's step)",
+                            key.replace("range", "quantum")
+                        ),
+                    ));
+                }
             }
             Ok(SensorSpec {
                 noise_std: noise,
                 lowpass_hz: self.lowpass_hz,
                 adc_bits: range.and(self.adc_bits),
                 adc_range: range.unwrap_or(0.0),
-                seed: channel_seed(self.seed, channel),
+                adc_quantum: range.and(quantum),
+                generator,
+                seed: channel(ch),
             })
         };
         let mut force = Vec::with_capacity(n_c);
         let mut disp = Vec::with_capacity(n_c);
         for i in 0..n_c as u64 {
-            force.push(sensor(self.force_noise, self.force_range, "force_range", 2 * i)?);
+            force.push(sensor(
+                force_sigma,
+                self.force_range,
+                self.force_quantum,
+                "force_range",
+                2 * i,
+            )?);
             disp.push(sensor(
-                self.displacement_noise,
+                disp_sigma,
                 self.displacement_range,
+                self.displacement_quantum,
                 "displacement_range",
                 2 * i + 1,
             )?);
@@ -2222,16 +2572,106 @@ impl RawSubstructure {
                 format!("DOF {} has no specimen attached", coupling[i] + 1),
             ));
         }
-        let actuator = self
-            .actuator
-            .as_ref()
-            .map_or_else(ActuatorSpec::ideal, RawActuator::spec);
+        let actuator = match &self.actuator {
+            Some(a) => a.spec().map_err(|e| prefixed(e, p))?,
+            None => ActuatorSpec::ideal(),
+        };
         actuator.validate().map_err(|e| prefixed(e, p))?;
+        if actuator.needs_plant() {
+            // The plant contains the specimen: one lumped_sdof alone at every coupling DOF.
+            for &c in &coupling {
+                let at: Vec<&SpecimenSpec> = specimens.iter().filter(|s| s.dofs().contains(&c)).collect();
+                let ok = matches!(at.as_slice(), [SpecimenSpec::LumpedSdof { .. }]);
+                if !ok && remote.is_none() {
+                    return Err(Error::invalid(
+                        format!("{p}actuator.kind"),
+                        format!(
+                            "servo_hydraulic needs exactly one lumped_sdof specimen at coupling DOF {} (its mass, damping and stiffness are part of the plant)",
+                            c + 1
+                        ),
+                    ));
+                }
+            }
+        }
+        let force_from_motion = match self.force.as_deref().unwrap_or("model") {
+            "model" => false,
+            "from_motion" => {
+                for &c in &coupling {
+                    let at: Vec<&SpecimenSpec> = specimens.iter().filter(|s| s.dofs().contains(&c)).collect();
+                    if !matches!(at.as_slice(), [s] if s.lumped_mck().is_some()) {
+                        return Err(Error::invalid(
+                            format!("{p}force"),
+                            format!(
+                                "from_motion needs exactly one lumped_sdof (or massless linear_sdof) specimen at coupling DOF {}",
+                                c + 1
+                            ),
+                        ));
+                    }
+                }
+                true
+            }
+            other => {
+                return Err(Error::invalid(
+                    format!("{p}force"),
+                    format!("unknown '{other}' (expected model or from_motion)"),
+                ));
+            }
+        };
+        for spec in &specimens {
+            if let SpecimenSpec::LumpedSdof { dof, .. } = spec
+                && model.influence()[*dof] != 1.0
+            {
+                return Err(Error::invalid(
+                    format!("{p}specimen"),
+                    format!(
+                        "a lumped_sdof specimen carries the earthquake load m·a_g and needs influence 1 at DOF {}",
+                        dof + 1
+                    ),
+                ));
+            }
+        }
+        // Refuse a bad or unstable controller now, with the sub-step length of the run.
+        let controller_tf = |key: &str, num: &[f64], den: &[f64]| -> Result<TransferFunction> {
+            if den.iter().all(|&v| v == 0.0) {
+                return Err(Error::invalid(format!("{key}.den"), "is zero (no transfer function)"));
+            }
+            let tf = TransferFunction::new(key, num, den)?;
+            crate::transfer::discrete::DiscreteFilter::tustin(key, &tf, dt / self.substeps as f64)?;
+            Ok(tf)
+        };
+        let (controller, controller_feedforward) = match &self.controller {
+            None => (None, None),
+            Some(c) => {
+                let key = format!("{p}controller");
+                let fb = controller_tf(&key, &c.num, &c.den)?;
+                let ff = match (&c.feedforward_num, &c.feedforward_den) {
+                    (Some(num), Some(den)) => Some(controller_tf(&format!("{key}.feedforward"), num, den)?),
+                    (None, None) => None,
+                    (Some(_), None) => {
+                        return Err(Error::invalid(
+                            format!("{key}.feedforward_den"),
+                            "is missing (feedforward_num is given)",
+                        ));
+                    }
+                    (None, Some(_)) => {
+                        return Err(Error::invalid(
+                            format!("{key}.feedforward_num"),
+                            "is missing (feedforward_den is given)",
+                        ));
+                    }
+                };
+                (Some(fb), ff)
+            }
+        };
         let inner_steps = match self.inner_steps {
             Some(0) => return Err(Error::invalid(format!("{p}inner_steps"), "must be at least 1")),
             Some(k) => k,
             None if actuator.dynamics == Dynamics::Ideal && actuator.delay == 0.0 => 1,
             None => 10,
+        };
+        let command_converter = match &self.sensors {
+            Some(s) => s.command_converter()?,
+            None => None,
         };
         let (force_sensors, displacement_sensors) = match &self.sensors {
             Some(s) => s.specs(coupling.len())?,
@@ -2267,6 +2707,12 @@ impl RawSubstructure {
             coupling_dofs: coupling,
             remote,
             phase_lag,
+            lab: LabOptions {
+                command_converter,
+                force_from_motion,
+            },
+            controller,
+            controller_feedforward,
         })
     }
 }

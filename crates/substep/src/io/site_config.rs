@@ -269,10 +269,10 @@ impl RawSite {
                         .map_err(|e: toml::de::Error| Error::invalid(&what, e.message().to_string()))?;
                     specimens.push(raw.to_spec(MAX_DOF, &what, base)?);
                 }
-                let actuator = self
-                    .actuator
-                    .as_ref()
-                    .map_or_else(ActuatorSpec::ideal, RawActuator::spec);
+                let actuator = match &self.actuator {
+                    Some(a) => a.spec()?,
+                    None => ActuatorSpec::ideal(),
+                };
                 actuator.validate()?;
                 let (force_sensor, displacement_sensor) = match &self.sensors {
                     Some(r) => r.base_specs().map_err(|e| match e {

@@ -1310,7 +1310,7 @@ impl VirtualLabSpec {
         VirtualLab::from_specs(
             &hello.coupling_dofs,
             &self.specimens,
-            &vec![self.actuator; n],
+            &vec![self.actuator.clone(); n],
             &force,
             &displacement,
             hello.dtau,

@@ -10,6 +10,7 @@ mod assemble;
 mod bouc_wen;
 mod friction;
 mod linear;
+mod lumped;
 mod replay;
 mod spec;
 
@@ -17,6 +18,7 @@ pub use assemble::{assemble_monolithic_model, assemble_monolithic_sparse};
 pub use bouc_wen::{BoucWen, BoucWenParams, Pinching};
 pub use friction::{Friction, FrictionModel};
 pub use linear::LinearSpecimen;
+pub use lumped::LumpedSdof;
 pub use replay::Replay;
 pub use spec::{LinearMatrices, SpecimenSpec, assemble_monolithic};
 

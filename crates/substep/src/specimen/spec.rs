@@ -1,7 +1,7 @@
 //! Specimens as described in a test definition (what a config file or a Python script gives),
 //! attached to DOFs of the numerical model.
 
-use super::{BoucWen, BoucWenParams, Friction, FrictionModel, LinearSpecimen, Replay, Specimen};
+use super::{BoucWen, BoucWenParams, Friction, FrictionModel, LinearSpecimen, LumpedSdof, Replay, Specimen};
 use crate::error::{Error, Result};
 use crate::model::StructuralModel;
 use nalgebra::{DMatrix, DVector, dmatrix};
@@ -39,6 +39,13 @@ pub enum SpecimenSpec {
     /// Replay of a measured force record on model DOF `dof` (0-based): samples `values` [N] of
     /// the force on the structure at `t = j dt` [s], independent of the motion.
     Replay { dof: usize, dt: f64, values: Vec<f64> },
+    /// Mass, dashpot and spring at model DOF `dof` (0-based) itself ([`LumpedSdof`]).
+    LumpedSdof {
+        dof: usize,
+        mass: f64,
+        damping: f64,
+        stiffness: f64,
+    },
 }
 
 /// Matrices of a linear specimen over `[attached; internal]` DOFs.
@@ -59,6 +66,7 @@ impl SpecimenSpec {
             SpecimenSpec::BoucWen { .. } => "bouc_wen",
             SpecimenSpec::Friction { .. } => "friction",
             SpecimenSpec::Replay { .. } => "replay",
+            SpecimenSpec::LumpedSdof { .. } => "lumped_sdof",
         }
     }
 
@@ -69,7 +77,8 @@ impl SpecimenSpec {
             SpecimenSpec::LinearMdof { dofs, .. } => dofs.clone(),
             SpecimenSpec::BoucWen { dof, .. }
             | SpecimenSpec::Friction { dof, .. }
-            | SpecimenSpec::Replay { dof, .. } => {
+            | SpecimenSpec::Replay { dof, .. }
+            | SpecimenSpec::LumpedSdof { dof, .. } => {
                 vec![*dof]
             }
         }
@@ -104,6 +113,12 @@ impl SpecimenSpec {
                 ..
             } => Box::new(Friction::new(*slip_force, *model, *damping)?),
             SpecimenSpec::Replay { dt, values, .. } => Box::new(Replay::new(*dt, values.as_slice())?),
+            SpecimenSpec::LumpedSdof {
+                mass,
+                damping,
+                stiffness,
+                ..
+            } => Box::new(LumpedSdof::new(*mass, *damping, *stiffness)?),
         })
     }
 
@@ -149,7 +164,41 @@ impl SpecimenSpec {
                     .clone()
                     .unwrap_or_else(|| DVector::from_element(stiffness.nrows(), 1.0)),
             }),
+            SpecimenSpec::LumpedSdof {
+                dof,
+                mass,
+                damping,
+                stiffness,
+            } => Some(LinearMatrices {
+                dofs: vec![*dof],
+                mass: dmatrix![*mass],
+                damping: dmatrix![*damping],
+                stiffness: dmatrix![*stiffness],
+                influence: DVector::from_element(1, 1.0),
+            }),
             SpecimenSpec::BoucWen { .. } | SpecimenSpec::Friction { .. } | SpecimenSpec::Replay { .. } => None,
+        }
+    }
+
+    /// `[m, c, k]` at the attached DOF of a specimen whose force is `−(m ẍ + c ẋ + k x)` of
+    /// that DOF's motion alone (a lumped SDOF, or a spring and dashpot to ground with `m = 0`);
+    /// `None` for the others. The servo-hydraulic plant and the lab's `force = "from_motion"`
+    /// use it.
+    pub fn lumped_mck(&self) -> Option<[f64; 3]> {
+        match *self {
+            SpecimenSpec::LumpedSdof {
+                mass,
+                damping,
+                stiffness,
+                ..
+            } => Some([mass, damping, stiffness]),
+            SpecimenSpec::LinearSdof {
+                mass: None,
+                stiffness,
+                damping,
+                ..
+            } => Some([0.0, damping, stiffness]),
+            _ => None,
         }
     }
 }

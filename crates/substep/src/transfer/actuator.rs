@@ -1,12 +1,22 @@
-//! Actuators: an optional pure delay followed by ideal, first-order or second-order
-//! (servo-hydraulic) dynamics.
+//! Actuators: an optional pure delay followed by ideal, first-order, second-order, general
+//! continuous LTI (transfer function or state space) or servo-hydraulic dynamics.
+//!
+//! The linear kinds are advanced by the exact first-order-hold map of their state space
+//! ([`FohMap`]): the lab's command is linear over each inner interval, so FOH is exact for it
+//! (no integration error at any inner rate, and the transfer-function kind reproduces the
+//! first- and second-order kinds to rounding). The servo-hydraulic plant
+//! ([`super::servo::ServoActuator`]) is advanced by RK4 with the linear command evaluated at the
+//! stage times, as the benchmark integrates it, because its CSI velocity feedback can be the
+//! benchmark's finite-difference block, which has no exact discretisation.
 
+use super::lti::StateSpace;
+use super::servo::{Derivative, ServoActuator, ServoParams};
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::integrate::FohMap;
 use nalgebra::{DMatrix, DVector, dmatrix};
 
 /// Dynamics from (delayed) command to achieved displacement.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Dynamics {
     /// Achieved = command.
     Ideal,
@@ -14,10 +24,59 @@ pub enum Dynamics {
     FirstOrder { time_constant: f64 },
     /// `ÿ + 2ζ_a ω_a ẏ + ω_a² y = ω_a² d`, `ω_a = 2π f_a`.
     SecondOrder { frequency_hz: f64, zeta: f64 },
+    /// A continuous SISO LTI system from command to displacement (from a transfer function or
+    /// state space; see [`super::lti`]), which must be stable.
+    Lti(StateSpace),
+    /// The servo-hydraulic plant of [`super::servo`] with the specimen at the actuator's DOF in
+    /// it; the specimen's mass, damping and stiffness come from the attached specimen.
+    ServoHydraulic(ServoSpec),
+}
+
+/// The servo-valve / actuator part of the servo-hydraulic plant ([`ServoParams`] without the
+/// specimen, whose `m_e`, `c_e`, `k_e` the lab takes from the attached specimen).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoSpec {
+    pub g: f64,
+    pub a1_beta0: f64,
+    pub beta1: f64,
+    pub beta2: f64,
+    pub a2: f64,
+    pub a3: f64,
+    pub derivative: Derivative,
+}
+
+impl ServoSpec {
+    /// The benchmark's nominal values (Silva et al. 2020).
+    pub fn benchmark() -> Self {
+        let p = ServoParams::benchmark();
+        Self {
+            g: p.g,
+            a1_beta0: p.a1_beta0,
+            beta1: p.beta1,
+            beta2: p.beta2,
+            a2: p.a2,
+            a3: p.a3,
+            derivative: Derivative::FiniteDifference,
+        }
+    }
+    /// The plant with a specimen of mass `m`, damping `c`, stiffness `k` at the DOF.
+    pub fn params(&self, [m, c, k]: [f64; 3]) -> ServoParams {
+        ServoParams {
+            g: self.g,
+            a1_beta0: self.a1_beta0,
+            beta1: self.beta1,
+            beta2: self.beta2,
+            a2: self.a2,
+            a3: self.a3,
+            m_e: m,
+            c_e: c,
+            k_e: k,
+        }
+    }
 }
 
 /// An actuator as configured: dynamics plus a pure delay [s].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ActuatorSpec {
     pub dynamics: Dynamics,
     pub delay: f64,
@@ -47,29 +106,116 @@ impl ActuatorSpec {
                     ));
                 }
             }
+            Dynamics::Lti(ref ss) => {
+                if ss.order() == 0 {
+                    return Err(Error::invalid(
+                        "actuator",
+                        "a static gain is no actuator dynamics (the transfer function or state space has no state)",
+                    ));
+                }
+                let ev = crate::linalg::eigenvalues(&ss.a)
+                    .ok_or_else(|| Error::numerical("actuator", "eigenvalues of A could not be computed"))?;
+                if let Some(z) = ev.iter().find(|z| z.re >= 0.0) {
+                    return Err(Error::invalid(
+                        "actuator",
+                        format!(
+                            "the actuator dynamics are not asymptotically stable (pole {:.6} {:+.6}i, need Re < 0)",
+                            z.re, z.im
+                        ),
+                    ));
+                }
+            }
+            Dynamics::ServoHydraulic(ref s) => {
+                let all = [
+                    ("g", s.g),
+                    ("a1_beta0", s.a1_beta0),
+                    ("beta1", s.beta1),
+                    ("beta2", s.beta2),
+                    ("a2", s.a2),
+                    ("a3", s.a3),
+                ];
+                for (name, v) in all {
+                    if !v.is_finite() {
+                        return Err(Error::invalid(
+                            format!("actuator.{name}"),
+                            format!("must be finite, got {v}"),
+                        ));
+                    }
+                }
+            }
         }
         Ok(())
+    }
+
+    /// Whether the dynamics need the attached specimen's `[m, c, k]` ([`Self::build_with_plant`]).
+    pub fn needs_plant(&self) -> bool {
+        matches!(self.dynamics, Dynamics::ServoHydraulic(_))
+    }
+
+    /// [`Self::build`] for dynamics whose plant contains the specimen: `plant = [m, c, k]` of
+    /// the specimen at the actuator's DOF (ignored by the other kinds).
+    pub fn build_with_plant(&self, dt_inner: f64, plant: Option<[f64; 3]>) -> Result<Actuator> {
+        let Dynamics::ServoHydraulic(servo) = self.dynamics else {
+            return self.build(dt_inner);
+        };
+        self.validate()?;
+        require_positive("sub-step length", dt_inner)?;
+        let plant = plant.ok_or_else(|| {
+            Error::invalid(
+                "actuator.kind",
+                "servo_hydraulic needs the specimen at its DOF (a lumped_sdof specimen: its mass, damping and stiffness are part of the plant)",
+            )
+        })?;
+        let params = servo.params(plant);
+        let servo_act = ServoActuator::new(params, servo.derivative, dt_inner).map_err(|e| match e {
+            Error::InvalidInput { what, reason } => Error::invalid(
+                what.replace("plant.m_e", "specimen.mass")
+                    .replace("plant.", "actuator."),
+                reason,
+            ),
+            other => other,
+        })?;
+        let mut a = self.build_linear(dt_inner, DMatrix::zeros(0, 0), DMatrix::zeros(0, 1))?;
+        a.servo = Some(Box::new(servo_act));
+        Ok(a)
     }
 
     /// Build an actuator for commands updated every `dt_inner` seconds.
     pub fn build(&self, dt_inner: f64) -> Result<Actuator> {
         self.validate()?;
         require_positive("sub-step length", dt_inner)?;
-        let (a, b) = match self.dynamics {
+        let (a, b) = match &self.dynamics {
             Dynamics::Ideal => (DMatrix::zeros(0, 0), DMatrix::zeros(0, 1)),
             Dynamics::FirstOrder { time_constant: t } => (dmatrix![-1.0 / t], dmatrix![1.0 / t]),
             Dynamics::SecondOrder { frequency_hz, zeta } => {
                 let w = 2.0 * std::f64::consts::PI * frequency_hz;
                 (dmatrix![0.0, 1.0; -w * w, -2.0 * zeta * w], dmatrix![0.0; w * w])
             }
+            Dynamics::Lti(ss) => {
+                let n = ss.order();
+                let mut a = self.build_linear(
+                    dt_inner,
+                    ss.a.clone(),
+                    DMatrix::from_column_slice(n, 1, ss.b.as_slice()),
+                )?;
+                a.output = Some((ss.c.clone(), ss.d));
+                return Ok(a);
+            }
+            Dynamics::ServoHydraulic(_) => return self.build_with_plant(dt_inner, None),
         };
+        self.build_linear(dt_inner, a, b)
+    }
+
+    fn build_linear(&self, dt_inner: f64, a: DMatrix<f64>, b: DMatrix<f64>) -> Result<Actuator> {
         let n = a.nrows();
         let delay = (self.delay > 0.0).then(|| DelayLine::new(self.delay, dt_inner));
         Ok(Actuator {
-            spec: *self,
+            spec: self.clone(),
             delay,
             a,
             b,
+            output: None,
+            servo: None,
             map: None,
             z: DVector::zeros(n),
             z_next: DVector::zeros(n),
@@ -161,6 +307,9 @@ pub struct Actuator {
     delay: Option<DelayLine>,
     a: DMatrix<f64>,
     b: DMatrix<f64>,
+    /// `(C, D)` of an LTI actuator (`position = C·z + D·delayed`); `None`: `position = z[0]`.
+    output: Option<(DVector<f64>, f64)>,
+    servo: Option<Box<ServoActuator>>,
     map: Option<(f64, FohMap)>,
     z: DVector<f64>,
     z_next: DVector<f64>,
@@ -191,6 +340,12 @@ impl Actuator {
             Some(line) => line.push(command_end, dt),
             None => command_end,
         };
+        if let Some(servo) = &mut self.servo {
+            servo.set_step(dt);
+            servo.step_linear(delayed_start, self.delayed);
+            self.position = servo.displacement();
+            return self.position;
+        }
         self.position = match self.spec.dynamics {
             Dynamics::Ideal => self.delayed,
             _ => {
@@ -206,29 +361,56 @@ impl Actuator {
                 self.w1[0] = self.delayed;
                 map.apply(&self.z, &self.w0, &self.w1, &mut self.dw, &mut self.z_next);
                 std::mem::swap(&mut self.z, &mut self.z_next);
-                self.z[0]
+                self.output_now()
             }
         };
         self.position
     }
 
+    fn output_now(&self) -> f64 {
+        match &self.output {
+            None => self.z[0],
+            Some((c, d)) => c.dot(&self.z) + d * self.delayed,
+        }
+    }
+
+    /// The servo-hydraulic plant, for that kind.
+    pub fn servo(&self) -> Option<&ServoActuator> {
+        self.servo.as_deref()
+    }
+
     /// State: `[delayed command, dynamics state…, delay history…]`.
+    /// The servo-hydraulic kind stores its plant state in place of the dynamics state.
     pub fn state_len(&self) -> usize {
-        1 + self.z.len() + self.delay.as_ref().map_or(0, DelayLine::state_len)
+        1 + self.dynamics_len() + self.delay.as_ref().map_or(0, DelayLine::state_len)
+    }
+    fn dynamics_len(&self) -> usize {
+        match &self.servo {
+            Some(_) => ServoActuator::STATE_LEN,
+            None => self.z.len(),
+        }
     }
     pub fn write_state(&self, out: &mut [f64]) {
         out[0] = self.delayed;
-        let nz = self.z.len();
-        out[1..1 + nz].copy_from_slice(self.z.as_slice());
+        let nz = self.dynamics_len();
+        match &self.servo {
+            Some(s) => s.write_state(&mut out[1..1 + nz]),
+            None => out[1..1 + nz].copy_from_slice(self.z.as_slice()),
+        }
         if let Some(d) = &self.delay {
             d.write_state(&mut out[1 + nz..]);
         }
     }
     pub fn read_state(&mut self, s: &[f64]) {
         self.delayed = s[0];
-        let nz = self.z.len();
-        self.z.copy_from_slice(&s[1..1 + nz]);
-        self.position = if nz > 0 { self.z[0] } else { self.delayed };
+        let nz = self.dynamics_len();
+        if let Some(servo) = &mut self.servo {
+            servo.read_state(&s[1..1 + nz]);
+            self.position = servo.displacement();
+        } else {
+            self.z.copy_from_slice(&s[1..1 + nz]);
+            self.position = if nz > 0 { self.output_now() } else { self.delayed };
+        }
         if let Some(d) = &mut self.delay {
             d.read_state(&s[1 + nz..]);
         }

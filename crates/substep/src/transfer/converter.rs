@@ -17,6 +17,14 @@ impl Converter {
         require_positive("converter.quantum", q)?;
         Ok(Self { range, q })
     }
+    /// Range [signal units].
+    pub fn range(&self) -> f64 {
+        self.range
+    }
+    /// Step [signal units].
+    pub fn quantum(&self) -> f64 {
+        self.q
+    }
     /// The benchmark's converters: ±3.8 (m), `q = 2⁻¹⁸`.
     pub fn benchmark() -> Self {
         Self {

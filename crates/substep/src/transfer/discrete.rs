@@ -145,6 +145,15 @@ impl DiscreteFilter {
         y
     }
 
+    /// The transposed-direct-form-II state (for checkpoints and the linear analysis).
+    pub fn state(&self) -> &[f64] {
+        &self.w
+    }
+    /// Set the state written by [`Self::state`].
+    pub fn set_state(&mut self, w: &[f64]) {
+        self.w.copy_from_slice(w);
+    }
+
     /// Back to rest.
     pub fn reset(&mut self) {
         self.w.iter_mut().for_each(|w| *w = 0.0);

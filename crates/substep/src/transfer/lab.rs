@@ -1,7 +1,16 @@
 //! The virtual lab: actuators on the coupling DOFs, specimens attached to them, force and
 //! displacement sensors. It is the simulated counterpart of a real test rig and implements
 //! [`ExperimentalSubstructure`] like a remote site would.
+//!
+//! [`LabOptions`] add what a lab adds around the actuators: a D/A converter on each command
+//! (quantise then saturate, before the actuator) and the force built from the measured motion
+//! (`force = "from_motion"`): `f = −(k x + c D1 + m (D2 + a_g))` from backward differences of
+//! the displacement `x` the actuator reached at the sub-step samples ([`DifferenceForce`]; the
+//! benchmark's load cell, which differentiates the noise-free motion), then passed through the
+//! force sensor (its noise, filter, A/D), instead of the specimen model's force.
 
+use super::converter::Converter;
+use super::servo::DifferenceForce;
 use super::{Actuator, ActuatorSpec, Sensor, SensorSpec};
 use crate::error::{Error, Result, require_positive};
 use crate::specimen::{Motion, Specimen, SpecimenSpec};
@@ -14,8 +23,22 @@ pub struct AttachedSpecimen {
     pub coupling_index: Vec<usize>,
 }
 
+/// How the lab measures force and converts commands (see the module docs).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LabOptions {
+    /// D/A converter on every actuator command.
+    pub command_converter: Option<Converter>,
+    /// Build the force from the measured motion instead of taking the specimen model's force.
+    pub force_from_motion: bool,
+}
+
 pub struct VirtualLab {
     actuators: Vec<Actuator>,
+    command_converter: Option<Converter>,
+    /// Per coupling DOF, with `force = "from_motion"`: the difference load cell and the mass
+    /// (for its earthquake load `m a_g`).
+    force_from_motion: Option<Vec<(DifferenceForce, f64)>>,
+    command_da: Vec<f64>,
     specimens: Vec<AttachedSpecimen>,
     force_sensors: Vec<Sensor>,
     disp_sensors: Vec<Sensor>,
@@ -45,6 +68,38 @@ impl VirtualLab {
         inner_steps: usize,
     ) -> Result<Self> {
         let n_c = actuators.len();
+        Self::with_options(
+            actuators,
+            specimens,
+            &vec![None; n_c],
+            force_sensors,
+            disp_sensors,
+            dt_substep,
+            inner_steps,
+            &LabOptions::default(),
+        )
+    }
+
+    /// [`Self::new`] with `plants[i]`, the `[m, c, k]` of the specimen at coupling DOF `i` (for
+    /// actuators whose plant contains the specimen, and for `force_from_motion`), and options.
+    #[allow(clippy::too_many_arguments)]
+    pub fn with_options(
+        actuators: &[ActuatorSpec],
+        specimens: Vec<AttachedSpecimen>,
+        plants: &[Option<[f64; 3]>],
+        force_sensors: &[SensorSpec],
+        disp_sensors: &[SensorSpec],
+        dt_substep: f64,
+        inner_steps: usize,
+        options: &LabOptions,
+    ) -> Result<Self> {
+        let n_c = actuators.len();
+        if plants.len() != n_c {
+            return Err(Error::invalid(
+                "lab",
+                format!("need one plant entry per coupling DOF ({n_c})"),
+            ));
+        }
         require_positive("sub-step length", dt_substep)?;
         if inner_steps == 0 {
             return Err(Error::invalid("substructure.inner_steps", "must be at least 1"));
@@ -83,8 +138,27 @@ impl VirtualLab {
         let dt_inner = dt_substep / inner_steps as f64;
         let actuators = actuators
             .iter()
-            .map(|a| a.build(dt_inner))
+            .zip(plants)
+            .map(|(a, p)| a.build_with_plant(dt_inner, *p))
             .collect::<Result<Vec<_>>>()?;
+        let force_from_motion = if options.force_from_motion {
+            let mut cells = Vec::with_capacity(n_c);
+            for (i, p) in plants.iter().enumerate() {
+                let [m, c, k] = p.ok_or_else(|| {
+                    Error::invalid(
+                        "substructure.force",
+                        format!(
+                            "from_motion needs one lumped_sdof (or massless linear_sdof) specimen alone at coupling DOF #{}",
+                            i + 1
+                        ),
+                    )
+                })?;
+                cells.push((DifferenceForce::new(m, c, k, dt_substep), m));
+            }
+            Some(cells)
+        } else {
+            None
+        };
         let force_sensors = force_sensors
             .iter()
             .map(|s| s.build("sensors.force"))
@@ -95,6 +169,9 @@ impl VirtualLab {
             .collect::<Result<Vec<_>>>()?;
         Ok(Self {
             actuators,
+            command_converter: options.command_converter,
+            force_from_motion,
+            command_da: vec![0.0; n_c],
             specimens,
             force_sensors,
             disp_sensors,
@@ -121,6 +198,47 @@ impl VirtualLab {
         dt_substep: f64,
         inner_steps: usize,
     ) -> Result<Self> {
+        Self::from_specs_with(
+            coupling_dofs,
+            specimens,
+            actuators,
+            force_sensors,
+            disp_sensors,
+            dt_substep,
+            inner_steps,
+            &LabOptions::default(),
+        )
+    }
+
+    /// [`Self::from_specs`] with options; the `[m, c, k]` of a coupling DOF is that of its
+    /// specimen when exactly one specimen with [`SpecimenSpec::lumped_mck`] is attached there.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_specs_with(
+        coupling_dofs: &[usize],
+        specimens: &[SpecimenSpec],
+        actuators: &[ActuatorSpec],
+        force_sensors: &[SensorSpec],
+        disp_sensors: &[SensorSpec],
+        dt_substep: f64,
+        inner_steps: usize,
+        options: &LabOptions,
+    ) -> Result<Self> {
+        let n_c = coupling_dofs.len();
+        let mut plants: Vec<Option<[f64; 3]>> = vec![None; n_c];
+        let mut count = vec![0usize; n_c];
+        for spec in specimens {
+            for dof in spec.dofs() {
+                if let Some(i) = coupling_dofs.iter().position(|&c| c == dof) {
+                    count[i] += 1;
+                    plants[i] = spec.lumped_mck();
+                }
+            }
+        }
+        for (p, &c) in plants.iter_mut().zip(&count) {
+            if c != 1 {
+                *p = None;
+            }
+        }
         let mut attached = Vec::with_capacity(specimens.len());
         for (k, spec) in specimens.iter().enumerate() {
             let mut coupling_index = Vec::new();
@@ -151,14 +269,20 @@ impl VirtualLab {
                 coupling_index,
             });
         }
-        Self::new(
+        Self::with_options(
             actuators,
             attached,
+            &plants,
             force_sensors,
             disp_sensors,
             dt_substep,
             inner_steps,
+            options,
         )
+    }
+
+    pub fn actuators(&self) -> &[Actuator] {
+        &self.actuators
     }
 
     /// Force on the structure before noise and quantisation, at the end of the last sub-step.
@@ -188,6 +312,15 @@ impl ExperimentalSubstructure for VirtualLab {
         displacement: &mut [f64],
     ) -> Result<()> {
         let h = dtau / self.inner_steps as f64;
+        let command = match &self.command_converter {
+            Some(c) => {
+                for (o, &u) in self.command_da.iter_mut().zip(command) {
+                    *o = c.da(u);
+                }
+                &self.command_da[..]
+            }
+            None => command,
+        };
         for s in 0..self.inner_steps {
             let r0 = s as f64 / self.inner_steps as f64;
             let r1 = (s + 1) as f64 / self.inner_steps as f64;
@@ -221,7 +354,14 @@ impl ExperimentalSubstructure for VirtualLab {
         }
         self.command_prev.copy_from_slice(command);
         for i in 0..self.actuators.len() {
-            force[i] = self.force_sensors[i].measure(self.true_force[i], dtau);
+            let f = match &mut self.force_from_motion {
+                Some(cells) => {
+                    let (cell, m) = &mut cells[i];
+                    -(cell.force(self.achieved_start[i]) + *m * ag.1)
+                }
+                None => self.true_force[i],
+            };
+            force[i] = self.force_sensors[i].measure(f, dtau);
             displacement[i] = self.disp_sensors[i].measure(self.achieved_start[i], dtau);
         }
         Ok(())
@@ -255,6 +395,18 @@ impl ExperimentalSubstructure for VirtualLab {
             return Err(Error::invalid(
                 "sensors",
                 "noise and quantisation must be off for the linear analysis",
+            ));
+        }
+        if self.command_converter.is_some() {
+            return Err(Error::invalid(
+                "substructure.actuator.da_quantum",
+                "the D/A converter quantises; the linear analysis needs it off",
+            ));
+        }
+        if self.force_from_motion.is_some() {
+            return Err(Error::invalid(
+                "substructure.force",
+                "the linear analysis does not cover the difference load cell (from_motion); use force = \"model\"",
             ));
         }
         Ok(())

@@ -16,9 +16,11 @@
 //! LTI systems from transfer functions or state space ([`lti`]), Tustin-discretised controllers
 //! ([`discrete`]), the servo-hydraulic actuator with control–structure interaction ([`servo`]),
 //! noise given as power or σ with the benchmark's generator ([`noise`]) and A/D–D/A converters
-//! ([`converter`]).
+//! ([`converter`]). [`ControlledSite`] puts a Tustin-discretised tracking controller in front
+//! of a site.
 
 mod actuator;
+mod controlled;
 pub mod converter;
 pub mod discrete;
 mod lab;
@@ -27,6 +29,7 @@ pub mod noise;
 mod sensor;
 pub mod servo;
 
-pub use actuator::{Actuator, ActuatorSpec, DelayLine, Dynamics};
-pub use lab::{AttachedSpecimen, VirtualLab};
-pub use sensor::{Sensor, SensorSpec, channel_seed, channel_sensors};
+pub use actuator::{Actuator, ActuatorSpec, DelayLine, Dynamics, ServoSpec};
+pub use controlled::ControlledSite;
+pub use lab::{AttachedSpecimen, LabOptions, VirtualLab};
+pub use sensor::{NoiseGenerator, Sensor, SensorSpec, channel_seed, channel_sensors};

@@ -1,11 +1,28 @@
 //! Sensors: additive Gaussian noise (seeded), optional first-order low-pass filter, optional
-//! A/D quantisation over a symmetric range — applied in that order, like an analog sensor
-//! followed by an anti-alias filter and a converter.
+//! A/D converter (saturation at `±range`, then quantisation with rounding half away from zero,
+//! [`Converter::ad`]) — applied in that order, like an analog sensor followed by an anti-alias
+//! filter and a converter.
+//!
+//! The noise comes from a ChaCha8 generator (the default) or from the RTHS benchmark's
+//! Park–Miller/polar generator ([`MinStdPolar`]), which reproduces the benchmark's sequence.
+//! Sensors built with the same generator and seed draw bit-identical sequences (shared noise).
 
+use super::converter::Converter;
+use super::noise::MinStdPolar;
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
+
+/// Which generator draws a sensor's standard-normal noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum NoiseGenerator {
+    /// ChaCha8 seeded with `seed`, normals by `rand_distr::StandardNormal`.
+    #[default]
+    ChaCha,
+    /// [`MinStdPolar`] started from `seed` (which must be in `1 ..= 2³¹ − 2`).
+    Benchmark,
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SensorSpec {
@@ -16,6 +33,9 @@ pub struct SensorSpec {
     /// A/D converter: number of bits over `[-range, range]`.
     pub adc_bits: Option<u32>,
     pub adc_range: f64,
+    /// A/D converter step instead of `adc_bits` (with `adc_range`).
+    pub adc_quantum: Option<f64>,
+    pub generator: NoiseGenerator,
     pub seed: u64,
 }
 
@@ -36,23 +56,72 @@ impl SensorSpec {
                 ));
             }
             require_positive(&format!("{what}.adc_range"), self.adc_range)?;
+            if self.adc_quantum.is_some() {
+                return Err(Error::invalid(
+                    format!("{what}.adc_quantum"),
+                    "give either adc_bits or a quantum, not both",
+                ));
+            }
+        }
+        if let Some(q) = self.adc_quantum {
+            require_positive(&format!("{what}.adc_quantum"), q)?;
+            require_positive(&format!("{what}.adc_range"), self.adc_range)?;
         }
         Ok(())
     }
+
+    /// The A/D converter, if any.
+    pub fn converter(&self) -> Option<Converter> {
+        let q = match (self.adc_bits, self.adc_quantum) {
+            (Some(bits), _) => 2.0 * self.adc_range / (2f64).powi(bits as i32),
+            (None, Some(q)) => q,
+            (None, None) => return None,
+        };
+        Converter::new(self.adc_range, q).ok()
+    }
+
     pub fn build(&self, what: &str) -> Result<Sensor> {
         self.validate(what)?;
+        let rng = match self.generator {
+            NoiseGenerator::ChaCha => Rng::ChaCha(Box::new(ChaCha8Rng::seed_from_u64(self.seed))),
+            NoiseGenerator::Benchmark => {
+                let seed = u32::try_from(self.seed).unwrap_or(0);
+                Rng::Benchmark(MinStdPolar::new(seed).map_err(|e| match e {
+                    Error::InvalidInput { reason, .. } => Error::invalid(format!("{what}.seed"), reason),
+                    other => other,
+                })?)
+            }
+        };
         Ok(Sensor {
             spec: *self,
-            rng: ChaCha8Rng::seed_from_u64(self.seed),
+            rng,
+            converter: self.converter(),
             filtered: None,
         })
     }
 }
 
 #[derive(Debug, Clone)]
+enum Rng {
+    ChaCha(Box<ChaCha8Rng>),
+    Benchmark(MinStdPolar),
+}
+
+impl Rng {
+    #[inline]
+    fn normal(&mut self) -> f64 {
+        match self {
+            Rng::ChaCha(r) => StandardNormal.sample(r.as_mut()),
+            Rng::Benchmark(g) => g.normal(),
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
 pub struct Sensor {
     spec: SensorSpec,
-    rng: ChaCha8Rng,
+    rng: Rng,
+    converter: Option<Converter>,
     filtered: Option<f64>,
 }
 
@@ -65,8 +134,7 @@ impl Sensor {
     pub fn measure(&mut self, true_value: f64, dt: f64) -> f64 {
         let mut x = true_value;
         if self.spec.noise_std > 0.0 {
-            let z: f64 = StandardNormal.sample(&mut self.rng);
-            x += self.spec.noise_std * z;
+            x += self.spec.noise_std * self.rng.normal();
         }
         if let Some(fc) = self.spec.lowpass_hz {
             // Exact discretisation of τ ẏ + y = x with x held over the interval.
@@ -75,10 +143,9 @@ impl Sensor {
             x = y + alpha * (x - y);
             self.filtered = Some(x);
         }
-        if let Some(bits) = self.spec.adc_bits {
-            let r = self.spec.adc_range;
-            let q = 2.0 * r / (2f64).powi(bits as i32);
-            x = ((x.clamp(-r, r) / q).round() * q).clamp(-r, r);
+        if let Some(c) = &self.converter {
+            // With bits, `range/q` is a power of two, so the quantised value never exceeds the range.
+            x = c.ad(x);
         }
         x
     }
@@ -94,7 +161,7 @@ impl Sensor {
     }
     /// Whether the sensor is a linear map (no noise, no quantisation).
     pub fn is_linear(&self) -> bool {
-        self.spec.noise_std == 0.0 && self.spec.adc_bits.is_none()
+        self.spec.noise_std == 0.0 && self.converter.is_none()
     }
 }
 

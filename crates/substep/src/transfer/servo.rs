@@ -172,6 +172,37 @@ impl ServoActuator {
     /// Advance one step `h` with the command `u` held.
     #[inline]
     pub fn step(&mut self, u: f64) {
+        self.step_inputs(u, u, u);
+    }
+
+    /// Advance one step `h` while the command moves linearly from `u_start` to `u_end` (the
+    /// virtual lab's command): RK4 with the command at its stage times.
+    #[inline]
+    pub fn step_linear(&mut self, u_start: f64, u_end: f64) {
+        self.step_inputs(u_start, 0.5 * (u_start + u_end), u_end);
+    }
+
+    /// Change the step (the real-time runner may re-space sub-steps); the state is kept.
+    #[inline]
+    pub fn set_step(&mut self, h: f64) {
+        self.h = h;
+    }
+
+    /// Length of [`Self::write_state`]: `[p, ṗ, F, x, ẋ, x_prev, started]`.
+    pub const STATE_LEN: usize = 7;
+    pub fn write_state(&self, out: &mut [f64]) {
+        out[..5].copy_from_slice(&self.s);
+        out[5] = self.x_prev;
+        out[6] = if self.steps > 0 { 1.0 } else { 0.0 };
+    }
+    pub fn read_state(&mut self, st: &[f64]) {
+        self.s.copy_from_slice(&st[..5]);
+        self.x_prev = st[5];
+        self.steps = u64::from(st[6] != 0.0);
+    }
+
+    #[inline]
+    fn step_inputs(&mut self, u: f64, u_mid: f64, u_end: f64) {
         let h = self.h;
         let s0 = self.s;
         let x0 = s0[3];
@@ -182,11 +213,11 @@ impl ServoActuator {
         };
         let k1 = self.rhs(&s0, u, d1);
         let s2 = add(&s0, 0.5 * h, &k1);
-        let k2 = self.rhs(&s2, u, self.dx(&s2, x0, 0.5 * h));
+        let k2 = self.rhs(&s2, u_mid, self.dx(&s2, x0, 0.5 * h));
         let s3 = add(&s0, 0.5 * h, &k2);
-        let k3 = self.rhs(&s3, u, self.dx(&s3, x0, 0.5 * h));
+        let k3 = self.rhs(&s3, u_mid, self.dx(&s3, x0, 0.5 * h));
         let s4 = add(&s0, h, &k3);
-        let k4 = self.rhs(&s4, u, self.dx(&s4, x0, h));
+        let k4 = self.rhs(&s4, u_end, self.dx(&s4, x0, h));
         for i in 0..5 {
             self.s[i] = s0[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         }
