@@ -1374,8 +1374,10 @@ fn check_exact_range(
                 }
             }
         }
-        let (key, rate) = match s.actuator.dynamics {
-            Dynamics::Ideal => ("", 0.0),
+        let (key, rate) = match &s.actuator.dynamics {
+            // Continuous LTI and servo-hydraulic actuators are checked for stability and
+            // integrability where the lab builds them (transfer/lti.rs, transfer/servo.rs).
+            Dynamics::Ideal | Dynamics::Lti(_) | Dynamics::ServoHydraulic(_) => ("", 0.0),
             Dynamics::FirstOrder { time_constant } => ("time_constant", dt_inner / time_constant),
             Dynamics::SecondOrder { frequency_hz, zeta } => {
                 let w = 2.0 * std::f64::consts::PI * frequency_hz;
@@ -1468,7 +1470,11 @@ impl RawConfig {
             if s.substeps == 0 || s.coupling_dofs.is_empty() {
                 return Ok(()); // refused with its own message when the substructure is built
             }
-            let actuator = s.actuator.as_ref().map_or_else(ActuatorSpec::ideal, RawActuator::spec);
+            let actuator = match s.actuator.as_ref().map(RawActuator::spec) {
+                None => ActuatorSpec::ideal(),
+                Some(Ok(a)) => a,
+                Some(Err(_)) => return Ok(()), // refused with its own message when the lab is built
+            };
             let inner = match s.inner_steps {
                 Some(k) => k.max(1),
                 None if actuator.dynamics == Dynamics::Ideal && actuator.delay == 0.0 => 1,

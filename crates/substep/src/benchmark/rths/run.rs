@@ -191,7 +191,7 @@ pub struct RthsResult {
 
 /// The exact FOH reference of the full 3-DOF model under `ag` sampled at `h`: floor
 /// displacements `[x_r1, x_r2, x_r3]`.
-pub fn reference(case: &Case, ag: &[f64], h: f64) -> [Vec<f64>; 3] {
+pub fn reference(case: &Case, ag: &[f64], h: f64) -> Result<[Vec<f64>; 3]> {
     let m = case.mass_matrix();
     let minv = m.try_inverse().expect("diagonal positive mass");
     let (k, c) = (case.stiffness_matrix(), case.damping_matrix());
@@ -212,7 +212,7 @@ pub fn reference(case: &Case, ag: &[f64], h: f64) -> [Vec<f64>; 3] {
     for i in 0..3 {
         b[(3 + i, 0)] = -influence()[i];
     }
-    let map = FohMap::new(&a, &b, h);
+    let map = FohMap::new(&a, &b, h)?;
     let phi = SMatrix::<f64, 6, 6>::from_fn(|i, j| map.phi[(i, j)]);
     let g0 = SVector::<f64, 6>::from_fn(|i, _| map.gamma0[(i, 0)]);
     let g1 = SVector::<f64, 6>::from_fn(|i, _| map.gamma1[(i, 0)]);
@@ -230,7 +230,7 @@ pub fn reference(case: &Case, ag: &[f64], h: f64) -> [Vec<f64>; 3] {
             z = phi * z + g0 * ag[k] + g1 * (ag[k + 1] - ag[k]);
         }
     }
-    out
+    Ok(out)
 }
 
 /// The numerical substructure as the benchmark integrates it: `z = [q; q̇]`,
@@ -379,7 +379,7 @@ pub fn run(input: &RthsInput) -> Result<RthsResult> {
         .record
         .sample_sorted((0..=2 * n).map(|i| i as f64 * 0.5 * h), input.intensity, &mut ag);
     let ag_k: Vec<f64> = (0..n).map(|k| ag[2 * k]).collect();
-    let reference = reference(&input.case, &ag_k, h);
+    let reference = reference(&input.case, &ag_k, h)?;
 
     let mut controller = input.controller.build(h)?;
     let mut lab = Lab::new(input)?;
