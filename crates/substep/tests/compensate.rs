@@ -170,7 +170,7 @@ fn table(
     command_noise: f64,
     comps: Vec<(&str, Box<dyn PhaseLagCompensator>)>,
 ) -> Vec<f64> {
-    let base = run(actuator, y_noise, command_noise, Box::new(Off));
+    let base = run(actuator.clone(), y_noise, command_noise, Box::new(Off));
     println!(
         "{name}: uncompensated RMS |d − y| = {:.3e} m (measured {:.3e})",
         base.rms, base.rms_measured
@@ -178,7 +178,7 @@ fn table(
     comps
         .into_iter()
         .map(|(label, c)| {
-            let o = run(actuator, y_noise, command_noise, c);
+            let o = run(actuator.clone(), y_noise, command_noise, c);
             let factor = base.rms / o.rms;
             println!(
                 "  {label:<28} RMS {:.3e} m (measured {:.3e})  reduction {factor:9.1}x{}",
@@ -333,10 +333,10 @@ fn arx_is_robust_over_long_runs() {
             ("2nd order + 5 ms", second_order(), [5, 10, 16]),
         ] {
             for noise in [0.0, 1e-4] {
-                let base = run_with(target, 60_000, actuator, noise, 0.0, Box::new(Off)).rms;
+                let base = run_with(target, 60_000, actuator.clone(), noise, 0.0, Box::new(Off)).rms;
                 print!("{name}, {act_name}, noise {noise}: uncompensated {base:.2e} m;");
                 for k in k_lags {
-                    let o = run_with(target, 60_000, actuator, noise, 0.0, arx(k));
+                    let o = run_with(target, 60_000, actuator.clone(), noise, 0.0, arx(k));
                     print!("  k_lag {k}: {:.1}x", base / o.rms);
                     assert!(o.trip.is_none(), "{name}, {act_name}, k_lag {k}: {:?}", o.trip);
                     assert!(
@@ -630,7 +630,7 @@ fn arx_variant_survey() {
             ("2nd", second_order(), [5, 10, 16]),
         ] {
             for noise in [0.0, 1e-4] {
-                let base = run_with(target, 30_000, actuator, noise, 0.0, Box::new(Off)).rms;
+                let base = run_with(target, 30_000, actuator.clone(), noise, 0.0, Box::new(Off)).rms;
                 for pairing in [ErrorPairing::Current, ErrorPairing::Delayed] {
                     for reg in [
                         Regressor::Full,
@@ -646,7 +646,7 @@ fn arx_variant_survey() {
                             let o = run_with(
                                 target,
                                 30_000,
-                                actuator,
+                                actuator.clone(),
                                 noise,
                                 0.0,
                                 Box::new(ArxPhaseLag::new(s).unwrap()),

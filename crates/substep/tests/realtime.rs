@@ -264,7 +264,7 @@ fn three_dof_test(dt: f64, k: usize, ef: ErrorForceSpec) -> (StructuralModel, Su
     let lab = VirtualLab::from_specs(
         &[1, 2],
         &[tmd(1, 80.0), tmd(2, 60.0)],
-        &[ActuatorSpec::ideal(); 2],
+        &vec![ActuatorSpec::ideal(); 2],
         &[SensorSpec::ideal(); 2],
         &[SensorSpec::ideal(); 2],
         dt / k as f64,

@@ -88,6 +88,7 @@ fn sensor(noise_std: f64, lowpass_hz: Option<f64>, adc_bits: Option<u32>, adc_ra
         adc_bits,
         adc_range,
         seed,
+        ..SensorSpec::ideal()
     }
 }
 
@@ -577,10 +578,10 @@ fn lab_second_order_actuator_inner_steps() {
     let n = 500;
     let act = spec(second_order(25.0, 0.6), 0.0);
     // The actuator alone, advanced once per sub-step.
-    let achieved_ref = drive(act, dtau, n, |t| command((t / dtau).round() as usize, dtau));
+    let achieved_ref = drive(act.clone(), dtau, n, |t| command((t / dtau).round() as usize, dtau));
     let (mut forces, mut tmd_states) = (Vec::new(), Vec::new());
     for inner in [1, 10, 40, 160] {
-        let mut lab = one_dof_lab(act, SensorSpec::ideal(), SensorSpec::ideal(), dtau, inner);
+        let mut lab = one_dof_lab(act.clone(), SensorSpec::ideal(), SensorSpec::ideal(), dtau, inner);
         let mut state = vec![0.0; lab.state_len()];
         let (mut f, mut d) = ([0.0], [0.0]);
         let (mut achieved, mut force, mut x_s) = (vec![], vec![], vec![]);
@@ -631,7 +632,7 @@ fn lab_sensor_noise_changes_only_measured_values() {
     let dtau = 2e-3;
     let n = 2000;
     let act = spec(second_order(30.0, 0.7), 1.3e-3);
-    let mut clean = one_dof_lab(act, SensorSpec::ideal(), SensorSpec::ideal(), dtau, 5);
+    let mut clean = one_dof_lab(act.clone(), SensorSpec::ideal(), SensorSpec::ideal(), dtau, 5);
     let mut noisy = one_dof_lab(
         act,
         sensor(0.05, None, None, 0.0, 11),
@@ -681,7 +682,7 @@ fn lab_state_round_trip_is_bit_for_bit() {
                     influence: None,
                 },
             ],
-            &[act, spec(Dynamics::FirstOrder { time_constant: 4e-3 }, 1.1e-3)],
+            &[act.clone(), spec(Dynamics::FirstOrder { time_constant: 4e-3 }, 1.1e-3)],
             &[force_sensor, force_sensor],
             &[SensorSpec::ideal(), SensorSpec::ideal()],
             dtau,
