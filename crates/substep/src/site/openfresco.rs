@@ -713,7 +713,7 @@ fn serve_connection(
         let idle = ServeOptions::deadline(options.idle_timeout);
         quick_ack(&stream);
         let got = read_full(&mut stream, &mut rx[..8], idle, stop).and_then(|_| {
-            read_full(&mut stream, &mut rx[8..], Some(Instant::now() + io), stop).map_err(|e| match e {
+            read_full(&mut stream, &mut rx[8..], ServeOptions::deadline(Some(io)), stop).map_err(|e| match e {
                 LinkError::Closed { got } => LinkError::Closed { got: got + 8 },
                 LinkError::TimedOut { got } => LinkError::TimedOut { got: got + 8 },
                 e => e,
@@ -965,8 +965,8 @@ impl OpenFrescoSite {
     }
 
     fn receive(&mut self, code: i32) -> Result<()> {
-        let deadline = Instant::now() + self.timeout;
-        match read_full(&mut self.stream, &mut self.rx, Some(deadline), None) {
+        let deadline = Instant::now().checked_add(self.timeout);
+        match read_full(&mut self.stream, &mut self.rx, deadline, None) {
             Ok(()) => {
                 f64s_from_le(&self.rx, &mut self.rx_values);
                 Ok(())
