@@ -267,13 +267,13 @@ impl Ramp {
     }
     pub fn validate(&self) -> Result<()> {
         if let Some((begin, _)) = self.fade_out
-            && begin < self.start + self.ramp_in
+            && begin < self.start.saturating_add(self.ramp_in)
         {
             return Err(Error::invalid(
                 "phase_lag.fade_out",
                 format!(
                     "begins at sub-step {begin}, before the ramp-in ends (sub-step {})",
-                    self.start + self.ramp_in
+                    self.start.saturating_add(self.ramp_in)
                 ),
             ));
         }
@@ -302,7 +302,7 @@ impl Ramp {
     }
     /// First sub-step with `h = 1`.
     pub fn full_from(&self) -> usize {
-        self.start + self.ramp_in.saturating_sub(1)
+        self.start.saturating_add(self.ramp_in.saturating_sub(1))
     }
 }
 

@@ -2475,11 +2475,11 @@ impl RawPhaseLag {
             }
         };
         let mut ramp = Ramp::new(
-            self.ramp_start.unwrap_or(0) * k_sub,
-            self.ramp_steps.unwrap_or(DEFAULT_RAMP_STEPS) * k_sub,
+            self.ramp_start.unwrap_or(0).saturating_mul(k_sub),
+            self.ramp_steps.unwrap_or(DEFAULT_RAMP_STEPS).saturating_mul(k_sub),
         );
         if let Some([begin, steps]) = self.fade_out {
-            ramp = ramp.with_fade_out(begin * k_sub, steps * k_sub);
+            ramp = ramp.with_fade_out(begin.saturating_mul(k_sub), steps.saturating_mul(k_sub));
         }
         let def = PhaseLagDefinition { spec, ramp };
         def.validate().map_err(|e| prefixed(e, "substructure."))?;
