@@ -453,3 +453,43 @@ fn an_output_dir_that_cannot_be_used_is_bad_input() {
     );
     assert_eq!(file_names(&dir.join("out")), ["summary.json"]);
 }
+
+#[test]
+fn a_run_killed_at_any_moment_leaves_no_broken_summary() {
+    let dir = temp_dir("killed");
+    std::fs::write(dir.join("cfg.toml"), edit("duration = 1.0", "duration = 20.0")).unwrap();
+    for k in 0..12u64 {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_substep"))
+            .args(["run", "cfg.toml", "--out", "out", "--quiet"])
+            .current_dir(&dir)
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(20 + 20 * k));
+        let _ = child.kill();
+        let status = child.wait().unwrap();
+        let summary = dir.join("out/summary.json");
+        if !summary.exists() {
+            continue; // killed before the directory was prepared
+        }
+        // the old summary or the new one, whole: it parses, and it says whether it completed
+        let text = std::fs::read_to_string(&summary).unwrap();
+        let value: serde_json::Value =
+            serde_json::from_str(&text).unwrap_or_else(|e| panic!("kill {k}: summary.json is broken ({e}): {text}"));
+        let completed = value["completed"].as_bool().expect("completed is a bool");
+        eprintln!("kill {k}: completed {completed}, status {status}");
+        assert!(completed || !status.success(), "kill {k}");
+        if completed {
+            assert_eq!(lines(&dir.join("out/history.csv")).len(), 1 + 2001, "kill {k}");
+        }
+        // only temporary files of substep's own outputs may be left behind; the next run removes them
+        for name in file_names(&dir.join("out")) {
+            if let Some(tmp) = name.strip_prefix('.') {
+                assert!(tmp.contains(".tmp."), "kill {k}: unexpected {name}");
+            }
+        }
+    }
+    let out = substep(&dir, &["run", "cfg.toml", "--out", "out", "--quiet", "--no-plots"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let names = file_names(&dir.join("out"));
+    assert_eq!(names, ["history.csv", "substeps.csv", "summary.json"]);
+}

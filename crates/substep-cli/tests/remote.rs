@@ -400,9 +400,22 @@ fn bad_remote_and_limit_keys_are_named() {
     .unwrap();
     let out = run(&dir, "c.toml", "nothing");
     let err = text(&out.stderr);
-    assert_ne!(out.status.code(), Some(0), "{err}");
+    assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("127.0.0.1:1"), "{err}");
     assert!(!dir.join("nothing/summary.json").exists());
+    // the same in real time
+    let out = bin()
+        .args(["run", "c.toml", "--out", "nothing", "--quiet", "--realtime"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        "error: site tcp://127.0.0.1:1: cannot connect: Connection refused (os error 111)"
+    );
+    assert!(!dir.join("nothing").exists());
     // a bad site file
     std::fs::write(dir.join("site.toml"), "[site]\nprotocol = \"carrier_pigeon\"\nlisten = \"127.0.0.1:0\"\n[[specimen]]\nkind = \"linear_sdof\"\ndof = 1\nstiffness = 1.0\n").unwrap();
     let out = bin()
