@@ -32,6 +32,11 @@ impl<A: SubstepObserver, B: SubstepObserver> SubstepObserver for Both<'_, A, B> 
         self.0.phase_lag(tracking_error, correction);
         self.1.phase_lag(tracking_error, correction);
     }
+    #[allow(clippy::too_many_arguments)]
+    fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.0.ramp(step, j, s, command, force, displacement);
+        self.1.ramp(step, j, s, command, force, displacement);
+    }
 }
 
 /// Rows kept for the plots (decimated beyond that).

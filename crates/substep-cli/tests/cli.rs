@@ -271,7 +271,7 @@ fn bad_input_gives_one_line_and_exit_code_2() {
         (
             "unknown_specimen_kind",
             edit("kind = \"linear_sdof\"", "kind = \"magic\""),
-            "unknown variant `magic`, expected one of `linear_sdof`, `linear_mdof`, `bouc_wen`, `friction`, `replay`",
+            "unknown variant `magic`, expected one of `lumped_sdof`, `linear_sdof`, `linear_mdof`, `bouc_wen`, `friction`, `replay`",
         ),
         (
             "unknown_actuator_kind",
