@@ -6,9 +6,11 @@
 //! grids, and the discrete frequency response with amplitude and period errors.
 
 pub mod amplification;
+pub mod energy;
 pub mod frequency;
 pub mod spectral;
 pub mod stability;
+pub mod storey;
 pub mod tmd_case;
 pub mod tracking;
 pub mod verify;
