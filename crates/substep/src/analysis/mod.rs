@@ -8,6 +8,7 @@
 pub mod amplification;
 pub mod energy;
 pub mod frequency;
+pub mod plan;
 pub mod spectral;
 pub mod stability;
 pub mod storey;
@@ -15,5 +16,5 @@ pub mod tmd_case;
 pub mod tracking;
 pub mod verify;
 
-pub use amplification::{Stability, StepMap};
+pub use amplification::{FrequencyResponse, Stability, StepMap};
 pub use tmd_case::{AnalysisCase, FrozenPhaseLag, Parameter};
