@@ -200,3 +200,26 @@ fn response_spectrum_of_a_harmonic_record_matches_the_closed_form() {
     assert!(e.contains("period"), "{e}");
     let _ = sdof(1.0, 0.0, 1.0).unwrap();
 }
+
+#[test]
+fn ground_motion_units_convert_to_si() {
+    let dir = std::env::temp_dir().join(format!("substep-units-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("ag.csv"), "t,ag\n0.0,0.0\n0.01,0.5\n0.02,-0.25\n").unwrap();
+    let cfg = |units: &str| {
+        format!(
+            "[structure.sdof]\nmass = 1.0\nstiffness = 100.0\ndamping = 0.1\n[ground_motion]\nfile = \"ag.csv\"\n{units}\n[integrator]\ndt = 0.01\n"
+        )
+    };
+    let peak = |units: &str| -> Result<f64, String> {
+        let def = substep::io::TestDefinition::from_toml(&cfg(units), "u.toml", &dir).map_err(|e| e.to_string())?;
+        Ok(def.ground_motion.accel.iter().fold(0.0_f64, |m, a| m.max(a.abs())))
+    };
+    assert_eq!(peak("").unwrap(), 0.5);
+    assert_eq!(peak("units = \"m/s2\"").unwrap(), 0.5);
+    assert!((peak("units = \"g\"").unwrap() - 0.5 * 9.80665).abs() < 1e-12);
+    assert!((peak("units = \"cm/s2\"\nscale = 2.0").unwrap() - 0.01).abs() < 1e-15);
+    let e = peak("units = \"ft/s2\"").unwrap_err();
+    assert!(e.contains("ground_motion.units") && e.contains("ft/s2"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}

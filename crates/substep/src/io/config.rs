@@ -432,6 +432,7 @@ struct RawGroundMotion {
     file: Option<String>,
     dt: Option<f64>,
     scale: Option<f64>,
+    units: Option<String>,
     generator: Option<String>,
     amplitude: Option<f64>,
     frequency: Option<f64>,
@@ -1121,6 +1122,30 @@ impl RawGroundMotion {
                 format!("must be finite, got {scale}"),
             ));
         }
+        // Units of the file's (or generator's) values; `.AT2` records are in g by definition and
+        // converted by their reader.
+        let is_at2 = self
+            .file
+            .as_deref()
+            .is_some_and(|f| Path::new(f).extension().is_some_and(|e| e.eq_ignore_ascii_case("at2")));
+        let units = match (self.units.as_deref(), is_at2) {
+            (None | Some("m/s2"), false) => 1.0,
+            (Some("g"), false) => excitation::G,
+            (Some("cm/s2"), false) => 0.01,
+            (None | Some("g"), true) => 1.0,
+            (Some(u @ ("m/s2" | "cm/s2")), true) => {
+                return Err(Error::invalid(
+                    "ground_motion.units",
+                    format!("a PEER .AT2 record is in g (converted on reading), not {u}"),
+                ));
+            }
+            (Some(other), _) => {
+                return Err(Error::invalid(
+                    "ground_motion.units",
+                    format!("unknown units '{other}' (expected \"m/s2\", \"g\" or \"cm/s2\")"),
+                ));
+            }
+        };
         let generator_keys = [
             ("amplitude", self.amplitude.is_some()),
             ("frequency", self.frequency.is_some()),
@@ -1173,13 +1198,17 @@ impl RawGroundMotion {
                 self.generate(kind, length, dt, &generator_keys)?
             }
         };
+        let description = match self.units.as_deref() {
+            Some(u) if !is_at2 && u != "m/s2" => format!("{description}, in {u}"),
+            _ => description,
+        };
         let description = if scale == 1.0 {
             description
         } else {
             format!("{description}, scaled by {scale}")
         };
         let accel = record
-            .scaled(scale)?
+            .scaled(scale * units)?
             .resample(dt, duration)
             .map_err(|e| prefixed(e, "ground_motion: "))?;
         Ok(GroundMotion { accel, description })
