@@ -26,6 +26,9 @@ use substep::substructure::ErrorForceSpec;
 pub struct AnalyzeArgs {
     #[command(subcommand)]
     pub command: AnalyzeCommand,
+    /// Figure format: png, svg or pdf
+    #[arg(long, global = true, value_enum, value_name = "FORMAT", default_value = "png")]
+    pub plot_format: crate::plots::PlotFormat,
 }
 
 #[derive(Debug, Subcommand)]
@@ -216,10 +219,13 @@ pub struct StabilityArgs {
     /// Band around ρ = 1 taken as limited stability
     #[arg(long, default_value_t = 1e-9)]
     pub tol: f64,
+    /// Output directory of the CSV files and figures
     #[arg(long, default_value = "analysis")]
     pub out: PathBuf,
+    /// No progress bar and no summary on stdout (files are still written)
     #[arg(long, short)]
     pub quiet: bool,
+    /// Write the CSV files only, no figures
     #[arg(long)]
     pub no_plots: bool,
 }
@@ -283,7 +289,7 @@ fn stability(a: &StabilityArgs) -> Result<()> {
                     describe_case(&base, param)
                 ),
                 "Ω = ωΔt",
-                name,
+                param.symbol(),
                 &omegas,
                 &values,
                 &rows,
@@ -325,7 +331,7 @@ fn describe_case(c: &AnalysisCase, varied: Parameter) -> String {
         (Parameter::ZetaS, c.zeta_s),
     ] {
         if p != varied {
-            parts.push(format!("{} {v}", p.name()));
+            parts.push(format!("{} = {v}", p.symbol()));
         }
     }
     if c.error_force != ErrorForceSpec::None {
@@ -362,10 +368,13 @@ pub struct AccuracyArgs {
     /// Optional series parameter name=a:b:n (zeta_s, zeta, eta_f, eta_m, eta_p); adds a column
     #[arg(long)]
     pub vary: Option<String>,
+    /// Output directory of the CSV files and figures
     #[arg(long, default_value = "analysis")]
     pub out: PathBuf,
+    /// No progress bar and no summary on stdout (files are still written)
     #[arg(long, short)]
     pub quiet: bool,
+    /// Write the CSV files only, no figures
     #[arg(long)]
     pub no_plots: bool,
 }
@@ -494,7 +503,7 @@ fn accuracy_plots(
 ) -> Result<()> {
     // error against the series parameter (η_T unless --vary), one curve per k_sub and peak,
     // for the first η_p
-    let x_name = vary.map_or("η_T = Δt/T", |p| p.name());
+    let x_name = vary.map_or("η_T = Δt/T", |p| p.symbol());
     for (file, label, pick) in [
         ("amplitude_error.png", "amplitude error [%]", 0usize),
         ("period_error.png", "period error [%]", 1usize),
@@ -534,7 +543,7 @@ fn accuracy_plots(
     let r_grid: Vec<f64> = (0..=600).map(|i| 0.5 + i as f64 / 600.0).collect();
     for &k in k_subs {
         let mut curves = Vec::new();
-        for &et in eta_ts.iter().take(6) {
+        for &et in eta_ts {
             let c = AnalysisCase {
                 k_sub: k,
                 eta_p: eta_ps[0],
@@ -572,8 +581,10 @@ fn accuracy_plots(
 
 #[derive(Debug, Args)]
 pub struct VerifyArgs {
+    /// Output directory of verify.md and verify.csv
     #[arg(long, default_value = "analysis")]
     pub out: PathBuf,
+    /// Print nothing (the files are still written)
     #[arg(long, short)]
     pub quiet: bool,
 }
@@ -1001,6 +1012,7 @@ fn plan(a: &PlanArgs) -> Result<()> {
 }
 
 pub fn analyze(args: &AnalyzeArgs) -> Result<()> {
+    crate::plots::set_format(args.plot_format);
     match &args.command {
         AnalyzeCommand::Stability(a) => stability(a),
         AnalyzeCommand::Accuracy(a) => accuracy(a),

@@ -75,7 +75,8 @@ impl HistoryWriter {
     ) -> io::Result<()> {
         let line = &mut self.line;
         line.clear();
-        num(line, t);
+        // Rounded to 1 ns: `i·Δt` without float noise (19.99, not 19.990000000000002).
+        num(line, crate::engineering::substep_time(t));
         row_group(line, kin.u.as_slice());
         row_group(line, kin.v.as_slice());
         row_group(line, kin.a.as_slice());
@@ -170,7 +171,10 @@ impl SubstepObserver for SubstepWriter {
         let line = &mut self.line;
         line.clear();
         let _ = write!(line, "{step},{j},");
-        num(line, (step - 1) as f64 * self.dt + j as f64 * self.dtau);
+        num(
+            line,
+            crate::engineering::substep_time((step - 1) as f64 * self.dt + j as f64 * self.dtau),
+        );
         row_group(line, command);
         row_group(line, force);
         row_group(line, displacement);

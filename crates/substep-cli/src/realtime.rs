@@ -83,7 +83,20 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let mut line = String::new();
     let mut write_error = None;
     let mut last_flush = std::time::Instant::now();
+    // Response peaks for the printed summary: (|x|, index, t) of u and of f_c.
+    let mut peak_u = (0.0_f64, 0usize, 0.0_f64);
+    let mut peak_f = (0.0_f64, 0usize, 0.0_f64);
     let sink = |r: &substep::realtime::StepRecordOwned| {
+        for (k, &x) in r.u.iter().enumerate() {
+            if x.abs() > peak_u.0 {
+                peak_u = (x.abs(), k, r.time);
+            }
+        }
+        for (k, &x) in r.coupling_force.iter().enumerate() {
+            if x.abs() > peak_f.0 {
+                peak_f = (x.abs(), k, r.time);
+            }
+        }
         line.clear();
         num(&mut line, r.time);
         for group in [
@@ -134,10 +147,28 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         "outputs": [history_path.display().to_string(), out_dir.join("realtime.json").display().to_string()],
     });
     write_json(&out_dir.join("summary.json"), &summary)?;
+    // The full report with the latency histogram goes to a file; stdout gets the statistics.
+    let text = report.to_string();
+    let report_path = out_dir.join("realtime.txt");
+    std::fs::write(&report_path, &text).with_context(|| format!("cannot write {}", report_path.display()))?;
     if !args.quiet {
-        print!("{report}");
+        for l in text
+            .lines()
+            .take_while(|l| !l.starts_with("wake-up lateness histogram"))
+        {
+            println!("  {l}");
+        }
         println!(
-            "  outputs in {}: history.csv, realtime.json, summary.json",
+            "  peak relative displacement |u| = {:.6} m (DOF {}, t = {:.3} s); peak coupling force |f_c| = {:.3} N (DOF {}, t = {:.3} s)",
+            peak_u.0,
+            peak_u.1 + 1,
+            peak_u.2,
+            peak_f.0,
+            sub.coupling_dofs.get(peak_f.1).map_or(0, |d| d + 1),
+            peak_f.2
+        );
+        println!(
+            "  outputs in {}: history.csv, realtime.json, realtime.txt (with the latency histogram), summary.json",
             out_dir.display()
         );
     }

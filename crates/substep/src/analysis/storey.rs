@@ -6,11 +6,12 @@
 //! * Base shear `V_b = ιᵀ r`: the force the ground exerts through the numerical substructure in
 //!   the direction of the excitation (for a shear building: the first-storey shear). It holds for
 //!   any model.
-//! * For a *shear chain* (DOF `j` is floor `j` counted from the ground, tridiagonal `K` and `C`,
-//!   `ι = 1`): drift `δ_j = u_j − u_{j−1}` (`u_0 = 0`) and storey shear `V_j = Σ_{i≥j} r_i`, the
-//!   force in the numerical elements of storey `j` (cut above storey `j`, the restoring forces of
-//!   all floors above sum to the storey's spring and dashpot forces), so `V_1 = V_b`. Forces
-//!   of specimens are not included: they are recorded separately as coupling forces.
+//! * For a *shear chain* (DOF `j` is floor `j` counted from the ground: diagonal `M`, tridiagonal
+//!   `K`, `ι = 1`; any `C`): drift `δ_j = u_j − u_{j−1}` (`u_0 = 0`) and storey shear
+//!   `V_j = Σ_{i≥j} r_i`, the force the numerical substructure transmits through storey `j`
+//!   (cut below floor `j`: by equilibrium of the floors above, `V_j = −Σ_{i≥j} m_i a_abs,i` in a
+//!   monolithic run), so `V_1 = V_b`. With tridiagonal `C` (Rayleigh) this is the storey's spring
+//!   and dashpot force; forces of specimens are not included (they are the coupling forces).
 
 use crate::error::{Error, Result};
 use crate::model::StructuralModel;
@@ -22,10 +23,7 @@ pub fn is_shear_chain(model: &StructuralModel) -> bool {
     let banded = |m: &nalgebra::DMatrix<f64>, band: usize| {
         (0..n).all(|i| (0..n).all(|j| i.abs_diff(j) <= band || m[(i, j)] == 0.0))
     };
-    model.influence.iter().all(|&x| x == 1.0)
-        && banded(&model.stiffness, 1)
-        && banded(&model.damping, 1)
-        && banded(&model.mass, 0)
+    model.influence.iter().all(|&x| x == 1.0) && banded(&model.stiffness, 1) && banded(&model.mass, 0)
 }
 
 /// Per-step building response, with preallocated work vectors (no allocation per step).
