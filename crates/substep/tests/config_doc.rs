@@ -97,6 +97,9 @@ fn accepted_keys(header: &str, kind: Option<&str>) -> Vec<String> {
         err.contains("unknown field `zzz_not_a_key`"),
         "{header} {kind:?}: {err}"
     );
+    if err.contains("there are no fields") {
+        return kind.map(|_| vec!["kind".to_string()]).unwrap_or_default();
+    }
     let list = err
         .split_once("expected ")
         .map(|(_, rest)| rest.trim_start_matches("one of "))
@@ -110,7 +113,6 @@ fn accepted_keys(header: &str, kind: Option<&str>) -> Vec<String> {
     if kind.is_some() {
         keys.push("kind".into());
     }
-    assert!(!keys.is_empty(), "{header}: {err}");
     keys
 }
 
@@ -141,9 +143,14 @@ fn every_key_the_parser_accepts_is_documented() {
     let mut total = 0;
     for &(header, kind, heading) in TABLES {
         let text = section(&doc, heading);
+        let table = header.trim_matches(|c| c == '[' || c == ']');
         for key in accepted_keys(header, kind) {
             total += 1;
-            if !text.contains(&format!("`{key}`")) {
+            // A sub-table is documented by its own section, `kind` by the kind column.
+            let sub_table =
+                doc.contains(&format!("`[{table}.{key}]`")) || doc.contains(&format!("`[[{table}.{key}]]`"));
+            let kind_column = key == "kind" && (text.contains("| kind |") || text.contains("`kind`"));
+            if !text.contains(&format!("`{key}`")) && !sub_table && !kind_column {
                 missing.push(format!("{header} {}: `{key}`", kind.unwrap_or("")));
             }
         }
