@@ -177,3 +177,27 @@ fn the_example_site_file_is_valid_and_every_example_config_parses() {
         TestDefinition::from_file(dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
     }
 }
+
+#[test]
+fn type_errors_read_without_rust_type_names() {
+    let base = "[structure.sdof]\nmass = 1.0\nstiffness = 1.0\n[ground_motion]\ngenerator = \"harmonic\"\namplitude = 1.0\nfrequency = 1.0\nduration = 1.0\n[integrator]\ndt = 0.01\n[substructure]\ncoupling_dofs = [1]\nsubsteps = SUB\n[[substructure.specimen]]\nkind = \"linear_sdof\"\ndof = 1\nstiffness = 1.0\n";
+    for (value, want) in [
+        ("2.5", "expected a whole number ≥ 0"),
+        ("-1", "expected a whole number ≥ 0"),
+        ("\"four\"", "expected a whole number ≥ 0"),
+    ] {
+        let e = TestDefinition::from_toml(&base.replace("SUB", value), "t.toml", Path::new("."))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("t.toml: line 13: ") && e.contains(want), "{value}: {e}");
+        assert!(!e.contains("usize"), "{e}");
+    }
+    let e = TestDefinition::from_toml(
+        &base.replace("SUB", "4").replace("mass = 1.0", "mass = \"heavy\""),
+        "t.toml",
+        Path::new("."),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("expected a number") && !e.contains("f64"), "{e}");
+}

@@ -29,7 +29,7 @@ use crate::error::{Error, Result};
 use crate::model::StructuralModel;
 use nalgebra::DVector;
 
-/// The energy terms at one step [J].
+/// The energy terms at one step \[J\].
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
 pub struct EnergyTerms {
     pub input: f64,
@@ -40,7 +40,7 @@ pub struct EnergyTerms {
 }
 
 impl EnergyTerms {
-    /// `E_K + E_S + E_D − E_I − E_C` [J].
+    /// `E_K + E_S + E_D − E_I − E_C` \[J\].
     pub fn residual(&self) -> f64 {
         self.kinetic + self.strain + self.damping - self.input - self.coupling
     }
@@ -140,12 +140,12 @@ impl EnergyBalance {
         self.terms
     }
 
-    /// `E_K + E_S` of the first state [J].
+    /// `E_K + E_S` of the first state \[J\].
     pub fn initial(&self) -> f64 {
         self.initial
     }
 
-    /// `E_err = E_K + E_S + E_D − E_I − E_C − E_0` [J] at the last step (`E_0`: [`Self::initial`]).
+    /// `E_err = E_K + E_S + E_D − E_I − E_C − E_0` \[J\] at the last step (`E_0`: [`Self::initial`]).
     pub fn error(&self) -> f64 {
         self.terms.residual() - self.initial
     }

@@ -107,7 +107,7 @@ pub struct PlanPoint {
     pub error_dt: f64,
     pub error_substep: f64,
     pub error_delay: f64,
-    /// Measured computing time per step [s].
+    /// Measured computing time per step \[s\].
     pub cost: f64,
 }
 

@@ -35,11 +35,11 @@ pub struct StoreyResponse {
     product: DVector<f64>,
     /// Absolute accelerations [m/s²] per DOF.
     pub absolute_acceleration: Vec<f64>,
-    /// Inter-storey drifts [m] (empty unless a shear chain).
+    /// Inter-storey drifts \[m\] (empty unless a shear chain).
     pub drift: Vec<f64>,
-    /// Storey shears [N] (empty unless a shear chain).
+    /// Storey shears \[N\] (empty unless a shear chain).
     pub storey_shear: Vec<f64>,
-    /// Base shear [N].
+    /// Base shear \[N\].
     pub base_shear: f64,
 }
 

@@ -8,7 +8,7 @@
 //! integration error beyond the sampling of the record (the Nigam–Jennings approach). Peaks are
 //! taken at the samples. For each period it gives
 //!
-//! * `S_d = max |u|` [m], pseudo-velocity `PS_v = ω S_d` [m/s], pseudo-acceleration
+//! * `S_d = max |u|` \[m\], pseudo-velocity `PS_v = ω S_d` [m/s], pseudo-acceleration
 //!   `PS_a = ω² S_d` [m/s²],
 //! * the peak absolute acceleration `S_a = max |ü + a_g| = max |2ζω u̇ + ω² u|` [m/s²].
 //!
@@ -23,9 +23,9 @@ use std::f64::consts::PI;
 /// Peak responses of one oscillator.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct SpectralOrdinate {
-    /// Period `T` [s].
+    /// Period `T` \[s\].
     pub period: f64,
-    /// Spectral displacement `S_d` [m].
+    /// Spectral displacement `S_d` \[m\].
     pub sd: f64,
     /// Pseudo-velocity `ω S_d` [m/s].
     pub psv: f64,

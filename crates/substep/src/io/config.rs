@@ -69,7 +69,7 @@ pub struct IntegratorDefinition {
     /// The scheme name as given in the config (e.g. `average_acceleration`).
     pub name: String,
     pub scheme: Scheme,
-    /// Time step [s].
+    /// Time step \[s\].
     pub dt: f64,
     /// Number of steps; the run covers `t = 0 ..= steps·dt`.
     pub steps: usize,
@@ -119,7 +119,7 @@ pub struct RemoteDefinition {
     pub protocol: RemoteProtocol,
     pub transport: Transport,
     pub mode: Mode,
-    /// Reply timeout [s].
+    /// Reply timeout \[s\].
     pub timeout: f64,
 }
 
@@ -253,7 +253,7 @@ pub const PLOT_FIGURES: &[&str] = &[
 pub struct PlotOptions {
     /// `png`, `svg` or `pdf`.
     pub format: Option<String>,
-    /// Time window `[t0, t1]` [s] of the hysteresis plot and the zoom panel.
+    /// Time window `[t0, t1]` \[s\] of the hysteresis plot and the zoom panel.
     pub window: Option<(f64, f64)>,
     /// Only these figures (names from [`PLOT_FIGURES`]); all when `None`.
     pub figures: Option<Vec<String>>,
@@ -287,7 +287,7 @@ impl TestDefinition {
         })
     }
 
-    /// Step time `t_i = i·dt` [s].
+    /// Step time `t_i = i·dt` \[s\].
     pub fn time(&self, step: usize) -> f64 {
         step as f64 * self.integrator.dt
     }
@@ -295,7 +295,7 @@ impl TestDefinition {
 
 /// `FILE: line L: message` from a toml error (its message may span lines; they are joined).
 pub(super) fn toml_error(e: &toml::de::Error, text: &str, name: &str) -> Error {
-    let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
+    let message = plain_types(&e.message().split_whitespace().collect::<Vec<_>>().join(" "));
     match e.span() {
         Some(span) => {
             let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
@@ -1415,6 +1415,31 @@ impl RawGroundMotion {
             }
         }
     }
+}
+
+/// serde's Rust type names in a message replaced by what a user types ("expected usize" →
+/// "expected a whole number ≥ 0").
+pub(super) fn plain_types(message: &str) -> String {
+    let mut m = message.to_string();
+    for (rust, plain) in [
+        ("expected usize", "expected a whole number ≥ 0"),
+        ("expected u64", "expected a whole number ≥ 0"),
+        ("expected u32", "expected a whole number ≥ 0 (at most 4294967295)"),
+        ("expected u16", "expected a whole number 0…65535"),
+        ("expected u8", "expected a whole number 0…255"),
+        ("expected i64", "expected a whole number"),
+        ("expected i32", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected f32", "expected a number"),
+        ("expected a sequence", "expected an array [..]"),
+        ("expected a map", "expected a table"),
+        ("floating point", "the number"),
+        ("invalid type: integer", "invalid value: the whole number"),
+        ("invalid type:", "wrong type:"),
+    ] {
+        m = m.replace(rust, plain);
+    }
+    m
 }
 
 /// `specimen.<key>` from a specimen constructor becomes `<what>.<key>`.

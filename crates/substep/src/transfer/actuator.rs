@@ -16,7 +16,7 @@ pub enum Dynamics {
     SecondOrder { frequency_hz: f64, zeta: f64 },
 }
 
-/// An actuator as configured: dynamics plus a pure delay [s].
+/// An actuator as configured: dynamics plus a pure delay \[s\].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ActuatorSpec {
     pub dynamics: Dynamics,
@@ -178,7 +178,7 @@ impl Actuator {
         &self.spec
     }
 
-    /// Achieved displacement at the end of the last interval [m].
+    /// Achieved displacement at the end of the last interval \[m\].
     pub fn position(&self) -> f64 {
         self.position
     }
