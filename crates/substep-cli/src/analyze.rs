@@ -12,25 +12,23 @@ macro_rules! bad {
 }
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use nalgebra::DVector;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use substep::analysis::frequency::{
-    DiscreteResponse, Peak, continuous_response, exact_amplification, find_peaks, peak_errors,
-};
+use substep::analysis::frequency::{DiscreteResponse, Peak, exact_amplification, find_peaks, peak_errors};
 use substep::analysis::stability::{MapPoint, critical_omega, linear_grid, stability_map};
 use substep::analysis::verify::{free_vibration_growth, stepped_sine_sweep};
-use substep::analysis::{AnalysisCase, FrozenPhaseLag, Parameter, Stability, StepMap};
+use substep::analysis::{AnalysisCase, FrozenPhaseLag, Parameter, Stability};
 use substep::io::config::TestDefinition;
-use substep::specimen::assemble_monolithic;
 use substep::substructure::ErrorForceSpec;
-use substep::transfer::SensorSpec;
 
 #[derive(Debug, Args)]
 pub struct AnalyzeArgs {
     #[command(subcommand)]
     pub command: AnalyzeCommand,
+    /// Figure format: png, svg or pdf
+    #[arg(long, global = true, value_enum, value_name = "FORMAT", default_value = "png")]
+    pub plot_format: crate::plots::PlotFormat,
 }
 
 #[derive(Debug, Subcommand)]
@@ -221,10 +219,13 @@ pub struct StabilityArgs {
     /// Band around ρ = 1 taken as limited stability
     #[arg(long, default_value_t = 1e-9)]
     pub tol: f64,
+    /// Output directory of the CSV files and figures
     #[arg(long, default_value = "analysis")]
     pub out: PathBuf,
+    /// No progress bar and no summary on stdout (files are still written)
     #[arg(long, short)]
     pub quiet: bool,
+    /// Write the CSV files only, no figures
     #[arg(long)]
     pub no_plots: bool,
 }
@@ -288,7 +289,7 @@ fn stability(a: &StabilityArgs) -> Result<()> {
                     describe_case(&base, param)
                 ),
                 "Ω = ωΔt",
-                name,
+                param.symbol(),
                 &omegas,
                 &values,
                 &rows,
@@ -330,7 +331,7 @@ fn describe_case(c: &AnalysisCase, varied: Parameter) -> String {
         (Parameter::ZetaS, c.zeta_s),
     ] {
         if p != varied {
-            parts.push(format!("{} {v}", p.name()));
+            parts.push(format!("{} = {v}", p.symbol()));
         }
     }
     if c.error_force != ErrorForceSpec::None {
@@ -367,10 +368,13 @@ pub struct AccuracyArgs {
     /// Optional series parameter name=a:b:n (zeta_s, zeta, eta_f, eta_m, eta_p); adds a column
     #[arg(long)]
     pub vary: Option<String>,
+    /// Output directory of the CSV files and figures
     #[arg(long, default_value = "analysis")]
     pub out: PathBuf,
+    /// No progress bar and no summary on stdout (files are still written)
     #[arg(long, short)]
     pub quiet: bool,
+    /// Write the CSV files only, no figures
     #[arg(long)]
     pub no_plots: bool,
 }
@@ -499,7 +503,7 @@ fn accuracy_plots(
 ) -> Result<()> {
     // error against the series parameter (η_T unless --vary), one curve per k_sub and peak,
     // for the first η_p
-    let x_name = vary.map_or("η_T = Δt/T", |p| p.name());
+    let x_name = vary.map_or("η_T = Δt/T", |p| p.symbol());
     for (file, label, pick) in [
         ("amplitude_error.png", "amplitude error [%]", 0usize),
         ("period_error.png", "period error [%]", 1usize),
@@ -539,7 +543,7 @@ fn accuracy_plots(
     let r_grid: Vec<f64> = (0..=600).map(|i| 0.5 + i as f64 / 600.0).collect();
     for &k in k_subs {
         let mut curves = Vec::new();
-        for &et in eta_ts.iter().take(6) {
+        for &et in eta_ts {
             let c = AnalysisCase {
                 k_sub: k,
                 eta_p: eta_ps[0],
@@ -577,8 +581,10 @@ fn accuracy_plots(
 
 #[derive(Debug, Args)]
 pub struct VerifyArgs {
+    /// Output directory of verify.md and verify.csv
     #[arg(long, default_value = "analysis")]
     pub out: PathBuf,
+    /// Print nothing (the files are still written)
     #[arg(long, short)]
     pub quiet: bool,
 }
@@ -825,7 +831,7 @@ fn boundary(c: &AnalysisCase) -> Result<Option<f64>> {
 pub struct PlanArgs {
     /// Test definition (TOML) with a [substructure] of linear specimens
     pub config: PathBuf,
-    /// Time steps Δt [s] to scan (default: the config's Δt × 2, 1, 1/2)
+    /// Time steps Δt [s] to scan, comma-separated (default: the config's Δt × 2, 1, 1/2)
     #[arg(long)]
     pub dt: Option<String>,
     /// Sub-steps per step to scan (default: 1, 2, 4, 8 and the config's)
@@ -834,16 +840,25 @@ pub struct PlanArgs {
     /// Actuator delays [s] to scan (default: the config's)
     #[arg(long)]
     pub delay: Option<String>,
+    /// Accepted peak error (amplitude or period) as a fraction
+    #[arg(long, default_value_t = 0.02)]
+    pub tolerance: f64,
+    /// Required stability margin 1 − ρ
+    #[arg(long, default_value_t = 1e-3)]
+    pub margin: f64,
+    /// Share of Δt the computation may take on this PC (the rest: I/O, actuator control)
+    #[arg(long, default_value_t = 0.5)]
+    pub budget: f64,
+    /// Output directory of plan.csv
     #[arg(long, default_value = "analysis")]
     pub out: PathBuf,
+    /// Print nothing (plan.csv is still written)
     #[arg(long, short)]
     pub quiet: bool,
 }
 
-/// One scanned setting of the planner: `(dt, k_sub, delay, ρ, [(algorithm peak, exact peak)])`.
-type PlanRow = (f64, usize, f64, f64, Vec<(Peak, Peak)>);
-
 fn plan(a: &PlanArgs) -> Result<()> {
+    use substep::analysis::plan::{PlanSettings, plan as scan};
     let def = TestDefinition::from_file(&a.config)?;
     let Some(sub) = &def.substructure else {
         bad!(
@@ -868,59 +883,39 @@ fn plan(a: &PlanArgs) -> Result<()> {
         Some(s) => parse_f64_list("--delay", s)?,
         None => vec![sub.actuator.delay],
     };
-    // The amplification-matrix analysis is dense (refused for large sparse models).
-    let model = def.model.dense("substep analyze plan")?;
-    let assembled = assemble_monolithic(&model, &sub.specimens)?;
-    let modes = assembled.modes()?;
-    let w1 = modes
-        .omega
-        .iter()
-        .copied()
-        .find(|&w| w > 0.0)
-        .context("the assembled model has no flexible mode")?;
-    let w_top = modes
-        .omega
-        .iter()
-        .copied()
-        .filter(|&w| w > 0.0)
-        .take(3)
-        .fold(w1, f64::max);
-    let output = sub.coupling_dofs[0];
-    let mut jobs = Vec::new();
-    for &dt in &dts {
-        for &k in &k_subs {
-            for &d in &delays {
-                jobs.push((dt, k, d));
-            }
+    if let Some(bad) = delays.iter().find(|&&v| v < 0.0) {
+        bad!("--delay", "{bad} is not ≥ 0");
+    }
+    for (flag, v) in [
+        ("--tolerance", a.tolerance),
+        ("--margin", a.margin),
+        ("--budget", a.budget),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            bad!(flag, "must be a number ≥ 0, got {v}");
         }
     }
-    let rows = jobs
-        .par_iter()
-        .map(|&(dt, k, delay)| -> Result<PlanRow> {
-            let mut s = sub.clone();
-            s.substeps = k;
-            s.actuator.delay = delay;
-            s.force_sensors = vec![SensorSpec::ideal(); s.coupling_dofs.len()];
-            s.displacement_sensors = vec![SensorSpec::ideal(); s.coupling_dofs.len()];
-            let mut test = s.build_test(&*model, dt, &DVector::zeros(model.n_dofs()))?;
-            let map = StepMap::probe(&mut test)?;
-            let rho = map.spectral_radius();
-            let w_max = (1.5 * w_top).min(0.95 * std::f64::consts::PI / dt);
-            let fd = find_peaks(|w| map.frequency_response(output, w * dt).norm(), 0.3 * w1, w_max, 2000);
-            let ex = find_peaks(
-                |w| continuous_response(&assembled, output, w).norm(),
-                0.3 * w1,
-                w_max,
-                2000,
-            );
-            Ok((dt, k, delay, rho, fd.into_iter().zip(ex).collect()))
-        })
-        .collect::<Result<Vec<_>>>()?;
+    // The amplification-matrix analysis is dense (refused for large sparse models).
+    let model = def.model.dense("substep analyze plan")?;
+    let started = std::time::Instant::now();
+    let settings = PlanSettings {
+        dts,
+        k_subs,
+        delays,
+        tolerance: a.tolerance,
+        min_margin: a.margin,
+        budget: a.budget,
+        cost_steps: 200,
+    };
+    let result = scan(sub, &model, &settings)?;
+    let elapsed = started.elapsed().as_secs_f64();
     create_out(&a.out)?;
-    let mut csv =
-        String::from("dt,k_sub,delay,rho,margin,class,peak,freq_hz,freq_hz_exact,amplitude_error,period_error\n");
+    let mut csv = String::from(
+        "dt,k_sub,delay,rho,margin,class,error,error_dt,error_substep,error_delay,dominant,us_per_step,budget_share,peak,freq_hz,freq_hz_exact,amplitude_error,period_error\n",
+    );
+    let output = sub.coupling_dofs[0];
     let mut table = format!(
-        "plan for {} (coupling DOF {}, response of that DOF to a_g):\n  {:>9} {:>5} {:>9} {:>10} {:>10} {:>9}  peaks: f [Hz] (amplitude error, period error)\n",
+        "plan for {} (response of coupling DOF {} to a_g vs the exact assembled system; errors are relative, amplitude h/h_exact − 1, period f_exact/f − 1):\n  {:>8} {:>5} {:>9} {:>9} {:>10} {:>9} {:>8} {:>14} {:>9} {:>8}  peaks: f [Hz] (amplitude error, period error)\n",
         a.config.display(),
         output + 1,
         "dt [s]",
@@ -928,62 +923,87 @@ fn plan(a: &PlanArgs) -> Result<()> {
         "delay [s]",
         "rho",
         "1 - rho",
-        "class"
+        "class",
+        "error",
+        "dominant",
+        "µs/step",
+        "budget",
     );
-    for (dt, k, delay, rho, peaks) in &rows {
-        let cls = Stability::classify(*rho, 1e-9).name();
+    for p in &result.points {
+        let cls = Stability::classify(p.rho, 1e-9).name();
+        let dom = match p.dominant() {
+            substep::analysis::plan::ErrorSource::TimeStep => "dt",
+            substep::analysis::plan::ErrorSource::SubStepping => "sub-step",
+            substep::analysis::plan::ErrorSource::Delay => "delay",
+        };
+        let head = format!(
+            "{},{},{},{},{},{cls},{},{},{},{},{dom},{:.3},{:.5}",
+            p.dt,
+            p.k_sub,
+            p.delay,
+            p.rho,
+            p.margin(),
+            p.error,
+            p.error_dt,
+            p.error_substep,
+            p.error_delay,
+            p.cost * 1e6,
+            p.utilisation()
+        );
         let mut peak_text = String::new();
-        for (i, (s, e)) in peaks.iter().enumerate() {
-            let (amp, per) = (s.h / e.h - 1.0, e.freq_ratio / s.freq_ratio - 1.0);
-            let hz = |w: f64| w / (2.0 * std::f64::consts::PI);
+        for (i, pk) in p.peaks.iter().enumerate() {
             let _ = write!(
                 peak_text,
                 "  {:.3} ({:+.2} %, {:+.2} %)",
-                hz(s.freq_ratio),
-                100.0 * amp,
-                100.0 * per
+                pk.freq_hz,
+                100.0 * pk.amplitude_error,
+                100.0 * pk.period_error
             );
             let _ = writeln!(
                 csv,
-                "{dt},{k},{delay},{rho},{},{cls},{},{},{},{amp},{per}",
-                1.0 - rho,
+                "{head},{},{},{},{},{}",
                 i + 1,
-                hz(s.freq_ratio),
-                hz(e.freq_ratio)
+                pk.freq_hz,
+                pk.freq_hz_exact,
+                pk.amplitude_error,
+                pk.period_error
             );
         }
-        if peaks.is_empty() {
-            let _ = writeln!(csv, "{dt},{k},{delay},{rho},{},{cls},,,,,", 1.0 - rho);
+        if p.peaks.is_empty() {
+            let _ = writeln!(csv, "{head},,,,,");
         }
         let _ = writeln!(
             table,
-            "  {dt:>9} {k:>5} {delay:>9} {rho:>10.6} {:>10.3e} {cls:>9}{peak_text}",
-            1.0 - rho
+            "  {:>8} {:>5} {:>9} {:>9.6} {:>10.2e} {cls:>9} {:>6.2} % {dom:>14} {:>9.1} {:>6.1} %{peak_text}",
+            p.dt,
+            p.k_sub,
+            p.delay,
+            p.rho,
+            p.margin(),
+            100.0 * p.error,
+            p.cost * 1e6,
+            100.0 * p.utilisation()
         );
     }
-    let best = rows.iter().filter(|r| r.3 < 1.0 - 1e-9).min_by(|x, y| {
-        let err = |r: &(f64, usize, f64, f64, Vec<(Peak, Peak)>)| {
-            r.4.iter()
-                .map(|(s, e)| (s.h / e.h - 1.0).abs().max((e.freq_ratio / s.freq_ratio - 1.0).abs()))
-                .fold(0.0, f64::max)
-        };
-        err(x).total_cmp(&err(y))
-    });
-    match best {
-        Some((dt, k, delay, rho, _)) => {
-            let _ = writeln!(
-                table,
-                "recommendation: dt = {dt} s, k_sub = {k} (delay {delay} s): stable (margin {:.3e}) with the smallest peak errors",
-                1.0 - rho
-            );
-        }
-        None => {
-            let _ = writeln!(
-                table,
-                "recommendation: none of the scanned settings is stable; use a smaller dt, more sub-steps or error-force compensation"
-            );
-        }
+    if let Some(note) = &result.phase_lag_note {
+        let _ = writeln!(table, "{note}");
     }
+    let _ = writeln!(
+        table,
+        "criteria: peak error ≤ {:.2} %, 1 − ρ ≥ {:.0e}, computation ≤ {:.0} % of dt (measured on this PC)",
+        100.0 * a.tolerance,
+        a.margin,
+        100.0 * a.budget
+    );
+    for (i, line) in result.advice.iter().enumerate() {
+        let _ = writeln!(table, "{}{line}", if i == 0 { "recommendation: " } else { "  " });
+    }
+    let _ = writeln!(
+        table,
+        "scanned {} settings in {elapsed:.2} s; table in {}",
+        result.points.len(),
+        a.out.join("plan.csv").display()
+    );
     write_file(&a.out.join("plan.csv"), &csv)?;
     if !a.quiet {
         print!("{table}");
@@ -992,6 +1012,7 @@ fn plan(a: &PlanArgs) -> Result<()> {
 }
 
 pub fn analyze(args: &AnalyzeArgs) -> Result<()> {
+    crate::plots::set_format(args.plot_format);
     match &args.command {
         AnalyzeCommand::Stability(a) => stability(a),
         AnalyzeCommand::Accuracy(a) => accuracy(a),

@@ -10,6 +10,7 @@ mod bench;
 mod bench_compare;
 mod bench_models;
 mod benchmark;
+mod engineering;
 mod output;
 mod plots;
 mod realtime;
@@ -66,9 +67,12 @@ pub struct RunArgs {
     /// No progress bar and no summary on stdout (errors are still printed)
     #[arg(long, short)]
     pub quiet: bool,
-    /// Do not draw PNG plots (overrides `[output] plots`)
+    /// Do not draw figures (overrides `[output] plots`)
     #[arg(long)]
     pub no_plots: bool,
+    /// Figure format: png, svg or pdf (overrides `[output.plots] format`; default png)
+    #[arg(long, value_enum, value_name = "FORMAT")]
+    pub plot_format: Option<plots::PlotFormat>,
     /// Run against the wall clock (sub-steps paced at Δt/k_sub, see docs/realtime.md)
     #[arg(long)]
     pub realtime: bool,

@@ -22,15 +22,42 @@ pub const OWNED_OUTPUTS: &[&str] = &[
     "substeps.csv",
     "summary.json",
     "realtime.json",
-    "displacement.png",
-    "acceleration.png",
-    "coupling_force.png",
-    "error_force.png",
-    "hysteresis.png",
-    "reference.png",
-    "compensation_force.png",
-    "tracking_error.png",
+    "realtime.txt",
+    "response.csv",
+    "ground_motion.csv",
+    "fourier.csv",
+    "spectrum.csv",
 ];
+
+/// The figures `substep run` draws (file stems), each in any of [`FIGURE_EXTENSIONS`]; a run
+/// removes all of them as it does [`OWNED_OUTPUTS`].
+pub const OWNED_FIGURES: &[&str] = &[
+    "displacement",
+    "acceleration",
+    "coupling_force",
+    "error_force",
+    "hysteresis",
+    "reference",
+    "compensation_force",
+    "tracking_error",
+    "energy",
+    "base_shear",
+    "storeys",
+    "ground_motion",
+    "response_spectrum",
+];
+
+/// The extensions of the plot formats (`--plot-format`).
+pub const FIGURE_EXTENSIONS: &[&str] = &["png", "svg", "pdf"];
+
+/// Every file name a run owns in its output directory.
+fn owned_names() -> impl Iterator<Item = String> {
+    OWNED_OUTPUTS.iter().map(|s| s.to_string()).chain(
+        OWNED_FIGURES
+            .iter()
+            .flat_map(|f| FIGURE_EXTENSIONS.iter().map(move |e| format!("{f}.{e}"))),
+    )
+}
 
 /// The temporary file [`write_atomic`] writes before renaming it to `path`: hidden, in the
 /// same directory (a rename within one file system is atomic), same extension (the PNG
@@ -78,14 +105,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
 }
 
 /// Create the output directory `dir` and remove what an earlier run left in it (the files of
-/// [`OWNED_OUTPUTS`] and their temporary files). Errors are bad input (exit code 2): the
+/// [`OWNED_OUTPUTS`], [`OWNED_FIGURES`] and their temporary files). Errors are bad input (exit code 2): the
 /// directory cannot be created, a name is taken by something that is not a file, or a stale
 /// output cannot be removed.
 pub fn prepare_dir(dir: &Path) -> substep::Result<()> {
     let name = dir.display().to_string();
     std::fs::create_dir_all(dir)
         .map_err(|e| substep::Error::file(&name, format!("cannot create the output directory: {e}")))?;
-    for owned in OWNED_OUTPUTS {
+    for owned in owned_names() {
         let path = dir.join(owned);
         for p in [temp_path(&path), path] {
             let Ok(meta) = std::fs::symlink_metadata(&p) else {
@@ -172,7 +199,8 @@ impl HistoryWriter {
     ) -> io::Result<()> {
         let line = &mut self.line;
         line.clear();
-        num(line, t);
+        // Rounded to 1 ns: `i·Δt` without float noise (19.99, not 19.990000000000002).
+        num(line, crate::engineering::substep_time(t));
         row_group(line, kin.u.as_slice());
         row_group(line, kin.v.as_slice());
         row_group(line, kin.a.as_slice());
@@ -268,7 +296,10 @@ impl SubstepWriter {
         let line = &mut self.line;
         line.clear();
         let _ = write!(line, "{step},{j},");
-        num(line, step.saturating_sub(1) as f64 * self.dt + j as f64 * self.dtau);
+        num(
+            line,
+            crate::engineering::substep_time(step.saturating_sub(1) as f64 * self.dt + j as f64 * self.dtau),
+        );
         row_group(line, command);
         row_group(line, force);
         row_group(line, displacement);

@@ -1,14 +1,23 @@
-//! PNG line charts with plotters (bitmap backend, ab_glyph text with the bundled DejaVu Sans,
-//! so no system fonts are needed).
+//! Figures with plotters: PNG (drawn at twice the size and averaged down, so lines and text are
+//! anti-aliased), SVG (plotters' SVG backend) or PDF (the SVG converted by svg2pdf), all with the
+//! bundled DejaVu Sans, so no system fonts are needed.
+//!
+//! A [`Figure`] is a title over one or more [`Panel`]s stacked vertically (or in columns); each
+//! panel has its own axes and its legend to the right of the data. [`line_chart`] and
+//! [`rho_heatmap`] are the one-panel shortcuts. The output format is chosen once per process
+//! with [`set_format`]; the functions replace the extension of the path they are given and
+//! return (or, for the shortcuts, use) the path actually written ([`output_path`]).
 
 use anyhow::{Context, Result, anyhow};
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Once;
+use std::sync::atomic::{AtomicU8, Ordering};
 
 const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
-const COLORS: [RGBColor; 8] = [
+const COLORS: [RGBColor; 12] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
@@ -17,7 +26,59 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(148, 103, 189),
     RGBColor(23, 190, 207),
     RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(188, 189, 34),
+    RGBColor(0, 0, 128),
+    RGBColor(128, 128, 0),
 ];
+/// Width reserved right of each panel for its legend [px at scale 1].
+const LEGEND_WIDTH: u32 = 200;
+
+/// Output format of every figure written by this process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PlotFormat {
+    Png,
+    Svg,
+    Pdf,
+}
+
+impl PlotFormat {
+    pub fn extension(self) -> &'static str {
+        match self {
+            PlotFormat::Png => "png",
+            PlotFormat::Svg => "svg",
+            PlotFormat::Pdf => "pdf",
+        }
+    }
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "png" => Some(PlotFormat::Png),
+            "svg" => Some(PlotFormat::Svg),
+            "pdf" => Some(PlotFormat::Pdf),
+            _ => None,
+        }
+    }
+}
+
+static FORMAT: AtomicU8 = AtomicU8::new(0);
+
+/// Choose the format of all figures drawn from now on (default PNG).
+pub fn set_format(f: PlotFormat) {
+    FORMAT.store(f as u8, Ordering::Relaxed);
+}
+
+pub fn format() -> PlotFormat {
+    match FORMAT.load(Ordering::Relaxed) {
+        1 => PlotFormat::Svg,
+        2 => PlotFormat::Pdf,
+        _ => PlotFormat::Png,
+    }
+}
+
+/// `path` with the extension of the current format.
+pub fn output_path(path: &Path) -> PathBuf {
+    path.with_extension(format().extension())
+}
 
 fn register_font() -> Result<()> {
     static ONCE: Once = Once::new();
@@ -30,10 +91,107 @@ fn register_font() -> Result<()> {
 }
 
 /// One curve of a chart.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Curve {
     pub label: String,
     pub x: Vec<f64>,
     pub y: Vec<f64>,
+}
+
+/// One set of axes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Panel {
+    pub x_label: String,
+    pub y_label: String,
+    pub curves: Vec<Curve>,
+    /// Logarithmic x axis (values must be > 0).
+    pub log_x: bool,
+    /// Draw a marker at every point.
+    pub markers: bool,
+    /// Share of the figure's height (relative to the other panels; 1 by default).
+    pub height: f64,
+    /// Only this x interval (a zoom window).
+    pub x_window: Option<(f64, f64)>,
+    /// Shade this x interval (where a zoom panel looks).
+    pub highlight: Option<(f64, f64)>,
+}
+
+impl Panel {
+    pub fn new(x_label: &str, y_label: &str) -> Self {
+        Self {
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            curves: Vec::new(),
+            log_x: false,
+            markers: false,
+            height: 1.0,
+            x_window: None,
+            highlight: None,
+        }
+    }
+    pub fn curves(mut self, c: Vec<Curve>) -> Self {
+        self.curves = c;
+        self
+    }
+    pub fn log_x(mut self) -> Self {
+        self.log_x = true;
+        self
+    }
+    pub fn markers(mut self) -> Self {
+        self.markers = true;
+        self
+    }
+    pub fn height(mut self, h: f64) -> Self {
+        self.height = h;
+        self
+    }
+    pub fn window(mut self, lo: f64, hi: f64) -> Self {
+        self.x_window = Some((lo, hi));
+        self
+    }
+    pub fn highlight(mut self, lo: f64, hi: f64) -> Self {
+        self.highlight = Some((lo, hi));
+        self
+    }
+}
+
+/// A titled set of panels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Figure {
+    pub title: String,
+    pub panels: Vec<Panel>,
+    /// Panels per row (1: stacked).
+    pub columns: usize,
+    /// Size at scale 1 [px]; the height grows with the panels unless set.
+    pub size: Option<(u32, u32)>,
+}
+
+impl Figure {
+    pub fn new(title: &str) -> Self {
+        Self {
+            title: title.into(),
+            panels: Vec::new(),
+            columns: 1,
+            size: None,
+        }
+    }
+    pub fn panel(mut self, p: Panel) -> Self {
+        self.panels.push(p);
+        self
+    }
+    pub fn columns(mut self, c: usize) -> Self {
+        self.columns = c.max(1);
+        self
+    }
+    pub fn size(&self) -> (u32, u32) {
+        self.size.unwrap_or_else(|| {
+            if self.columns > 1 {
+                return (1100, 560);
+            }
+            let h: f64 = self.panels.iter().map(|p| p.height).sum();
+            (1100, (60.0 + 500.0 * h.max(0.5)).round() as u32)
+        })
+    }
 }
 
 fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -51,72 +209,319 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - 0.05 * span, hi + 0.05 * span)
 }
 
-/// Tick labels: plain for moderate magnitudes, exponent notation otherwise.
+/// Tick labels: fixed point for moderate magnitudes, exponent notation otherwise.
 fn tick(v: f64, scale: f64) -> String {
     if v.abs() <= 1e-9 * scale {
         "0".into()
-    } else if (1e-2..1e5).contains(&scale) {
-        let digits = (1.0 - scale.log10().floor()).clamp(0.0, 4.0) as usize;
+    } else if (1e-4..1e5).contains(&scale) {
+        let digits = (1.0 - scale.log10().floor()).clamp(0.0, 6.0) as usize;
         format!("{v:.digits$}")
     } else {
         format!("{v:.1e}")
     }
 }
 
-/// Draw `curves` into the PNG `path` (1000×560 px).
-pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, curves: &[Curve]) -> Result<()> {
-    register_font()?;
-    let draw = |path: &Path| -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>> {
-        let root = BitMapBackend::new(path, (1000, 560)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (x0, x1) = range(curves.iter().flat_map(|c| c.x.iter().copied()));
-        let (y0, y1) = range(curves.iter().flat_map(|c| c.y.iter().copied()));
-        let (xs, ys) = (x0.abs().max(x1.abs()), y0.abs().max(y1.abs()));
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 22))
-            .margin(14)
-            .x_label_area_size(48)
-            .y_label_area_size(84)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .label_style(("sans-serif", 14))
-            .axis_desc_style(("sans-serif", 16))
-            .x_label_formatter(&|v| tick(*v, xs))
-            .y_label_formatter(&|v| tick(*v, ys))
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()?;
-        for (k, c) in curves.iter().enumerate() {
-            let color = COLORS[k % COLORS.len()];
-            chart
-                .draw_series(LineSeries::new(
-                    c.x.iter()
-                        .copied()
-                        .zip(c.y.iter().copied())
-                        .filter(|(x, y)| x.is_finite() && y.is_finite()),
-                    color.stroke_width(if curves.len() > 1 && k == 0 { 2 } else { 1 }),
-                ))?
-                .label(c.label.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 22, y)], color.stroke_width(2)));
+/// A log-axis tick (the axis holds `log10 x`).
+fn log_tick(v: f64) -> String {
+    let x = 10f64.powf(v);
+    if x >= 100.0 {
+        format!("{x:.0}")
+    } else if x >= 1.0 {
+        format!("{x:.2}")
+            .trim_end_matches('0')
+            .trim_end_matches('.')
+            .to_string()
+    } else {
+        let digits = (1.0 - x.log10().floor()).clamp(1.0, 6.0) as usize;
+        format!("{x:.digits$}")
+    }
+}
+
+type DrawResult = std::result::Result<(), String>;
+
+fn e<E: std::fmt::Debug>(err: E) -> String {
+    format!("{err:?}")
+}
+
+/// Draw `fig` on `root` with every length multiplied by `s`.
+fn draw_figure<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure, s: f64) -> DrawResult {
+    let px = |v: f64| (v * s).round() as i32;
+    root.fill(&WHITE).map_err(e)?;
+    let (w, h) = root.dim_in_pixel();
+    let title_h = px(44.0) as u32;
+    let (top, body) = root.split_vertically(title_h);
+    top.draw(&Text::new(
+        fig.title.clone(),
+        ((w / 2) as i32, px(12.0)),
+        ("sans-serif", 22.0 * s)
+            .into_font()
+            .color(&BLACK)
+            .pos(plotters::style::text_anchor::Pos::new(
+                plotters::style::text_anchor::HPos::Center,
+                plotters::style::text_anchor::VPos::Top,
+            )),
+    ))
+    .map_err(e)?;
+    let areas: Vec<DrawingArea<DB, Shift>> = if fig.columns > 1 {
+        let n = fig.panels.len().max(1);
+        body.split_evenly((1, n))
+    } else {
+        let total: f64 = fig.panels.iter().map(|p| p.height).sum::<f64>().max(1e-9);
+        let mut rest = body;
+        let mut out = Vec::new();
+        let body_h = (h - title_h) as f64;
+        for (i, p) in fig.panels.iter().enumerate() {
+            if i + 1 == fig.panels.len() {
+                out.push(rest);
+                break;
+            }
+            let (a, b) = rest.split_vertically((body_h * p.height / total).round() as u32);
+            out.push(a);
+            rest = b;
         }
-        if curves.len() > 1 || curves.iter().any(|c| !c.label.is_empty()) {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(RGBColor(160, 160, 160))
-                .label_font(("sans-serif", 14))
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()?;
-        }
-        root.present()?;
-        Ok(())
+        out
     };
-    // Drawn to a temporary file and renamed: a killed run never leaves half a PNG.
-    crate::output::replace_atomic(path, |tmp| draw(tmp).map_err(|e| std::io::Error::other(e.to_string())))
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("cannot draw {}", path.display()))
+    for (p, area) in fig.panels.iter().zip(&areas) {
+        draw_panel(area, p, s, fig.columns == 1)?;
+    }
+    Ok(())
+}
+
+fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, s: f64, legend_right: bool) -> DrawResult {
+    let px = |v: f64| (v * s).round() as u32;
+    let tx = |x: f64| if p.log_x { x.log10() } else { x };
+    let in_window = |x: f64| p.x_window.is_none_or(|(lo, hi)| x >= lo && x <= hi);
+    let (x0, x1) = match p.x_window {
+        Some((lo, hi)) => (tx(lo), tx(hi)),
+        None => {
+            let (a, b) = range(p.curves.iter().flat_map(|c| c.x.iter().copied().map(tx)));
+            if p.log_x { (a, b) } else { (a, b) }
+        }
+    };
+    let (y0, y1) = range(
+        p.curves
+            .iter()
+            .flat_map(|c| c.x.iter().zip(&c.y).filter(|(x, _)| in_window(**x)).map(|(_, y)| *y)),
+    );
+    let labelled = p.curves.iter().any(|c| !c.label.is_empty());
+    let (plot_area, legend_area) = if labelled && legend_right {
+        let (w, _) = area.dim_in_pixel();
+        let (a, b) = area.split_horizontally(w.saturating_sub(px(LEGEND_WIDTH as f64)));
+        (a, Some(b))
+    } else {
+        (area.clone(), None)
+    };
+    let (xs, ys) = (x0.abs().max(x1.abs()), y0.abs().max(y1.abs()));
+    let mut chart = ChartBuilder::on(&plot_area)
+        .margin(px(10.0))
+        .x_label_area_size(px(48.0))
+        .y_label_area_size(px(84.0))
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(e)?;
+    let log_x = p.log_x;
+    let x_fmt = move |v: &f64| if log_x { log_tick(*v) } else { tick(*v, xs) };
+    chart
+        .configure_mesh()
+        .x_desc(p.x_label.as_str())
+        .y_desc(p.y_label.as_str())
+        .label_style(("sans-serif", 14.0 * s))
+        .axis_desc_style(("sans-serif", 16.0 * s))
+        .x_label_formatter(&x_fmt)
+        .y_label_formatter(&|v| tick(*v, ys))
+        .bold_line_style(RGBColor(215, 215, 215).stroke_width(px(1.0)))
+        .light_line_style(RGBColor(242, 242, 242).stroke_width(px(1.0)))
+        .max_light_lines(if p.height < 0.8 { 1 } else { 4 })
+        .axis_style(RGBColor(90, 90, 90).stroke_width(px(1.0)))
+        .draw()
+        .map_err(e)?;
+    if let Some((lo, hi)) = p.highlight {
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(tx(lo), y0), (tx(hi), y1)],
+                RGBColor(255, 200, 60).mix(0.25).filled(),
+            )))
+            .map_err(e)?;
+    }
+    let width = px(1.25).max(1);
+    for (k, c) in p.curves.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        // Finite runs only: a NaN breaks the line instead of joining across it; values are
+        // clamped to the axes so that nothing is drawn outside them.
+        let mut run: Vec<(f64, f64)> = Vec::new();
+        let mut runs: Vec<Vec<(f64, f64)>> = Vec::new();
+        for (&x, &y) in c.x.iter().zip(&c.y) {
+            let ok = x.is_finite() && y.is_finite() && (!p.log_x || x > 0.0) && in_window(x);
+            if ok {
+                run.push((tx(x), y.clamp(y0, y1)));
+            } else if !run.is_empty() {
+                runs.push(std::mem::take(&mut run));
+            }
+        }
+        if !run.is_empty() {
+            runs.push(run);
+        }
+        for r in &runs {
+            if r.len() == 1 || p.markers {
+                chart
+                    .draw_series(r.iter().map(|&q| Circle::new(q, px(3.0), color.filled())))
+                    .map_err(e)?;
+            }
+            if r.len() > 1 {
+                chart
+                    .draw_series(LineSeries::new(r.iter().copied(), color.stroke_width(width)))
+                    .map_err(e)?;
+            }
+        }
+    }
+    if let Some(legend) = legend_area {
+        let font = ("sans-serif", 14.0 * s).into_font().color(&BLACK);
+        let line_h = px(22.0) as i32;
+        let top = px(30.0) as i32;
+        for (k, c) in p.curves.iter().enumerate() {
+            let color = COLORS[k % COLORS.len()];
+            let y = top + k as i32 * line_h;
+            legend
+                .draw(&PathElement::new(
+                    vec![(px(6.0) as i32, y), (px(30.0) as i32, y)],
+                    color.stroke_width(px(2.0)),
+                ))
+                .map_err(e)?;
+            legend
+                .draw(&Text::new(
+                    c.label.clone(),
+                    (px(36.0) as i32, y - px(8.0) as i32),
+                    font.clone(),
+                ))
+                .map_err(e)?;
+        }
+    } else if labelled && p.curves.len() > 1 {
+        // Side-by-side panels: a legend in the upper corner of the plot area.
+        for (k, c) in p.curves.iter().enumerate() {
+            let color = COLORS[k % COLORS.len()];
+            let _ = chart
+                .draw_series(std::iter::empty::<Circle<(f64, f64), u32>>())
+                .map(|a| {
+                    a.label(c.label.as_str())
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 22, y)], color.stroke_width(2)));
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.9))
+            .border_style(RGBColor(160, 160, 160))
+            .label_font(("sans-serif", 14.0 * s))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(e)?;
+    }
+    Ok(())
+}
+
+/// Render with `draw` at `size` in the current format to `path` (extension replaced);
+/// returns the written path.
+fn render(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl Fn(&dyn Fn(f64) -> f64, RenderTarget) -> DrawResult,
+) -> Result<PathBuf> {
+    register_font()?;
+    let out = output_path(path);
+    let fail = |m: String| anyhow!("cannot draw {}: {m}", out.display());
+    match format() {
+        PlotFormat::Png => {
+            // Twice the size, then a 2×2 box filter: anti-aliased lines and text.
+            let (w, h) = (size.0 * 2, size.1 * 2);
+            let mut buf = vec![255u8; (w * h * 3) as usize];
+            draw(&|v| v * 2.0, RenderTarget::Bitmap(&mut buf, (w, h))).map_err(fail)?;
+            let mut small = vec![0u8; (size.0 * size.1 * 3) as usize];
+            for y in 0..size.1 as usize {
+                for x in 0..size.0 as usize {
+                    for c in 0..3 {
+                        let at = |dx: usize, dy: usize| buf[((2 * y + dy) * w as usize + 2 * x + dx) * 3 + c] as u32;
+                        small[(y * size.0 as usize + x) * 3 + c] =
+                            ((at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1) + 2) / 4) as u8;
+                    }
+                }
+            }
+            // Written to a temporary file and renamed: a killed run never leaves half a PNG.
+            crate::output::replace_atomic(&out, |tmp| {
+                image::save_buffer_with_format(
+                    tmp,
+                    &small,
+                    size.0,
+                    size.1,
+                    image::ColorType::Rgb8,
+                    image::ImageFormat::Png,
+                )
+                .map_err(std::io::Error::other)
+            })
+            .with_context(|| format!("cannot write {}", out.display()))?;
+        }
+        PlotFormat::Svg | PlotFormat::Pdf => {
+            let mut svg = String::new();
+            draw(&|v| v, RenderTarget::Svg(&mut svg, size)).map_err(fail)?;
+            let bytes = if format() == PlotFormat::Svg {
+                svg.into_bytes()
+            } else {
+                svg_to_pdf(&svg).map_err(fail)?
+            };
+            crate::output::write_atomic(&out, &bytes).with_context(|| format!("cannot write {}", out.display()))?;
+        }
+    }
+    Ok(out)
+}
+
+/// Where [`render`] draws.
+enum RenderTarget<'a> {
+    Bitmap(&'a mut [u8], (u32, u32)),
+    Svg(&'a mut String, (u32, u32)),
+}
+
+/// SVG text → PDF bytes, with the bundled font for the text.
+fn svg_to_pdf(svg: &str) -> std::result::Result<Vec<u8>, String> {
+    use svg2pdf::usvg;
+    let mut options = usvg::Options::default();
+    let db = options.fontdb_mut();
+    db.load_font_data(FONT.to_vec());
+    // plotters writes the generic family `sans-serif`: resolve it to the bundled font.
+    db.set_sans_serif_family("DejaVu Sans");
+    options.font_family = "DejaVu Sans".into();
+    let tree = usvg::Tree::from_str(svg, &options).map_err(|e| format!("SVG: {e}"))?;
+    svg2pdf::to_pdf(
+        &tree,
+        svg2pdf::ConversionOptions::default(),
+        svg2pdf::PageOptions::default(),
+    )
+    .map_err(|e| format!("PDF: {e:?}"))
+}
+
+/// Draw `fig` to `path` (extension replaced by the current format); returns the written path.
+pub fn figure(path: &Path, fig: &Figure) -> Result<PathBuf> {
+    render(path, fig.size(), |s, target| {
+        let scale = s(1.0);
+        match target {
+            RenderTarget::Bitmap(buf, size) => {
+                let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
+                draw_figure(&root, fig, scale)?;
+                root.present().map_err(e)
+            }
+            RenderTarget::Svg(buf, size) => {
+                let root = SVGBackend::with_string(buf, size).into_drawing_area();
+                draw_figure(&root, fig, scale)?;
+                root.present().map_err(e)
+            }
+        }
+    })
+}
+
+/// Draw `curves` into one panel at `path` (1100×560 px; the extension follows the current
+/// format, see [`output_path`]).
+pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, curves: &[Curve]) -> Result<()> {
+    let fig = Figure {
+        size: Some((1100, 560)),
+        ..Figure::new(title).panel(Panel::new(x_label, y_label).curves(curves.to_vec()))
+    };
+    figure(path, &fig).map(|_| ())
 }
 
 /// Colour of a spectral radius: white at `ρ = 1`, towards blue for `ρ < 1` and red for `ρ > 1`
@@ -134,18 +539,50 @@ fn rho_color(rho: f64) -> RGBColor {
     }
 }
 
-/// A heat map of `ρ` over a rectangular grid (`rho[iy][ix]` at `(xs[ix], ys[iy])`) with the
-/// `ρ = 1` contour (points where `ρ − 1` changes sign between grid neighbours, interpolated).
-pub fn rho_heatmap(
-    path: &Path,
+/// Segments of the `ρ = 1` contour by marching squares on the grid points.
+fn contour_segments(xs: &[f64], ys: &[f64], rho: &[Vec<f64>]) -> Vec<[(f64, f64); 2]> {
+    let mut out = Vec::new();
+    for iy in 0..ys.len().saturating_sub(1) {
+        for ix in 0..xs.len().saturating_sub(1) {
+            let corners = [
+                (xs[ix], ys[iy], rho[iy][ix] - 1.0),
+                (xs[ix + 1], ys[iy], rho[iy][ix + 1] - 1.0),
+                (xs[ix + 1], ys[iy + 1], rho[iy + 1][ix + 1] - 1.0),
+                (xs[ix], ys[iy + 1], rho[iy + 1][ix] - 1.0),
+            ];
+            if corners.iter().any(|c| !c.2.is_finite()) {
+                continue;
+            }
+            let mut pts = Vec::new();
+            for k in 0..4 {
+                let (a, b) = (corners[k], corners[(k + 1) % 4]);
+                if (a.2 > 0.0) != (b.2 > 0.0) {
+                    let f = a.2 / (a.2 - b.2);
+                    pts.push((a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1)));
+                }
+            }
+            if pts.len() >= 2 {
+                out.push([pts[0], pts[1]]);
+            }
+            if pts.len() == 4 {
+                out.push([pts[2], pts[3]]);
+            }
+        }
+    }
+    out
+}
+
+fn draw_heatmap<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    s: f64,
     title: &str,
     x_label: &str,
     y_label: &str,
     xs: &[f64],
     ys: &[f64],
     rho: &[Vec<f64>],
-) -> Result<()> {
-    register_font()?;
+) -> DrawResult {
+    let px = |v: f64| (v * s).round() as u32;
     let half = |v: &[f64], i: usize| -> (f64, f64) {
         let lo = if i == 0 {
             v[0] - (v.get(1).copied().unwrap_or(v[0] + 1.0) - v[0]) / 2.0
@@ -159,68 +596,124 @@ pub fn rho_heatmap(
         };
         (lo, hi)
     };
-    let draw = |path: &Path| -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>> {
-        let root = BitMapBackend::new(path, (900, 700)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (x0, x1) = (half(xs, 0).0, half(xs, xs.len() - 1).1);
-        let (y0, y1) = (half(ys, 0).0, half(ys, ys.len() - 1).1);
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
-            .margin(14)
-            .x_label_area_size(48)
-            .y_label_area_size(70)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .label_style(("sans-serif", 14))
-            .axis_desc_style(("sans-serif", 16))
-            .draw()?;
-        chart.draw_series(ys.iter().enumerate().flat_map(|(iy, _)| {
+    root.fill(&WHITE).map_err(e)?;
+    let (w, _) = root.dim_in_pixel();
+    let (main, bar) = root.split_horizontally(w - px(130.0));
+    let (x0, x1) = (half(xs, 0).0, half(xs, xs.len() - 1).1);
+    let (y0, y1) = (half(ys, 0).0, half(ys, ys.len() - 1).1);
+    let mut chart = ChartBuilder::on(&main)
+        .caption(title, ("sans-serif", 20.0 * s))
+        .margin(px(14.0))
+        .x_label_area_size(px(48.0))
+        .y_label_area_size(px(70.0))
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(e)?;
+    let (xsc, ysc) = (x0.abs().max(x1.abs()), y0.abs().max(y1.abs()));
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .label_style(("sans-serif", 14.0 * s))
+        .axis_desc_style(("sans-serif", 16.0 * s))
+        .x_label_formatter(&|v| tick(*v, xsc))
+        .y_label_formatter(&|v| tick(*v, ysc))
+        .draw()
+        .map_err(e)?;
+    chart
+        .draw_series(ys.iter().enumerate().flat_map(|(iy, _)| {
             xs.iter().enumerate().map(move |(ix, _)| {
                 let (xa, xb) = half(xs, ix);
                 let (ya, yb) = half(ys, iy);
                 Rectangle::new([(xa, ya), (xb, yb)], rho_color(rho[iy][ix]).filled())
             })
-        }))?;
-        let mut contour = Vec::new();
-        for iy in 0..ys.len() {
-            for ix in 0..xs.len() {
-                let r = rho[iy][ix] - 1.0;
-                if ix + 1 < xs.len() {
-                    let q = rho[iy][ix + 1] - 1.0;
-                    if r.is_finite() && q.is_finite() && (r > 0.0) != (q > 0.0) {
-                        contour.push((xs[ix] + r / (r - q) * (xs[ix + 1] - xs[ix]), ys[iy]));
-                    }
-                }
-                if iy + 1 < ys.len() {
-                    let q = rho[iy + 1][ix] - 1.0;
-                    if r.is_finite() && q.is_finite() && (r > 0.0) != (q > 0.0) {
-                        contour.push((xs[ix], ys[iy] + r / (r - q) * (ys[iy + 1] - ys[iy])));
-                    }
-                }
+        }))
+        .map_err(e)?;
+    for seg in contour_segments(xs, ys, rho) {
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                seg.to_vec(),
+                BLACK.stroke_width(px(2.0)),
+            )))
+            .map_err(e)?;
+    }
+    // Colour bar: ρ from e^{-0.1} to e^{0.1} (the colour scale saturates beyond), ρ = 1 marked.
+    let (r_lo, r_hi) = ((-0.1f64).exp(), 0.1f64.exp());
+    let mut cb = ChartBuilder::on(&bar)
+        .margin_top(px(60.0))
+        .margin_bottom(px(62.0))
+        .margin_right(px(10.0))
+        .y_label_area_size(px(0.0))
+        .right_y_label_area_size(px(64.0))
+        .build_cartesian_2d(0.0..1.0, r_lo..r_hi)
+        .map_err(e)?
+        .set_secondary_coord(0.0..1.0, r_lo..r_hi);
+    cb.configure_secondary_axes()
+        .y_desc("spectral radius ρ")
+        .label_style(("sans-serif", 13.0 * s))
+        .axis_desc_style(("sans-serif", 15.0 * s))
+        .y_labels(9)
+        .y_label_formatter(&|v| format!("{v:.3}"))
+        .draw()
+        .map_err(e)?;
+    let steps = 120;
+    cb.draw_series((0..steps).map(|i| {
+        let a = r_lo + (r_hi - r_lo) * i as f64 / steps as f64;
+        let b = r_lo + (r_hi - r_lo) * (i + 1) as f64 / steps as f64;
+        Rectangle::new([(0.0, a), (1.0, b)], rho_color(0.5 * (a + b)).filled())
+    }))
+    .map_err(e)?;
+    cb.draw_series(std::iter::once(PathElement::new(
+        vec![(0.0, 1.0), (1.0, 1.0)],
+        BLACK.stroke_width(px(2.0)),
+    )))
+    .map_err(e)?;
+    cb.draw_series(std::iter::once(Rectangle::new(
+        [(0.0, r_lo), (1.0, r_hi)],
+        BLACK.stroke_width(px(1.0)),
+    )))
+    .map_err(e)?;
+    let (bw, bh) = bar.dim_in_pixel();
+    bar.draw(&Text::new(
+        "ρ = 1 (black line)".to_string(),
+        (px(4.0) as i32, (bh - px(30.0)) as i32),
+        ("sans-serif", 12.0 * s).into_font().color(&BLACK),
+    ))
+    .map_err(e)?;
+    let _ = bw;
+    Ok(())
+}
+
+/// A heat map of `ρ` over a rectangular grid (`rho[iy][ix]` at `(xs[ix], ys[iy])`) with a colour
+/// bar and the `ρ = 1` contour (marching squares on the grid values, linear interpolation).
+pub fn rho_heatmap(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    xs: &[f64],
+    ys: &[f64],
+    rho: &[Vec<f64>],
+) -> Result<()> {
+    if xs.is_empty() || ys.is_empty() || rho.len() != ys.len() || rho.iter().any(|r| r.len() != xs.len()) {
+        return Err(anyhow!("cannot draw {}: the grid is empty or ragged", path.display()));
+    }
+    render(path, (1000, 700), |s, target| {
+        let scale = s(1.0);
+        match target {
+            RenderTarget::Bitmap(buf, size) => {
+                let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
+                draw_heatmap(&root, scale, title, x_label, y_label, xs, ys, rho)?;
+                root.present().map_err(e)
+            }
+            RenderTarget::Svg(buf, size) => {
+                let root = SVGBackend::with_string(buf, size).into_drawing_area();
+                draw_heatmap(&root, scale, title, x_label, y_label, xs, ys, rho)?;
+                root.present().map_err(e)
             }
         }
-        chart
-            .draw_series(contour.iter().map(|&p| Circle::new(p, 1, BLACK.filled())))?
-            .label("ρ = 1")
-            .legend(|(x, y)| Circle::new((x + 10, y), 3, BLACK.filled()));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .label_font(("sans-serif", 14))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
-        root.present()?;
-        Ok(())
-    };
-    // Drawn to a temporary file and renamed: a killed run never leaves half a PNG.
-    crate::output::replace_atomic(path, |tmp| draw(tmp).map_err(|e| std::io::Error::other(e.to_string())))
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("cannot draw {}", path.display()))
+    })
+    .map(|_| ())
 }
 
 #[cfg(test)]
@@ -234,9 +727,155 @@ mod tests {
         assert_eq!(tick(0.5, 1.0), "0.5");
         assert_eq!(tick(0.06, 0.07), "0.060");
         assert_eq!(tick(400.0, 750.0), "400");
-        assert_eq!(tick(2.0e-4, 3.0e-4), "2.0e-4");
+        assert_eq!(tick(2.0e-4, 3.0e-4), "0.00020");
+        assert_eq!(tick(2.0e-5, 3.0e-5), "2.0e-5");
+        assert_eq!(log_tick(0.0), "1");
+        assert_eq!(log_tick(-1.0), "0.10");
         assert_eq!(range([0.0, 0.0].into_iter()), (-1.0, 1.0));
         let (lo, hi) = range([1.0, 3.0].into_iter());
         assert!(lo < 1.0 && hi > 3.0);
+    }
+
+    /// PNG width and height from the IHDR chunk.
+    fn png_size(bytes: &[u8]) -> (u32, u32) {
+        assert_eq!(&bytes[1..4], b"PNG");
+        let be = |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        (be(16), be(20))
+    }
+
+    /// Pixels within a small distance of `c` in a decoded PNG.
+    fn pixels_near(path: &Path, c: RGBColor) -> usize {
+        let img = image::open(path).unwrap().to_rgb8();
+        img.pixels()
+            .filter(|p| {
+                let d = |a: u8, b: u8| (a as i32 - b as i32).abs();
+                d(p[0], c.0) + d(p[1], c.1) + d(p[2], c.2) < 60
+            })
+            .count()
+    }
+
+    #[test]
+    fn every_figure_kind_renders_in_every_format() {
+        let dir = std::env::temp_dir().join(format!("substep-plots-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let t: Vec<f64> = (0..500).map(|i| i as f64 * 0.01).collect();
+        let sine = |f: f64| t.iter().map(|&x| (f * x).sin()).collect::<Vec<_>>();
+        let mut with_gap = sine(3.0);
+        with_gap[100] = f64::NAN;
+        let curves = vec![
+            Curve {
+                label: "a".into(),
+                x: t.clone(),
+                y: sine(2.0),
+            },
+            Curve {
+                label: "b".into(),
+                x: t.clone(),
+                y: with_gap,
+            },
+            Curve {
+                label: "c".into(),
+                x: t.clone(),
+                y: sine(5.0),
+            },
+        ];
+        let multi = Figure::new("three panels")
+            .panel(Panel::new("t [s]", "u [m]").curves(curves.clone()).highlight(1.0, 2.0))
+            .panel(Panel::new("t [s]", "e [m]").curves(curves[..1].to_vec()).height(0.4))
+            .panel(
+                Panel::new("t [s]", "u [m]")
+                    .curves(curves.clone())
+                    .window(1.0, 2.0)
+                    .height(0.6),
+            );
+        let periods: Vec<f64> = (1..50).map(|i| 0.02 * i as f64).collect();
+        let logf = Figure::new("log x").panel(
+            Panel::new("T [s]", "S [m/s²]")
+                .curves(vec![Curve {
+                    label: "S".into(),
+                    x: periods.clone(),
+                    y: periods.iter().map(|p| 1.0 / p).collect(),
+                }])
+                .log_x()
+                .markers(),
+        );
+        let cols = Figure::new("columns")
+            .columns(2)
+            .panel(Panel::new("x", "y").curves(curves.clone()))
+            .panel(Panel::new("x", "y").curves(curves[..2].to_vec()));
+        let xs: Vec<f64> = (0..30).map(|i| 0.1 * i as f64).collect();
+        let ys: Vec<f64> = (0..20).map(|i| 0.01 * i as f64).collect();
+        let rho: Vec<Vec<f64>> = ys
+            .iter()
+            .map(|y| xs.iter().map(|x| 0.95 + 0.04 * x - y).collect())
+            .collect();
+        for fmt in [PlotFormat::Png, PlotFormat::Svg, PlotFormat::Pdf] {
+            set_format(fmt);
+            let mut written = Vec::new();
+            for (name, fig) in [("multi", &multi), ("log", &logf), ("cols", &cols)] {
+                written.push((
+                    figure(&dir.join(name), fig).unwrap(),
+                    fig.size(),
+                    fig.panels.iter().map(|p| p.curves.len()).max().unwrap(),
+                ));
+            }
+            line_chart(&dir.join("line.png"), "one", "x", "y", &curves).unwrap();
+            written.push((output_path(&dir.join("line.png")), (1100, 560), 3));
+            rho_heatmap(&dir.join("map.png"), "ρ", "Ω", "ζ_s", &xs, &ys, &rho).unwrap();
+            written.push((output_path(&dir.join("map.png")), (1000, 700), 0));
+            for (path, size, series) in written {
+                assert_eq!(path.extension().unwrap(), fmt.extension());
+                let bytes = std::fs::read(&path).unwrap();
+                assert!(bytes.len() > 2000, "{}: {} bytes", path.display(), bytes.len());
+                match fmt {
+                    PlotFormat::Png => {
+                        assert_eq!(png_size(&bytes), size, "{}", path.display());
+                        for k in 0..series {
+                            assert!(
+                                pixels_near(&path, COLORS[k]) > 200,
+                                "{}: series {k} not drawn",
+                                path.display()
+                            );
+                        }
+                    }
+                    PlotFormat::Svg => {
+                        let text = String::from_utf8(bytes).unwrap();
+                        let tree = svg2pdf::usvg::Tree::from_str(&text, &svg2pdf::usvg::Options::default());
+                        assert!(tree.is_ok(), "{}: {:?}", path.display(), tree.err());
+                        assert!(text.contains(&format!("width=\"{}\"", size.0)), "{}", path.display());
+                        for k in 0..series {
+                            let c = COLORS[k];
+                            assert!(
+                                text.contains(&format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2)),
+                                "{}: series {k}",
+                                path.display()
+                            );
+                        }
+                    }
+                    PlotFormat::Pdf => {
+                        assert!(bytes.starts_with(b"%PDF-"), "{}", path.display());
+                        let tail = String::from_utf8_lossy(&bytes[bytes.len() - 64..]).to_string();
+                        assert!(tail.contains("%%EOF"), "{}: {tail}", path.display());
+                    }
+                }
+            }
+        }
+        set_format(PlotFormat::Png);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn contour_of_a_plane_is_a_straight_line() {
+        // ρ − 1 = x − 0.5 on a 3×3 grid: the contour is x = 0.5 in both rows of cells.
+        let xs = [0.0, 0.4, 1.0];
+        let ys = [0.0, 1.0, 2.0];
+        let rho: Vec<Vec<f64>> = ys.iter().map(|_| xs.iter().map(|x| 0.5 + x).collect()).collect();
+        let segs = contour_segments(&xs, &ys, &rho);
+        assert_eq!(segs.len(), 2);
+        for s in segs {
+            for p in s {
+                assert!((p.0 - 0.5).abs() < 1e-12, "{p:?}");
+            }
+        }
     }
 }

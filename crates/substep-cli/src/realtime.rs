@@ -94,7 +94,20 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let mut line = String::new();
     let mut write_error = None;
     let mut last_flush = std::time::Instant::now();
+    // Response peaks for the printed summary: (|x|, index, t) of u and of f_c.
+    let mut peak_u = (0.0_f64, 0usize, 0.0_f64);
+    let mut peak_f = (0.0_f64, 0usize, 0.0_f64);
     let sink = |r: &substep::realtime::StepRecordOwned| {
+        for (k, &x) in r.u.iter().enumerate() {
+            if x.abs() > peak_u.0 {
+                peak_u = (x.abs(), k, r.time);
+            }
+        }
+        for (k, &x) in r.coupling_force.iter().enumerate() {
+            if x.abs() > peak_f.0 {
+                peak_f = (x.abs(), k, r.time);
+            }
+        }
         line.clear();
         num(&mut line, r.time);
         for group in [
@@ -171,16 +184,39 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         "outputs": outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
     });
     write_json(&summary_path, &summary)?;
+    // The full report with the latency histogram goes to a file; stdout gets the statistics.
+    let text = report.to_string();
+    let report_path = out_dir.join("realtime.txt");
+    write_atomic(&report_path, text.as_bytes()).with_context(|| format!("cannot write {}", report_path.display()))?;
     if !args.quiet {
-        print!("{report}");
+        for l in text
+            .lines()
+            .take_while(|l| !l.starts_with("wake-up lateness histogram"))
+        {
+            println!("  {l}");
+        }
+        println!(
+            "  peak relative displacement |u| = {:.6} m (DOF {}, t = {:.3} s); peak coupling force |f_c| = {:.3} N (DOF {}, t = {:.3} s)",
+            peak_u.0,
+            peak_u.1 + 1,
+            peak_u.2,
+            peak_f.0,
+            sub.coupling_dofs.get(peak_f.1).map_or(0, |d| d + 1),
+            peak_f.2
+        );
         if let Some(n) = ramp_substeps.filter(|&n| n > 0) {
             println!("  the {n} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)");
         }
         let names: Vec<String> = outputs
             .iter()
+            .chain(std::iter::once(&report_path))
             .filter_map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()))
             .collect();
-        println!("  outputs in {}: {}", out_dir.display(), names.join(", "));
+        println!(
+            "  outputs in {}: {} (realtime.txt has the latency histogram)",
+            out_dir.display(),
+            names.join(", ")
+        );
     }
     match failure {
         Some(e) => Err(e.into()),

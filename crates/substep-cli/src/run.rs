@@ -4,7 +4,7 @@
 use crate::output::{
     Decimated, ErrorStats, ErrorTracker, HistoryWriter, Peak, PeakTracker, SubstepWriter, prepare_dir, write_atomic,
 };
-use crate::plots::{Curve, line_chart};
+use crate::plots::{Curve, Figure, Panel, line_chart, output_path};
 use crate::{DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, RunArgs};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -145,6 +145,11 @@ struct Summary {
     /// Warnings of the run (e.g. a phase-lag compensator disabled by its guard).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     warnings: Vec<String>,
+    /// PGA and response-spectrum peak of the input.
+    input_motion: Value,
+    /// Energy balance, base shear, drifts, absolute accelerations (dense models up to 200 DOFs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    engineering: Option<Value>,
     outputs: Vec<String>,
 }
 
@@ -315,7 +320,8 @@ fn compensation_charts(def: &TestDefinition, table: &Decimated, dir: &Path) -> R
     let dof = s.coupling_dofs[0] + 1;
     let t = table.column(0);
     let mut out = Vec::new();
-    if s.error_force != ErrorForceSpec::None {
+    let wants = |f: &str| def.output.plot_options.wants(f);
+    if s.error_force != ErrorForceSpec::None && wants("compensation_force") {
         let path = dir.join("compensation_force.png");
         line_chart(
             &path,
@@ -335,9 +341,9 @@ fn compensation_charts(def: &TestDefinition, table: &Decimated, dir: &Path) -> R
                 },
             ],
         )?;
-        out.push(path);
+        out.push(output_path(&path));
     }
-    if s.phase_lag.is_some() {
+    if s.phase_lag.is_some() && wants("tracking_error") {
         let path = dir.join("tracking_error.png");
         line_chart(
             &path,
@@ -350,7 +356,7 @@ fn compensation_charts(def: &TestDefinition, table: &Decimated, dir: &Path) -> R
                 y: table.column(3),
             }],
         )?;
-        out.push(path);
+        out.push(output_path(&path));
     }
     Ok(out)
 }
@@ -533,9 +539,11 @@ impl Recorder {
         }
     }
 
-    /// The charts of the run (`reference`: the reference's scheme name, if there is one).
-    fn charts(&self, reference: Option<&str>) -> Vec<Chart> {
+    /// The figures of the run (`reference`: the reference's scheme name, if there is one;
+    /// `window`: the `[output.plots] window` for the hysteresis and the zoom panel).
+    fn charts(&self, reference: Option<&str>, window: Option<(f64, f64)>) -> Vec<Chart> {
         let time = self.table.column(0);
+        let duration = time.last().copied().unwrap_or(0.0);
         let dof_curves = |col: &dyn Fn(usize) -> usize| -> Vec<Curve> {
             (0..self.sel.len())
                 .map(|k| Curve {
@@ -545,82 +553,159 @@ impl Recorder {
                 })
                 .collect()
         };
+        let one = |title: &str, x: &str, y: &str, curves: Vec<Curve>| Figure {
+            size: Some((1100, 560)),
+            ..Figure::new(title).panel(Panel::new(x, y).curves(curves))
+        };
         let time_s = "time t [s]";
         let mut charts = vec![
             Chart {
-                file: "displacement.png",
-                title: "Relative displacement".into(),
-                x_label: time_s,
-                y_label: "displacement u [m]",
-                curves: dof_curves(&|k| self.col_u(k)),
+                file: "displacement",
+                figure: one(
+                    "Displacement relative to the ground",
+                    time_s,
+                    "relative displacement u [m]",
+                    dof_curves(&|k| self.col_u(k)),
+                ),
             },
             Chart {
-                file: "acceleration.png",
-                title: "Relative acceleration".into(),
-                x_label: time_s,
-                y_label: "acceleration a [m/s²]",
-                curves: dof_curves(&|k| self.col_a(k)),
+                file: "acceleration",
+                figure: one(
+                    "Acceleration relative to the ground (absolute: response.csv)",
+                    time_s,
+                    "relative acceleration ü [m/s²]",
+                    dof_curves(&|k| self.col_a(k)),
+                ),
             },
         ];
         if self.coupling.is_empty() {
             return charts;
         }
-        // Quantity `j` of each coupling DOF against time, or against the measured displacement.
-        let coupling_curves = |j: usize, against_time: bool| -> Vec<Curve> {
+        // Quantity `j` of each coupling DOF against time.
+        let coupling_curves = |j: usize| -> Vec<Curve> {
             (0..self.coupling.len().min(MAX_CURVES))
                 .map(|k| Curve {
                     label: format!("DOF {}", self.coupling[k] + 1),
-                    x: if against_time {
-                        time.clone()
-                    } else {
-                        self.table.column(self.col_coupling(k, 2))
-                    },
+                    x: time.clone(),
                     y: self.table.column(self.col_coupling(k, j)),
                 })
                 .collect()
         };
         charts.push(Chart {
-            file: "coupling_force.png",
-            title: "Measured coupling force on the structure".into(),
-            x_label: time_s,
-            y_label: "force f_c [N]",
-            curves: coupling_curves(0, true),
+            file: "coupling_force",
+            figure: one(
+                "Measured coupling force on the structure",
+                time_s,
+                "coupling force f_c [N]",
+                coupling_curves(0),
+            ),
         });
         charts.push(Chart {
-            file: "error_force.png",
-            title: "Error force f(k) − f(k−1)".into(),
-            x_label: time_s,
-            y_label: "error force [N]",
-            curves: coupling_curves(1, true),
+            file: "error_force",
+            figure: one(
+                "Error force f(k) − f(k−1) of the last sub-step",
+                time_s,
+                "error force [N]",
+                coupling_curves(1),
+            ),
         });
+        // Hysteresis in the field's convention: the force on the specimen (−f_c) against the
+        // specimen's measured displacement, over a window (default: 10 % of the record around
+        // the peak displacement) so that the loops can be read.
+        let dm0 = self.table.column(self.col_coupling(0, 2));
+        let (w0, w1) = window.unwrap_or_else(|| {
+            let (i, _) = dm0
+                .iter()
+                .enumerate()
+                .fold((0, 0.0_f64), |b, (i, &x)| if x.abs() > b.1 { (i, x.abs()) } else { b });
+            let centre = time.get(i).copied().unwrap_or(0.0);
+            let half = 0.05 * duration;
+            ((centre - half).max(0.0), (centre + half).min(duration.max(1e-9)))
+        });
+        let hyst: Vec<Curve> = (0..self.coupling.len().min(MAX_CURVES))
+            .map(|k| {
+                let (x, y): (Vec<f64>, Vec<f64>) = time
+                    .iter()
+                    .zip(self.table.column(self.col_coupling(k, 2)))
+                    .zip(self.table.column(self.col_coupling(k, 0)))
+                    .filter(|((t, _), _)| **t >= w0 && **t <= w1)
+                    .map(|((_, d), f)| (d, -f))
+                    .unzip();
+                Curve {
+                    label: format!("DOF {}", self.coupling[k] + 1),
+                    x,
+                    y,
+                }
+            })
+            .collect();
         charts.push(Chart {
-            file: "hysteresis.png",
-            title: "Coupling force vs measured displacement".into(),
-            x_label: "measured displacement d_m [m]",
-            y_label: "force f_c [N]",
-            curves: coupling_curves(0, false),
+            file: "hysteresis",
+            figure: one(
+                &format!("Specimen force vs displacement, t = {w0:.2} … {w1:.2} s"),
+                "specimen displacement d_m [m] (measured)",
+                "force on the specimen −f_c [N]",
+                hyst,
+            ),
         });
         if let Some(scheme) = reference {
             // The first coupling DOF is always among the plotted DOFs.
             let c = self.coupling[0];
             let k = self.sel.iter().position(|&d| d == c).unwrap_or(0);
+            let r = self.table.column(self.col_coupling(0, 3));
+            let u = self.table.column(self.col_u(k));
+            let err: Vec<f64> = u.iter().zip(&r).map(|(a, b)| a - b).collect();
+            let (i_max, _) = err
+                .iter()
+                .enumerate()
+                .fold((0, 0.0_f64), |b, (i, &x)| if x.abs() > b.1 { (i, x.abs()) } else { b });
+            let (z0, z1) = window.unwrap_or_else(|| {
+                let centre = time.get(i_max).copied().unwrap_or(0.0);
+                let half = 0.03 * duration;
+                ((centre - half).max(0.0), (centre + half).min(duration.max(1e-9)))
+            });
+            let peak_r = r.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+            let curves = vec![
+                Curve {
+                    label: format!("reference ({scheme})"),
+                    x: time.clone(),
+                    y: r.clone(),
+                },
+                Curve {
+                    label: "substructure test".into(),
+                    x: time.clone(),
+                    y: u.clone(),
+                },
+            ];
             charts.push(Chart {
-                file: "reference.png",
-                title: format!("DOF {}: substructure test vs reference ({scheme})", c + 1),
-                x_label: time_s,
-                y_label: "displacement u [m]",
-                curves: vec![
-                    Curve {
-                        label: format!("reference ({scheme})"),
-                        x: time.clone(),
-                        y: self.table.column(self.col_coupling(0, 3)),
-                    },
-                    Curve {
-                        label: "substructure test".into(),
-                        x: time.clone(),
-                        y: self.table.column(self.col_u(k)),
-                    },
-                ],
+                file: "reference",
+                figure: Figure::new(&format!(
+                    "DOF {}: substructure test vs reference ({scheme}); peak error {:.2} % of the peak reference",
+                    c + 1,
+                    100.0 * err.get(i_max).map_or(0.0, |e| e.abs()) / peak_r.max(f64::MIN_POSITIVE)
+                ))
+                .panel(
+                    Panel::new(time_s, "displacement u [m]")
+                        .curves(curves.clone())
+                        .highlight(z0, z1),
+                )
+                .panel(
+                    Panel::new(time_s, "error u − u_ref [m]")
+                        .curves(vec![Curve {
+                            label: "test − reference".into(),
+                            x: time.clone(),
+                            y: err,
+                        }])
+                        .height(0.45),
+                )
+                .panel(
+                    Panel::new(
+                        &format!("time t [s] (zoom on {z0:.2} … {z1:.2} s)"),
+                        "displacement u [m]",
+                    )
+                    .curves(curves)
+                    .window(z0, z1)
+                    .height(0.7),
+                ),
             });
         }
         charts
@@ -630,36 +715,47 @@ impl Recorder {
         let show = |name: &str, unit: &str, p: &PeakTracker| {
             let (k, peak) = p.largest();
             println!(
-                "  peak |{name}| = {:.4e} {unit} (DOF {}, t = {:.3} s)",
-                peak.max_abs,
+                "  peak {name} = {} {unit} (DOF {}, t = {:.3} s)",
+                fixed(peak.max_abs),
                 k + 1,
                 peak.t
             );
         };
-        show("u", "m", &self.peak_u);
-        show("v", "m/s", &self.peak_v);
-        show("a", "m/s²", &self.peak_a);
+        show("relative displacement |u|", "m", &self.peak_u);
+        show("relative velocity |u̇|", "m/s", &self.peak_v);
+        show("relative acceleration |ü|", "m/s²", &self.peak_a);
         if !self.coupling.is_empty() {
             let (k, p) = self.peak_fc.largest();
             let (ke, pe) = self.peak_fe.largest();
             println!(
-                "  peak coupling force {:.4e} N (DOF {}, t = {:.3} s), peak |error force| {:.4e} N (DOF {})",
-                p.max_abs,
+                "  peak coupling force |f_c| = {} N (DOF {}, t = {:.3} s), peak |error force| = {} N (DOF {})",
+                fixed(p.max_abs),
                 self.coupling[k] + 1,
                 p.t,
-                pe.max_abs,
+                fixed(pe.max_abs),
                 self.coupling[ke] + 1
             );
         }
     }
 }
 
+/// A number in fixed-point notation with about four significant digits (no exponent for
+/// the magnitudes of a test: 1e-6 … 1e9).
+fn fixed(x: f64) -> String {
+    let a = x.abs();
+    if a == 0.0 || !a.is_finite() {
+        return format!("{x}");
+    }
+    if !(1e-6..1e9).contains(&a) {
+        return format!("{x:.3e}");
+    }
+    let digits = (3.0 - a.log10().floor()).clamp(0.0, 9.0) as usize;
+    format!("{x:.digits$}")
+}
+
 struct Chart {
     file: &'static str,
-    title: String,
-    x_label: &'static str,
-    y_label: &'static str,
-    curves: Vec<Curve>,
+    figure: Figure,
 }
 
 fn print_header(args: &RunArgs, def: &TestDefinition) {
@@ -739,6 +835,17 @@ pub fn run(args: &RunArgs) -> Result<()> {
         .clone()
         .or_else(|| def.output.dir.clone())
         .unwrap_or_else(|| PathBuf::from("results"));
+    let format = args
+        .plot_format
+        .or_else(|| {
+            def.output
+                .plot_options
+                .format
+                .as_deref()
+                .and_then(crate::plots::PlotFormat::from_name)
+        })
+        .unwrap_or(crate::plots::PlotFormat::Png);
+    crate::plots::set_format(format);
     if args.realtime {
         let name = args
             .config
@@ -801,6 +908,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let mut last_flush = Instant::now();
 
     let mut recorder = Recorder::new(n, &coupling);
+    let mut engineering = crate::engineering::Engineering::create(&def, &out_dir)?;
     let substep_length = def
         .substructure
         .as_ref()
@@ -824,6 +932,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
             )
             .with_context(|| cannot_write(&history_path))?;
         recorder.record(&sim, reference.as_ref());
+        if let Some(e) = &mut engineering {
+            e.record(&sim)?;
+        }
         if let Some(rec) = sim.coupling() {
             let first_of = |name: &str| {
                 groups
@@ -867,14 +978,30 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     let done = sim.steps_done();
 
-    if def.output.plots && !args.no_plots && recorder.table.rows() > 1 {
-        for chart in recorder.charts(reference.as_ref().map(|r| r.scheme())) {
-            let path = out_dir.join(chart.file);
-            line_chart(&path, &chart.title, chart.x_label, chart.y_label, &chart.curves)?;
-            outputs.push(path);
+    let plot_opts = &def.output.plot_options;
+    let plotting = def.output.plots && !args.no_plots;
+    if let Some(e) = &mut engineering {
+        outputs.push(e.finish()?);
+    }
+    let (gm_files, gm_figures, gm_summary) = crate::engineering::ground_motion_outputs(&def, &out_dir)?;
+    outputs.extend(gm_files);
+    if plotting && recorder.table.rows() > 1 {
+        let mut figures: Vec<(&str, Figure)> = recorder
+            .charts(reference.as_ref().map(|r| r.scheme()), plot_opts.window)
+            .into_iter()
+            .map(|c| (c.file, c.figure))
+            .collect();
+        if let Some(e) = &engineering {
+            figures.extend(e.figures());
+        }
+        figures.extend(gm_figures);
+        for (file, fig) in figures {
+            if plot_opts.wants(file) {
+                outputs.push(crate::plots::figure(&out_dir.join(file), &fig)?);
+            }
         }
     }
-    if def.output.plots && !args.no_plots && comp_table.rows() > 1 {
+    if plotting && comp_table.rows() > 1 {
         for path in compensation_charts(&def, &comp_table, &out_dir)? {
             outputs.push(path);
         }
@@ -947,6 +1074,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
         estimation,
         phase_lag,
         warnings,
+        input_motion: gm_summary,
+        engineering: engineering.as_ref().map(|e| e.summary()),
         outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
     };
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
@@ -986,6 +1115,14 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 percent(r.max_displacement_error),
                 percent(r.max_force_error)
             );
+            println!(
+                "    (largest |test − reference| over the run and all DOFs, relative to that DOF's peak |reference|)"
+            );
+        }
+        if let Some(e) = &engineering {
+            for line in e.lines() {
+                println!("{line}");
+            }
         }
         let names: Vec<String> = outputs
             .iter()

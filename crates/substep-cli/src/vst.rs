@@ -281,6 +281,7 @@ fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result<TestDefini
         output: OutputSettings {
             dir: None,
             plots: false,
+            plot_options: Default::default(),
         },
     })
 }

@@ -147,9 +147,64 @@ fn plan_recommends_a_stable_setting() {
     let lines = read_lines(&dir.join("plan.csv"));
     assert_eq!(
         lines[0],
-        "dt,k_sub,delay,rho,margin,class,peak,freq_hz,freq_hz_exact,amplitude_error,period_error"
+        "dt,k_sub,delay,rho,margin,class,error,error_dt,error_substep,error_delay,dominant,us_per_step,budget_share,peak,freq_hz,freq_hz_exact,amplitude_error,period_error"
     );
     assert_eq!(lines.len(), 1 + 3 * 2 * 2);
+    assert!(
+        stdout.contains("dominant error: ") && stdout.contains("remedy: "),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn plan_analyses_phase_lag_compensation_frozen_and_changes_its_advice() {
+    let dir = temp_dir("plan-phase-lag");
+    let base = std::fs::read_to_string(examples().join("tmd_substructure.toml")).unwrap();
+    let base = base.replace("dir = \"results/tmd_substructure\"", "").replace(
+        "file = \"ag_sweep.csv\"",
+        "generator = \"harmonic\"\namplitude = 1.0\nfrequency = 1.0\nduration = 1.0",
+    );
+    let with = dir.join("with.toml");
+    std::fs::write(
+        &with,
+        format!("{base}\n[substructure.phase_lag]\nkind = \"polynomial\"\norder = 2\n").replace(
+            "[substructure.actuator]\nkind = \"ideal\"",
+            "[substructure.actuator]\nkind = \"ideal\"\ndelay = 0.01",
+        ),
+    )
+    .unwrap();
+    let without = dir.join("without.toml");
+    std::fs::write(
+        &without,
+        base.replace(
+            "[substructure.actuator]\nkind = \"ideal\"",
+            "[substructure.actuator]\nkind = \"ideal\"\ndelay = 0.01",
+        ),
+    )
+    .unwrap();
+    let run = |cfg: &std::path::Path| {
+        let out = substep(&[
+            "analyze",
+            "plan",
+            cfg.to_str().unwrap(),
+            "--k-sub",
+            "4",
+            "--dt",
+            "0.01",
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        text(&out.stdout)
+    };
+    let a = run(&without);
+    let b = run(&with);
+    assert!(
+        a.contains("dominant error: actuator delay/lag") && a.contains("remedy: phase-lag compensation"),
+        "{a}"
+    );
+    assert!(b.contains("phase-lag compensation (polynomial) analysed frozen"), "{b}");
+    assert!(!b.contains("remedy: phase-lag compensation,"), "{b}");
 }
 
 #[test]

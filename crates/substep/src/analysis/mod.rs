@@ -6,13 +6,16 @@
 //! grids, and the discrete frequency response with amplitude and period errors.
 
 pub mod amplification;
+pub mod energy;
 pub mod frequency;
 pub mod metrics;
+pub mod plan;
 pub mod spectral;
 pub mod stability;
+pub mod storey;
 pub mod tmd_case;
 pub mod tracking;
 pub mod verify;
 
-pub use amplification::{Stability, StepMap};
+pub use amplification::{FrequencyResponse, Stability, StepMap};
 pub use tmd_case::{AnalysisCase, FrozenPhaseLag, Parameter};

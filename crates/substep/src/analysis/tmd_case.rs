@@ -86,6 +86,18 @@ impl Parameter {
             Parameter::Omega => "Omega",
         }
     }
+    /// The symbol for figures and tables (`η_m`, `ζ_s`, `Ω`, …).
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Parameter::ZetaS => "ζ_s",
+            Parameter::Zeta => "ζ",
+            Parameter::EtaF => "η_f",
+            Parameter::EtaM => "η_m",
+            Parameter::EtaP => "η_p",
+            Parameter::EtaT => "η_T",
+            Parameter::Omega => "Ω",
+        }
+    }
 }
 
 impl AnalysisCase {

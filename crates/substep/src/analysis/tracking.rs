@@ -202,10 +202,10 @@ pub struct TrackingMetrics {
 /// Tracking metrics of one coupling DOF.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Tracking {
-    /// Cross-correlation delay of the measured displacement behind the command [s] (`None`
+    /// Cross-correlation delay of the measured displacement behind the command \[s\] (`None`
     /// when undefined, e.g. no motion).
     pub delay: Option<f64>,
-    /// Upper end of the lag range searched [s]: a delay equal to it means "at least".
+    /// Upper end of the lag range searched \[s\]: a delay equal to it means "at least".
     pub max_delay: f64,
     /// `std(x_m − d) / std(d)`.
     pub nrms: f64,
@@ -214,12 +214,12 @@ pub struct Tracking {
 }
 
 impl TrackingMetrics {
-    /// Longest delay searched, whatever the sub-step length [s].
+    /// Longest delay searched, whatever the sub-step length \[s\].
     pub const MAX_DELAY: f64 = 0.1;
     /// Cap on the lags kept per coupling DOF (bounds memory and the cost per sub-step).
     pub const MAX_LAGS: usize = 1000;
 
-    /// For `n_coupling` DOFs and sub-step length `substep_length` [s] (> 0).
+    /// For `n_coupling` DOFs and sub-step length `substep_length` \[s\] (> 0).
     pub fn new(n_coupling: usize, substep_length: f64) -> Self {
         let lags = if substep_length > 0.0 {
             ((Self::MAX_DELAY / substep_length).ceil() as usize).clamp(1, Self::MAX_LAGS)

@@ -25,6 +25,7 @@
 mod generators;
 mod readers;
 mod record;
+pub mod spectrum;
 
 pub use generators::{Envelope, KanaiTajimi, harmonic, kanai_tajimi, sine_sweep};
 pub use readers::{

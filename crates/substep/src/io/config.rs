@@ -76,7 +76,7 @@ pub struct IntegratorDefinition {
     /// The scheme name as given in the config (e.g. `average_acceleration`).
     pub name: String,
     pub scheme: Scheme,
-    /// Time step [s].
+    /// Time step \[s\].
     pub dt: f64,
     /// Number of steps; the run covers `t = 0 ..= steps·dt`.
     pub steps: usize,
@@ -134,7 +134,7 @@ pub struct RemoteDefinition {
     pub protocol: RemoteProtocol,
     pub transport: Transport,
     pub mode: Mode,
-    /// Reply timeout [s] (checked: at most `MAX_DURATION_SECS`).
+    /// Reply timeout \[s\] (checked: at most `MAX_DURATION_SECS`).
     pub timeout: f64,
     /// The site's shared secret (`secret_file`, else `SUBSTEP_SITE_SECRET`).
     pub secret: Option<Secret>,
@@ -258,8 +258,45 @@ impl SubstructureDefinition {
 pub struct OutputSettings {
     /// Output directory from `[output] dir`, if given.
     pub dir: Option<PathBuf>,
-    /// Whether to draw PNG plots.
+    /// Whether to draw figures.
     pub plots: bool,
+    /// `[output.plots]`: format, time window and which figures.
+    pub plot_options: PlotOptions,
+}
+
+/// Figure names accepted by `[output.plots] figures` (the file names without extension).
+pub const PLOT_FIGURES: &[&str] = &[
+    "displacement",
+    "acceleration",
+    "coupling_force",
+    "error_force",
+    "hysteresis",
+    "reference",
+    "compensation_force",
+    "tracking_error",
+    "energy",
+    "base_shear",
+    "storeys",
+    "ground_motion",
+    "response_spectrum",
+];
+
+/// The `[output.plots]` table (all optional).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PlotOptions {
+    /// `png`, `svg` or `pdf`.
+    pub format: Option<String>,
+    /// Time window `[t0, t1]` \[s\] of the hysteresis plot and the zoom panel.
+    pub window: Option<(f64, f64)>,
+    /// Only these figures (names from [`PLOT_FIGURES`]); all when `None`.
+    pub figures: Option<Vec<String>>,
+}
+
+impl PlotOptions {
+    /// Whether figure `name` is to be drawn.
+    pub fn wants(&self, name: &str) -> bool {
+        self.figures.as_ref().is_none_or(|f| f.iter().any(|n| n == name))
+    }
 }
 
 impl TestDefinition {
@@ -283,7 +320,7 @@ impl TestDefinition {
         })
     }
 
-    /// Step time `t_i = i·dt` [s].
+    /// Step time `t_i = i·dt` \[s\].
     pub fn time(&self, step: usize) -> f64 {
         step as f64 * self.integrator.dt
     }
@@ -291,7 +328,7 @@ impl TestDefinition {
 
 /// `FILE: line L: message` from a toml error (its message may span lines; they are joined).
 pub(super) fn toml_error(e: &toml::de::Error, text: &str, name: &str) -> Error {
-    let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
+    let message = plain_types(&e.message().split_whitespace().collect::<Vec<_>>().join(" "));
     match e.span() {
         Some(span) => {
             let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
@@ -488,6 +525,7 @@ struct RawGroundMotion {
     file: Option<String>,
     dt: Option<f64>,
     scale: Option<f64>,
+    units: Option<String>,
     generator: Option<String>,
     amplitude: Option<f64>,
     frequency: Option<f64>,
@@ -783,17 +821,98 @@ struct RawPhaseLag {
 #[serde(deny_unknown_fields)]
 struct RawOutput {
     dir: Option<String>,
-    #[serde(default = "yes")]
-    plots: bool,
+    #[serde(default)]
+    plots: RawPlots,
 }
 
-fn yes() -> bool {
-    true
+/// `[output] plots = true | false`, or the table `[output.plots]`.
+#[derive(Debug)]
+enum RawPlots {
+    Enabled(bool),
+    Table(RawPlotTable),
+}
+
+impl Default for RawPlots {
+    fn default() -> Self {
+        RawPlots::Enabled(true)
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlotTable {
+    enabled: Option<bool>,
+    format: Option<String>,
+    window: Option<[f64; 2]>,
+    figures: Option<Vec<String>>,
+}
+
+impl<'de> Deserialize<'de> for RawPlots {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = RawPlots;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("true, false or a table [output.plots] with enabled, format, window, figures")
+            }
+            fn visit_bool<E: serde::de::Error>(self, v: bool) -> std::result::Result<RawPlots, E> {
+                Ok(RawPlots::Enabled(v))
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> std::result::Result<RawPlots, A::Error> {
+                RawPlotTable::deserialize(serde::de::value::MapAccessDeserializer::new(map)).map(RawPlots::Table)
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+impl RawPlots {
+    fn build(&self) -> Result<(bool, PlotOptions)> {
+        let t = match self {
+            RawPlots::Enabled(b) => return Ok((*b, PlotOptions::default())),
+            RawPlots::Table(t) => t,
+        };
+        if let Some(f) = &t.format
+            && !["png", "svg", "pdf"].contains(&f.as_str())
+        {
+            return Err(Error::invalid(
+                "output.plots.format",
+                format!("unknown format '{f}' (expected \"png\", \"svg\" or \"pdf\")"),
+            ));
+        }
+        if let Some([a, b]) = t.window
+            && !(a.is_finite() && b.is_finite() && a >= 0.0 && b > a)
+        {
+            return Err(Error::invalid(
+                "output.plots.window",
+                format!("must be [t0, t1] with 0 ≤ t0 < t1 [s], got [{a}, {b}]"),
+            ));
+        }
+        if let Some(figs) = &t.figures
+            && let Some(bad) = figs.iter().find(|f| !PLOT_FIGURES.contains(&f.as_str()))
+        {
+            return Err(Error::invalid(
+                "output.plots.figures",
+                format!("unknown figure '{bad}' (expected some of {})", PLOT_FIGURES.join(", ")),
+            ));
+        }
+        Ok((
+            t.enabled.unwrap_or(true),
+            PlotOptions {
+                format: t.format.clone(),
+                window: t.window.map(|[a, b]| (a, b)),
+                figures: t.figures.clone(),
+            },
+        ))
+    }
 }
 
 impl Default for RawOutput {
     fn default() -> Self {
-        Self { dir: None, plots: true }
+        Self {
+            dir: None,
+            plots: RawPlots::default(),
+        }
     }
 }
 
@@ -995,9 +1114,13 @@ impl RawConfig {
                 steps,
             },
             substructure,
-            output: OutputSettings {
-                dir: self.output.dir.map(PathBuf::from),
-                plots: self.output.plots,
+            output: {
+                let (plots, plot_options) = self.output.plots.build()?;
+                OutputSettings {
+                    dir: self.output.dir.map(PathBuf::from),
+                    plots,
+                    plot_options,
+                }
             },
         })
     }
@@ -1616,6 +1739,30 @@ impl RawGroundMotion {
                 format!("must be finite, got {scale}"),
             ));
         }
+        // Units of the file's (or generator's) values; `.AT2` records are in g by definition and
+        // converted by their reader.
+        let is_at2 = self
+            .file
+            .as_deref()
+            .is_some_and(|f| Path::new(f).extension().is_some_and(|e| e.eq_ignore_ascii_case("at2")));
+        let units = match (self.units.as_deref(), is_at2) {
+            (None | Some("m/s2"), false) => 1.0,
+            (Some("g"), false) => excitation::G,
+            (Some("cm/s2"), false) => 0.01,
+            (None | Some("g"), true) => 1.0,
+            (Some(u @ ("m/s2" | "cm/s2")), true) => {
+                return Err(Error::invalid(
+                    "ground_motion.units",
+                    format!("a PEER .AT2 record is in g (converted on reading), not {u}"),
+                ));
+            }
+            (Some(other), _) => {
+                return Err(Error::invalid(
+                    "ground_motion.units",
+                    format!("unknown units '{other}' (expected \"m/s2\", \"g\" or \"cm/s2\")"),
+                ));
+            }
+        };
         let generator_keys = [
             ("amplitude", self.amplitude.is_some()),
             ("frequency", self.frequency.is_some()),
@@ -1669,6 +1816,10 @@ impl RawGroundMotion {
                 self.generate(kind, length, dt, &generator_keys)?
             }
         };
+        let description = match self.units.as_deref() {
+            Some(u) if !is_at2 && u != "m/s2" => format!("{description}, in {u}"),
+            _ => description,
+        };
         let description = if scale == 1.0 {
             description
         } else {
@@ -1676,7 +1827,7 @@ impl RawGroundMotion {
         };
         check_samples(limits, duration.unwrap_or(record.duration()), dt)?;
         let accel = record
-            .scaled(scale)?
+            .scaled(scale * units)?
             .resample(dt, duration)
             .map_err(|e| prefixed(e, "ground_motion: "))?;
         Ok(GroundMotion { accel, description })
@@ -1770,6 +1921,31 @@ impl RawGroundMotion {
             }
         }
     }
+}
+
+/// serde's Rust type names in a message replaced by what a user types ("expected usize" →
+/// "expected a whole number ≥ 0").
+pub(super) fn plain_types(message: &str) -> String {
+    let mut m = message.to_string();
+    for (rust, plain) in [
+        ("expected usize", "expected a whole number ≥ 0"),
+        ("expected u64", "expected a whole number ≥ 0"),
+        ("expected u32", "expected a whole number ≥ 0 (at most 4294967295)"),
+        ("expected u16", "expected a whole number 0…65535"),
+        ("expected u8", "expected a whole number 0…255"),
+        ("expected i64", "expected a whole number"),
+        ("expected i32", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected f32", "expected a number"),
+        ("expected a sequence", "expected an array [..]"),
+        ("expected a map", "expected a table"),
+        ("floating point", "the number"),
+        ("invalid type: integer", "invalid value: the whole number"),
+        ("invalid type:", "wrong type:"),
+    ] {
+        m = m.replace(rust, plain);
+    }
+    m
 }
 
 /// `specimen.<key>` from a specimen constructor becomes `<what>.<key>`.
@@ -2915,7 +3091,14 @@ seed = 3
             }
         }
         assert_eq!(s.error_force, ErrorForceSpec::None);
-        assert_eq!(d.output, OutputSettings { dir: None, plots: true });
+        assert_eq!(
+            d.output,
+            OutputSettings {
+                dir: None,
+                plots: true,
+                plot_options: PlotOptions::default()
+            }
+        );
     }
 
     #[test]

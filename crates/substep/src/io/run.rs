@@ -78,7 +78,7 @@ impl Simulation {
     pub fn steps_total(&self) -> usize {
         self.accel.len() - 1
     }
-    /// Time of the current state [s].
+    /// Time of the current state \[s\].
     pub fn time(&self) -> f64 {
         self.step as f64 * self.dt
     }
@@ -156,7 +156,7 @@ struct SpecimenRows {
 }
 
 /// The monolithic reference of a substructure test with linear specimens: numerical model plus
-/// specimens assembled ([`assemble_monolithic`]) and integrated exactly (first-order hold) if it
+/// specimens assembled ([`assemble_monolithic`](crate::specimen::assemble_monolithic)) and integrated exactly (first-order hold) if it
 /// has at most [`EXACT_REFERENCE_MAX_DOFS`] DOFs, else with the run's Newmark scheme.
 pub struct Reference {
     integrator: Box<dyn Integrator>,
@@ -274,11 +274,11 @@ impl Reference {
         }
     }
 
-    /// Displacements of the numerical DOFs [m].
+    /// Displacements of the numerical DOFs \[m\].
     pub fn u(&self) -> &[f64] {
         &self.integrator.state().u.as_slice()[..self.n_numerical]
     }
-    /// Force of the specimens on the structure at each coupling DOF [N].
+    /// Force of the specimens on the structure at each coupling DOF \[N\].
     pub fn coupling_force(&self) -> &[f64] {
         &self.force
     }

@@ -18,9 +18,9 @@ pub fn sdof(mass: f64, damping: f64, stiffness: f64) -> Result<StructuralModel> 
 /// Primary structure with a tuned mass damper (docs/theory.md §1.5; parameters: §9.3).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TmdSystem {
-    /// Primary mass `m` [kg].
+    /// Primary mass `m` \[kg\].
     pub mass: f64,
-    /// Primary natural frequency `f` [Hz].
+    /// Primary natural frequency `f` \[Hz\].
     pub frequency: f64,
     /// Primary damping ratio `ζ`.
     pub zeta: f64,
@@ -95,9 +95,9 @@ pub fn tmd_two_dof(p: &TmdSystem) -> Result<StructuralModel> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ShearBuilding {
     pub stories: usize,
-    /// Floor mass [kg].
+    /// Floor mass \[kg\].
     pub story_mass: f64,
-    /// Target first natural period [s].
+    /// Target first natural period \[s\].
     pub first_period: f64,
 }
 

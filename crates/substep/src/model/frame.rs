@@ -21,9 +21,9 @@ use nalgebra::{DMatrix, DVector};
 /// Cross-section properties of a member (strong axis in the frame plane).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Section {
-    /// Area `A` [m²].
+    /// Area `A` \[m²\].
     pub area: f64,
-    /// Second moment of area `I` [m⁴].
+    /// Second moment of area `I` \[m⁴\].
     pub inertia: f64,
 }
 
@@ -58,17 +58,17 @@ pub struct Frame2d {
     pub bays: usize,
     /// Stories (≥ 1).
     pub stories: usize,
-    /// Bay width [m].
+    /// Bay width \[m\].
     pub bay_width: f64,
-    /// Story height [m].
+    /// Story height \[m\].
     pub story_height: f64,
-    /// Young's modulus of all members [Pa].
+    /// Young's modulus of all members \[Pa\].
     pub elastic_modulus: f64,
     pub column: Section,
     pub beam: Section,
     /// Density of the members [kg/m³] (their own mass; must be > 0).
     pub density: f64,
-    /// Floor mass per bay and floor [kg], lumped at the bay's two end nodes.
+    /// Floor mass per bay and floor \[kg\], lumped at the bay's two end nodes.
     pub floor_mass_per_bay: f64,
     /// Tie the horizontal DOFs of each floor into one (axially rigid floor).
     pub rigid_diaphragm: bool,

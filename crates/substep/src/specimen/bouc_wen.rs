@@ -119,7 +119,7 @@ pub struct BoucWenParams {
     pub stiffness: f64,
     /// Post-yield stiffness ratio `α ∈ [0, 1]`.
     pub alpha: f64,
-    /// Yield displacement `u_y` [m] (`> 0`).
+    /// Yield displacement `u_y` \[m\] (`> 0`).
     pub yield_displacement: f64,
     /// `A > 0` (default 1).
     pub a: f64,
@@ -214,7 +214,7 @@ impl BoucWenParams {
         Ok(())
     }
 
-    /// Bound of `|z|` without degradation, `z_u = u_y (A / (β + γ))^{1/n}` [m].
+    /// Bound of `|z|` without degradation, `z_u = u_y (A / (β + γ))^{1/n}` \[m\].
     pub fn z_ultimate(&self) -> f64 {
         self.yield_displacement * (self.a / (self.beta + self.gamma)).powf(1.0 / self.n)
     }
@@ -283,7 +283,7 @@ impl BoucWen {
         &self.p
     }
 
-    /// Committed hysteretic displacement `z` [m].
+    /// Committed hysteretic displacement `z` \[m\].
     pub fn z(&self) -> f64 {
         self.z
     }
@@ -293,7 +293,7 @@ impl BoucWen {
         self.eps
     }
 
-    /// Committed hysteretic energy `E_h = (1 − α) k u_y² ε` [J] (excludes the viscous part).
+    /// Committed hysteretic energy `E_h = (1 − α) k u_y² ε` \[J\] (excludes the viscous part).
     pub fn hysteretic_energy(&self) -> f64 {
         (1.0 - self.p.alpha) * self.p.stiffness * self.p.yield_displacement.powi(2) * self.eps
     }

@@ -45,7 +45,7 @@ pub struct Friction {
 }
 
 impl Friction {
-    /// `slip_force` `F_s ≥ 0` [N], `damping` `c ≥ 0` [N s/m].
+    /// `slip_force` `F_s ≥ 0` \[N\], `damping` `c ≥ 0` [N s/m].
     pub fn new(slip_force: f64, model: FrictionModel, damping: f64) -> Result<Self> {
         require_non_negative("specimen.slip_force", slip_force)?;
         match model {
@@ -74,7 +74,7 @@ impl Friction {
         self.slip_force
     }
 
-    /// Committed slip displacement `u_p` [m] (0 for the smooth model).
+    /// Committed slip displacement `u_p` \[m\] (0 for the smooth model).
     pub fn slip(&self) -> f64 {
         self.u_p
     }

@@ -23,8 +23,8 @@ pub use replay::Replay;
 pub use spec::{LinearMatrices, SpecimenSpec, assemble_monolithic};
 
 /// The motion imposed on a specimen over one interval: coupling displacements move linearly
-/// from `d_start` to `d_end` [m] while the ground acceleration moves linearly from `ag_start`
-/// to `ag_end` [m/s²], over `dt` [s].
+/// from `d_start` to `d_end` \[m\] while the ground acceleration moves linearly from `ag_start`
+/// to `ag_end` [m/s²], over `dt` \[s\].
 #[derive(Debug, Clone, Copy)]
 pub struct Motion<'a> {
     pub d_start: &'a [f64],
@@ -41,7 +41,7 @@ pub trait Specimen: Send {
     /// Number of coupling DOFs the specimen is attached to.
     fn n_dofs(&self) -> usize;
     /// Advance from the committed state through `motion`; write the force on the structure at
-    /// the end of the interval (one entry per attached DOF) into `force` [N].
+    /// the end of the interval (one entry per attached DOF) into `force` \[N\].
     fn advance(&mut self, motion: &Motion, force: &mut [f64]);
     /// Accept the trial state computed by the last `advance`.
     fn commit(&mut self);

@@ -18,7 +18,7 @@ pub struct Replay {
 }
 
 impl Replay {
-    /// `dt` the record's sampling interval [s] (`> 0`), `values` the forces [N] (non-empty,
+    /// `dt` the record's sampling interval \[s\] (`> 0`), `values` the forces \[N\] (non-empty,
     /// finite).
     pub fn new(dt: f64, values: impl Into<Arc<[f64]>>) -> Result<Self> {
         require_positive("specimen.dt", dt)?;
@@ -40,12 +40,12 @@ impl Replay {
         })
     }
 
-    /// Committed elapsed time [s].
+    /// Committed elapsed time \[s\].
     pub fn time(&self) -> f64 {
         self.t
     }
 
-    /// Duration of the record, `(N−1) Δt_rec` [s].
+    /// Duration of the record, `(N−1) Δt_rec` \[s\].
     pub fn duration(&self) -> f64 {
         (self.values.len() - 1) as f64 * self.dt
     }

@@ -28,7 +28,7 @@ pub enum SpecimenSpec {
     /// Bouc–Wen hysteretic spring to ground on model DOF `dof` (0-based); see
     /// [`BoucWenParams`] for the parameters and their defaults.
     BoucWen { dof: usize, params: BoucWenParams },
-    /// Friction damper on model DOF `dof` (0-based): slip force `slip_force` [N], the friction
+    /// Friction damper on model DOF `dof` (0-based): slip force `slip_force` \[N\], the friction
     /// law `model` (configs default to `stick_slip`), linear viscous part `damping` [N s/m].
     Friction {
         dof: usize,
@@ -36,8 +36,8 @@ pub enum SpecimenSpec {
         model: FrictionModel,
         damping: f64,
     },
-    /// Replay of a measured force record on model DOF `dof` (0-based): samples `values` [N] of
-    /// the force on the structure at `t = j dt` [s], independent of the motion.
+    /// Replay of a measured force record on model DOF `dof` (0-based): samples `values` \[N\] of
+    /// the force on the structure at `t = j dt` \[s\], independent of the motion.
     Replay { dof: usize, dt: f64, values: Vec<f64> },
     /// Mass, dashpot and spring at model DOF `dof` (0-based) itself ([`LumpedSdof`]).
     LumpedSdof {

@@ -16,7 +16,7 @@ pub enum ErrorForceSpec {
     /// 2..=12) per coupling DOF, RLS with forgetting factor `lambda` and initial covariance `p0`
     /// (of the normalised regressor). The last sub-step's force is predicted, the last command
     /// solved consistently with it, and `f_u = e = f^{(k)} − f̂^{(k)}` (P = 1). See
-    /// [`super::estimation`].
+    /// the module docs of `substructure::estimation` (private; summarised in docs/substructure.md).
     Arx { order: usize, lambda: f64, p0: f64 },
 }
 

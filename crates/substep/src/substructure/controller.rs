@@ -15,7 +15,7 @@ use nalgebra::{DMatrix, DVector};
 /// Parameters of the sub-step algorithm.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SubstepSettings {
-    /// Time step Δt [s].
+    /// Time step Δt \[s\].
     pub dt: f64,
     /// Newmark β, γ (average acceleration ¼, ½ by default).
     pub beta: f64,
@@ -142,27 +142,27 @@ impl SubstepController {
     pub fn gain_columns(&self) -> &DMatrix<f64> {
         &self.gain_columns
     }
-    /// Measured coupling force `f_c,i` of the last completed step [N].
+    /// Measured coupling force `f_c,i` of the last completed step \[N\].
     pub fn coupling_force(&self) -> &[f64] {
         self.force.as_slice()
     }
-    /// Error force `e = f^{(k)} − f^{(k−1)}` of the last completed step [N].
+    /// Error force `e = f^{(k)} − f^{(k−1)}` of the last completed step \[N\].
     pub fn error_force(&self) -> &[f64] {
         &self.error_force
     }
-    /// Compensation force `f_u` that enters the next predictor [N].
+    /// Compensation force `f_u` that enters the next predictor \[N\].
     pub fn compensation_force(&self) -> &[f64] {
         &self.compensation_force
     }
-    /// The last command `d^{(j)}` [m].
+    /// The last command `d^{(j)}` \[m\].
     pub fn command(&self) -> &[f64] {
         self.command.as_slice()
     }
-    /// Coupling part of the current predictor `x̂_c` [m].
+    /// Coupling part of the current predictor `x̂_c` \[m\].
     pub fn predictor_c(&self) -> &[f64] {
         self.predictor_c.as_slice()
     }
-    /// Coupling part of the previous step's predictor `x̂_c^{(i)}` [m], where the command ramp
+    /// Coupling part of the previous step's predictor `x̂_c^{(i)}` \[m\], where the command ramp
     /// of the current step starts (for a site that runs the sub-steps itself).
     pub fn predictor_c_prev(&self) -> &[f64] {
         self.predictor_c_prev.as_slice()

@@ -35,10 +35,10 @@ pub fn substep_ground_acceleration(ag_i: f64, ag_next: f64, j: usize, k: usize) 
 pub trait ExperimentalSubstructure: Send {
     /// Number of coupling DOFs (actuators / load cells).
     fn n_coupling(&self) -> usize;
-    /// Execute one sub-step of length `dtau` [s]: the actuators move towards `command` [m]
+    /// Execute one sub-step of length `dtau` \[s\]: the actuators move towards `command` \[m\]
     /// (one value per coupling DOF) while the ground acceleration ramps from `ag.0` to `ag.1`
-    /// [m/s²]. On return, `force` holds the measured force on the numerical substructure [N]
-    /// and `displacement` the measured coupling displacement [m].
+    /// [m/s²]. On return, `force` holds the measured force on the numerical substructure \[N\]
+    /// and `displacement` the measured coupling displacement \[m\].
     fn substep(
         &mut self,
         command: &[f64],

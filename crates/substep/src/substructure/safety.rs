@@ -29,7 +29,7 @@ pub struct SafetyLimits {
     pub displacement: Option<Vec<f64>>,
     pub velocity: Option<Vec<f64>>,
     pub force: Option<Vec<f64>>,
-    /// Duration of the ramp to the safe position after a stop [s].
+    /// Duration of the ramp to the safe position after a stop \[s\].
     pub ramp_time: f64,
 }
 

@@ -75,7 +75,7 @@ impl ServoSpec {
     }
 }
 
-/// An actuator as configured: dynamics plus a pure delay [s].
+/// An actuator as configured: dynamics plus a pure delay \[s\].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ActuatorSpec {
     pub dynamics: Dynamics,
@@ -327,7 +327,7 @@ impl Actuator {
         &self.spec
     }
 
-    /// Achieved displacement at the end of the last interval [m].
+    /// Achieved displacement at the end of the last interval \[m\].
     pub fn position(&self) -> f64 {
         self.position
     }

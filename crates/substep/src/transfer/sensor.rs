@@ -28,7 +28,7 @@ pub enum NoiseGenerator {
 pub struct SensorSpec {
     /// Standard deviation of the additive noise, in the measured unit (N or m).
     pub noise_std: f64,
-    /// Cut-off frequency of a first-order low-pass filter [Hz].
+    /// Cut-off frequency of a first-order low-pass filter \[Hz\].
     pub lowpass_hz: Option<f64>,
     /// A/D converter: number of bits over `[-range, range]`.
     pub adc_bits: Option<u32>,
