@@ -545,15 +545,6 @@ struct RawLimits {
 #[derive(Debug, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub(super) enum RawSpecimen {
-    /// Mass, dashpot and spring at the coupling DOF itself.
-    LumpedSdof {
-        dof: usize,
-        mass: f64,
-        #[serde(default)]
-        damping: f64,
-        #[serde(default)]
-        stiffness: f64,
-    },
     LinearSdof {
         dof: usize,
         mass: Option<f64>,
@@ -607,6 +598,15 @@ pub(super) enum RawSpecimen {
         dt: Option<f64>,
         #[serde(default = "one")]
         scale: f64,
+    },
+    /// Mass, dashpot and spring at the coupling DOF itself.
+    LumpedSdof {
+        dof: usize,
+        mass: f64,
+        #[serde(default)]
+        damping: f64,
+        #[serde(default)]
+        stiffness: f64,
     },
 }
 
