@@ -493,4 +493,57 @@ fn bad_transfer_inputs_name_the_key() {
     );
     let e = with_force("loadcell").unwrap_err().to_string();
     assert!(e.starts_with("cfg.toml: substructure.force: unknown 'loadcell'"), "{e}");
+    // The lab's options are refused with a remote site (which replaces the lab).
+    let remote = TestDefinition::from_toml(
+        &format!(
+            "{}[substructure.remote]\naddress = \"127.0.0.1:9\"\n",
+            BASE.replace("substeps = 4\n", "substeps = 4\nforce = \"from_motion\"\n")
+        ),
+        "cfg.toml",
+        std::path::Path::new(""),
+    );
+    let e = remote.map(|_| ()).unwrap_err().to_string();
+    assert!(
+        e.starts_with("cfg.toml: substructure.force: belongs to the virtual lab"),
+        "{e}"
+    );
+}
+
+#[test]
+fn benchmark_channel_seeds_are_the_same_locally_and_on_a_site() {
+    // A site derives its channels from the base spec with `channel_sensors`; a local run from
+    // the config: both give the same per-channel seeds, so a remote run reproduces a local one.
+    let def = parse("[substructure.sensors]\ngenerator = \"benchmark\"\nforce_noise = 1.0\ndisplacement_noise = 1.0\n")
+        .unwrap();
+    let s = def.substructure.as_ref().unwrap();
+    let base = SensorSpec {
+        noise_std: 1.0,
+        generator: substep::transfer::NoiseGenerator::Benchmark,
+        seed: u64::from(BENCHMARK_SEED),
+        ..SensorSpec::ideal()
+    };
+    let (f, d) = substep::transfer::channel_sensors(&base, &base, 1);
+    assert_eq!(f[0], s.force_sensors[0]);
+    assert_eq!(d[0], s.displacement_sensors[0]);
+    assert!((1..=2_147_483_646).contains(&f[0].seed) && f[0].seed != d[0].seed);
+    // What a site cannot do is refused there, with the key.
+    let site = |sensors: &str| {
+        substep::io::site_config::SiteDefinition::from_toml(
+            &format!(
+                "[site]\nprotocol = \"substep\"\nlisten = \"127.0.0.1:8090\"\n[[specimen]]\nkind = \"linear_sdof\"\ndof = 1\nstiffness = 10.0\n[sensors]\n{sensors}"
+            ),
+            "site.toml",
+            std::path::Path::new(""),
+        )
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+    };
+    site("generator = \"benchmark\"\nforce_noise = 1.0\n").unwrap();
+    let e = site("shared_noise = true\n").unwrap_err();
+    assert!(
+        e.starts_with("site.toml: sensors.shared_noise: is not supported by a site"),
+        "{e}"
+    );
+    let e = site("command_range = 1.0\ncommand_bits = 16\n").unwrap_err();
+    assert!(e.starts_with("site.toml: sensors.command_range:"), "{e}");
 }
