@@ -493,4 +493,99 @@ fn bad_transfer_inputs_name_the_key() {
     );
     let e = with_force("loadcell").unwrap_err().to_string();
     assert!(e.starts_with("cfg.toml: substructure.force: unknown 'loadcell'"), "{e}");
+    // The lab's options are refused with a remote site (which replaces the lab).
+    let remote = TestDefinition::from_toml(
+        &format!(
+            "{}[substructure.remote]\naddress = \"127.0.0.1:9\"\n",
+            BASE.replace("substeps = 4\n", "substeps = 4\nforce = \"from_motion\"\n")
+        ),
+        "cfg.toml",
+        std::path::Path::new(""),
+    );
+    let e = remote.map(|_| ()).unwrap_err().to_string();
+    assert!(
+        e.starts_with("cfg.toml: substructure.force: belongs to the virtual lab"),
+        "{e}"
+    );
+}
+
+#[test]
+fn benchmark_channel_seeds_are_the_same_locally_and_on_a_site() {
+    // A site derives its channels from the base spec with `channel_sensors`; a local run from
+    // the config: both give the same per-channel seeds, so a remote run reproduces a local one.
+    let def = parse("[substructure.sensors]\ngenerator = \"benchmark\"\nforce_noise = 1.0\ndisplacement_noise = 1.0\n")
+        .unwrap();
+    let s = def.substructure.as_ref().unwrap();
+    let base = SensorSpec {
+        noise_std: 1.0,
+        generator: substep::transfer::NoiseGenerator::Benchmark,
+        seed: u64::from(BENCHMARK_SEED),
+        ..SensorSpec::ideal()
+    };
+    let (f, d) = substep::transfer::channel_sensors(&base, &base, 1);
+    assert_eq!(f[0], s.force_sensors[0]);
+    assert_eq!(d[0], s.displacement_sensors[0]);
+    assert!((1..=2_147_483_646).contains(&f[0].seed) && f[0].seed != d[0].seed);
+    // What a site cannot do is refused there, with the key.
+    let site = |sensors: &str| {
+        substep::io::site_config::SiteDefinition::from_toml(
+            &format!(
+                "[site]\nprotocol = \"substep\"\nlisten = \"127.0.0.1:8090\"\n[[specimen]]\nkind = \"linear_sdof\"\ndof = 1\nstiffness = 10.0\n[sensors]\n{sensors}"
+            ),
+            "site.toml",
+            std::path::Path::new(""),
+        )
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+    };
+    site("generator = \"benchmark\"\nforce_noise = 1.0\n").unwrap();
+    let e = site("shared_noise = true\n").unwrap_err();
+    assert!(
+        e.starts_with("site.toml: sensors.shared_noise: is not supported by a site"),
+        "{e}"
+    );
+    let e = site("command_range = 1.0\ncommand_bits = 16\n").unwrap_err();
+    assert!(e.starts_with("site.toml: sensors.command_range:"), "{e}");
+}
+
+#[test]
+fn state_round_trip_of_the_new_kinds_and_the_controller() {
+    // Save the state, go on, restore, go on again: bit-identical (checkpoints and the linear
+    // analysis rely on it).
+    let dtau = 1.0 / 4096.0;
+    let kinds = [
+        ActuatorSpec {
+            dynamics: Dynamics::ServoHydraulic(ServoSpec::benchmark()),
+            delay: 5e-4,
+        },
+        tf(&[1.0, 30.0], &[1.0, 60.0]),
+        tf(&[142122.3], &[1.0, 527.8, 142122.3]),
+    ];
+    let pi = TransferFunction::new("c", &[2.0, 95.0], &[1.0, 0.0]).unwrap();
+    let lead = TransferFunction::new("f", &[50.8, 8570.4], &[1.0, 8570.4]).unwrap();
+    for spec in kinds {
+        let inner = lab(spec.clone(), benchmark_specimen(), dtau, 3, &LabOptions::default());
+        let mut site = substep::transfer::ControlledSite::new(Box::new(inner), "c", &pi, Some(&lead), dtau).unwrap();
+        let cmd = |j: usize| 1e-3 * (j as f64 * 0.01).sin();
+        let (mut f, mut d) = ([0.0], [0.0]);
+        for j in 0..300 {
+            site.substep(&[cmd(j)], (0.0, 0.0), dtau, &mut f, &mut d).unwrap();
+        }
+        let mut state = vec![0.0; site.state_len()];
+        site.write_state(&mut state);
+        let run = |site: &mut substep::transfer::ControlledSite| -> Vec<f64> {
+            let (mut f, mut d) = ([0.0], [0.0]);
+            (300..400)
+                .flat_map(|j| {
+                    site.substep(&[cmd(j)], (0.0, 0.0), dtau, &mut f, &mut d).unwrap();
+                    [f[0], d[0]]
+                })
+                .collect()
+        };
+        let first = run(&mut site);
+        site.read_state(&state);
+        let second = run(&mut site);
+        assert_eq!(first, second, "{:?}", spec.dynamics);
+        assert!(first.iter().any(|v| *v != 0.0));
+    }
 }

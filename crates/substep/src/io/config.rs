@@ -40,7 +40,8 @@ use crate::transfer::lti::{StateSpace, TransferFunction};
 use crate::transfer::noise::BENCHMARK_SEED;
 use crate::transfer::servo::Derivative;
 use crate::transfer::{
-    ActuatorSpec, ControlledSite, Dynamics, LabOptions, NoiseGenerator, SensorSpec, ServoSpec, VirtualLab, channel_seed,
+    ActuatorSpec, ControlledSite, Dynamics, LabOptions, NoiseGenerator, SensorSpec, ServoSpec, VirtualLab,
+    channel_seed_for,
 };
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
@@ -612,15 +613,6 @@ struct RawLimits {
 #[derive(Debug, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub(super) enum RawSpecimen {
-    /// Mass, dashpot and spring at the coupling DOF itself.
-    LumpedSdof {
-        dof: usize,
-        mass: f64,
-        #[serde(default)]
-        damping: f64,
-        #[serde(default)]
-        stiffness: f64,
-    },
     LinearSdof {
         dof: usize,
         mass: Option<f64>,
@@ -674,6 +666,15 @@ pub(super) enum RawSpecimen {
         dt: Option<f64>,
         #[serde(default = "one")]
         scale: f64,
+    },
+    /// Mass, dashpot and spring at the coupling DOF itself.
+    LumpedSdof {
+        dof: usize,
+        mass: f64,
+        #[serde(default)]
+        damping: f64,
+        #[serde(default)]
+        stiffness: f64,
     },
 }
 
@@ -2308,6 +2309,11 @@ impl RawSensors {
         }
     }
 
+    /// Whether the channels share one noise sequence.
+    pub(super) fn shared_noise(&self) -> bool {
+        self.shared_noise
+    }
+
     /// The configured seed; by default 1, or the benchmark's start state for its generator.
     fn seed(&self) -> u64 {
         match (self.seed, self.generator.as_deref()) {
@@ -2412,11 +2418,7 @@ impl RawSensors {
             if self.shared_noise {
                 return seed;
             }
-            let s = channel_seed(seed, ch);
-            match generator {
-                NoiseGenerator::ChaCha => s,
-                NoiseGenerator::Benchmark => s % 2_147_483_646 + 1,
-            }
+            channel_seed_for(generator, seed, ch)
         };
         for (key, q, range) in [
             ("force_quantum", self.force_quantum, self.force_range),
@@ -2855,6 +2857,19 @@ impl RawSubstructure {
             Some(s) => s.command_converter()?,
             None => None,
         };
+        if remote.is_some() {
+            // These belong to the virtual lab, which a remote site replaces.
+            let local = [
+                ("force", force_from_motion),
+                ("sensors.command_range", command_converter.is_some()),
+            ];
+            if let Some((key, _)) = local.iter().find(|(_, on)| *on) {
+                return Err(Error::invalid(
+                    format!("{p}{key}"),
+                    "belongs to the virtual lab and is not used with [substructure.remote] (configure the site)",
+                ));
+            }
+        }
         let (force_sensors, displacement_sensors) = match &self.sensors {
             Some(s) => s.specs(coupling.len())?,
             None => (

@@ -274,6 +274,21 @@ impl RawSite {
                     None => ActuatorSpec::ideal(),
                 };
                 actuator.validate()?;
+                if let Some(r) = &self.sensors {
+                    // A site derives its channels' seeds itself and has no D/A stage yet.
+                    if r.shared_noise() {
+                        return Err(Error::invalid(
+                            "sensors.shared_noise",
+                            "is not supported by a site (each channel gets its own sequence)",
+                        ));
+                    }
+                    if !matches!(r.command_converter(), Ok(None)) {
+                        return Err(Error::invalid(
+                            "sensors.command_range",
+                            "the D/A converter on the commands is not supported by a site",
+                        ));
+                    }
+                }
                 let (force_sensor, displacement_sensor) = match &self.sensors {
                     Some(r) => r.base_specs().map_err(|e| match e {
                         Error::InvalidInput { what, reason } => {

@@ -32,4 +32,4 @@ pub mod servo;
 pub use actuator::{Actuator, ActuatorSpec, DelayLine, Dynamics, ServoSpec};
 pub use controlled::ControlledSite;
 pub use lab::{AttachedSpecimen, LabOptions, VirtualLab};
-pub use sensor::{NoiseGenerator, Sensor, SensorSpec, channel_seed, channel_sensors};
+pub use sensor::{NoiseGenerator, Sensor, SensorSpec, channel_seed, channel_seed_for, channel_sensors};

@@ -177,15 +177,24 @@ pub fn channel_seed(seed: u64, channel: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// [`channel_seed`] kept in the generator's seed range (`1 ..= 2³¹ − 2` for the benchmark's).
+pub fn channel_seed_for(generator: NoiseGenerator, seed: u64, channel: u64) -> u64 {
+    let s = channel_seed(seed, channel);
+    match generator {
+        NoiseGenerator::ChaCha => s,
+        NoiseGenerator::Benchmark => s % 2_147_483_646 + 1,
+    }
+}
+
 /// One force and one displacement sensor per coupling DOF from base specs, each with its own
-/// seed derived from the base spec's seed by [`channel_seed`].
+/// seed derived from the base spec's seed by [`channel_seed_for`].
 pub fn channel_sensors(
     force: &SensorSpec,
     displacement: &SensorSpec,
     n_c: usize,
 ) -> (Vec<SensorSpec>, Vec<SensorSpec>) {
     let with = |s: &SensorSpec, ch: u64| SensorSpec {
-        seed: channel_seed(s.seed, ch),
+        seed: channel_seed_for(s.generator, s.seed, ch),
         ..*s
     };
     (
