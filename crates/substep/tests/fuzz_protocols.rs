@@ -623,3 +623,70 @@ fn sstp_client_survives_a_hostile_site() {
     }
     site.join().unwrap();
 }
+
+#[test]
+fn sstp_udp_server_survives_arbitrary_datagrams() {
+    use std::net::UdpSocket;
+    let server = SiteServer::spawn_udp(
+        UdpSocket::bind("127.0.0.1:0").unwrap(),
+        spring_lab().factory(),
+        &quick_options(),
+    )
+    .unwrap();
+    let addr = server.local_addr();
+    let mut r = rng(7);
+    let base = LIVE.load(Ordering::Relaxed);
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.set_nonblocking(true).unwrap();
+    let mut hello = Vec::new();
+    Message::Hello(hello2()).encode(0, &mut hello);
+    let mut buf = vec![0u8; 65_536];
+    for case in 0..live_cases(2_000) {
+        let mut d = Vec::new();
+        match case % 4 {
+            // a valid handshake now and then, so that requests hit a live session too
+            0 => d.extend_from_slice(&hello),
+            1 => {
+                let len = r.random_range(0..300);
+                d.extend((0..len).map(|_| r.random::<u8>()));
+            }
+            _ => {
+                random_message(&mut r, 2, 4).encode(r.random_range(0..4), &mut d);
+                mutate(&mut r, &mut d);
+            }
+        }
+        let _ = sock.send_to(&d, addr);
+        if case % 64 == 0 {
+            std::thread::sleep(Duration::from_millis(1)); // let the server keep up
+        }
+        // replies that have arrived (if any) are protocol frames
+        while let Ok((n, _)) = sock.recv_from(&mut buf) {
+            assert!(n >= 4 && &buf[..4] == b"SSTP", "{:?}", &buf[..n.min(16)]);
+        }
+    }
+    let growth = PEAK.load(Ordering::Relaxed).saturating_sub(base);
+    assert!(growth < 64 << 20, "heap grew by {growth} bytes");
+    // a valid UDP client is served afterwards (the fuzz socket's session, if any, is another
+    // address: wait for its idle timeout on "busy")
+    let opts = ClientOptions {
+        timeout: Duration::from_millis(300),
+        ..ClientOptions::default()
+    };
+    let mut site = None;
+    for _ in 0..100 {
+        match RemoteSite::connect(addr, Transport::Udp, hello2(), &opts) {
+            Ok(s) => {
+                site = Some(s);
+                break;
+            }
+            Err(e) if e.to_string().contains("busy") => std::thread::sleep(Duration::from_millis(20)),
+            Err(e) => panic!("{e}"),
+        }
+    }
+    let mut site = site.expect("served");
+    let (mut f, mut d) = (vec![0.0; 2], vec![0.0; 2]);
+    site.substep(&[1e-3, 2e-3], (0.0, 0.0), 0.0025, &mut f, &mut d).unwrap();
+    assert_eq!(f, vec![-10.0, -40.0]);
+    drop(site);
+    server.stop().unwrap();
+}

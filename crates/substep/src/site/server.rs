@@ -712,15 +712,15 @@ impl Hosted {
 
 /// Why a handshake did not lead to a session.
 struct Refusal {
-    /// Reply (if any) and its sequence number.
-    reply: Option<(Message, u32)>,
+    /// Sequence number of the `Reject` (with `log` as its reason) to send, if any.
+    reply: Option<u32>,
     log: String,
 }
 
 impl Refusal {
     fn reject(reason: String, seq: u32) -> Self {
         Refusal {
-            reply: Some((Message::Reject { reason: reason.clone() }, seq)),
+            reply: Some(seq),
             log: reason,
         }
     }
@@ -800,8 +800,14 @@ fn serve_tcp_connection(
     let (mut session, accept_seq, mac) = match handshake {
         Ok(x) => x,
         Err(refusal) => {
-            if let Some((msg, seq)) = &refusal.reply {
-                let _ = send(&mut stream, msg, *seq);
+            if let Some(seq) = refusal.reply {
+                let _ = send(
+                    &mut stream,
+                    &Message::Reject {
+                        reason: refusal.log.clone(),
+                    },
+                    seq,
+                );
             }
             options.log(&format!("site: {peer} rejected: {}", refusal.log));
             report.rejected += 1;
@@ -1022,8 +1028,14 @@ impl UdpServer {
         );
     }
     fn refuse(&mut self, from: SocketAddr, options: &ServeOptions, refusal: Refusal) {
-        if let Some((msg, seq)) = &refusal.reply {
-            self.send(from, msg, *seq);
+        if let Some(seq) = refusal.reply {
+            self.send(
+                from,
+                &Message::Reject {
+                    reason: refusal.log.clone(),
+                },
+                seq,
+            );
         }
         options.log(&format!("site: {from} rejected: {}", refusal.log));
         self.report.rejected += 1;
