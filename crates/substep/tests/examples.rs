@@ -117,3 +117,18 @@ fn ideal_tmd_test_converges_to_the_exact_solution() {
         "max coupling-force error {ferr} against the exact solution"
     );
 }
+
+/// The example site configs (`examples/sites/*.toml`, for `substep site serve`) parse.
+#[test]
+fn every_example_site_config_parses() {
+    let dir = examples_dir().join("sites");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            substep::io::site_config::SiteDefinition::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+            n += 1;
+        }
+    }
+    assert!(n >= 1, "no site config in {}", dir.display());
+}
