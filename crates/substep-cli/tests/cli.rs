@@ -271,7 +271,7 @@ fn bad_input_gives_one_line_and_exit_code_2() {
         (
             "unknown_specimen_kind",
             edit("kind = \"linear_sdof\"", "kind = \"magic\""),
-            "unknown variant `magic`, expected one of `lumped_sdof`, `linear_sdof`, `linear_mdof`, `bouc_wen`, `friction`, `replay`",
+            "unknown variant `magic`, expected one of `linear_sdof`, `linear_mdof`, `bouc_wen`, `friction`, `replay`, `lumped_sdof`",
         ),
         (
             "unknown_actuator_kind",
@@ -390,7 +390,16 @@ fn a_run_removes_the_outputs_of_an_earlier_run_and_nothing_else() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
     assert_eq!(
         file_names(&dir.join("out")),
-        ["history.csv", "my_plot.png", "notes.txt", "summary.json"]
+        [
+            "fourier.csv",
+            "ground_motion.csv",
+            "history.csv",
+            "my_plot.png",
+            "notes.txt",
+            "response.csv",
+            "spectrum.csv",
+            "summary.json"
+        ]
     );
     assert_eq!(json(&dir.join("out/summary.json"))["completed"], false);
     assert_eq!(std::fs::read_to_string(dir.join("out/notes.txt")).unwrap(), "mine");
@@ -411,6 +420,7 @@ fn a_run_removes_the_outputs_of_an_earlier_run_and_nothing_else() {
             "my_plot.png",
             "notes.txt",
             "realtime.json",
+            "realtime.txt",
             "summary.json"
         ]
     );
@@ -491,5 +501,16 @@ fn a_run_killed_at_any_moment_leaves_no_broken_summary() {
     let out = substep(&dir, &["run", "cfg.toml", "--out", "out", "--quiet", "--no-plots"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let names = file_names(&dir.join("out"));
-    assert_eq!(names, ["history.csv", "substeps.csv", "summary.json"]);
+    assert_eq!(
+        names,
+        [
+            "fourier.csv",
+            "ground_motion.csv",
+            "history.csv",
+            "response.csv",
+            "spectrum.csv",
+            "substeps.csv",
+            "summary.json"
+        ]
+    );
 }
