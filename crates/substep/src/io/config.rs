@@ -1383,7 +1383,7 @@ impl RawConfig {
             shape.inner_steps = inner as f64;
             let dt_inner = dt / shape.substeps / shape.inner_steps;
             if actuator.delay.is_finite() && actuator.delay > 0.0 {
-                shape.delay_samples = 2.0 * ((actuator.delay / dt_inner).ceil() + 2.0);
+                shape.delay_samples = crate::transfer::DelayLine::samples(actuator.delay, dt_inner);
             }
             if s.phase_lag.as_ref().is_some_and(|p| p.kind != "none") {
                 shape.extra_substep_columns = 2.0;

@@ -16,6 +16,6 @@ mod actuator;
 mod lab;
 mod sensor;
 
-pub use actuator::{Actuator, ActuatorSpec, DelayLine, Dynamics};
+pub use actuator::{Actuator, ActuatorSpec, DELAY_MAX_SAMPLES, DelayLine, Dynamics};
 pub use lab::{AttachedSpecimen, VirtualLab};
 pub use sensor::{Sensor, SensorSpec, channel_seed, channel_sensors};
