@@ -3,7 +3,7 @@
 //! load and step, or be refused with a one-line error naming the config — never panic or hang.
 //!
 //! Seeded (ChaCha8, one seed per case) so a failure reproduces; `SUBSTEP_FUZZ_CASES` sets the
-//! number of cases (default 2000, about a second in release). Every case runs in its own thread
+//! number of cases (default 2000, a few seconds in release). Every case runs in its own thread
 //! with a deadline, so a hang fails the test instead of blocking it.
 
 use rand::{Rng, SeedableRng};
