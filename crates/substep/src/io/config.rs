@@ -305,7 +305,7 @@ impl TestDefinition {
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
         let name = path.display().to_string();
-        let text = limits::read_text(path, Limits::default().max_file_bytes)?;
+        let text = limits::read_text(path, limits::CONFIG_MAX_BYTES)?;
         let base = path.parent().unwrap_or(Path::new(""));
         Self::from_toml(&text, &name, base)
     }
@@ -1081,8 +1081,11 @@ impl RawConfig {
         let sparse_capable = matches!(scheme, Scheme::Newmark { beta, .. } if beta > 0.0);
         // Limits first, from the config alone: nothing big is built, read or run before this.
         let shape = self.structure.shape(sparse_capable, &limits)?;
-        if let (Some(m), Some(length)) = (shape, self.ground_motion.length_hint(duration)) {
-            self.check_run(&limits, m, (length / dt).floor(), dt)?;
+        if let Some(length) = self.ground_motion.length_hint(duration) {
+            check_samples(&limits, length, dt)?;
+            if let Some(m) = shape {
+                self.check_run(&limits, m, (length / dt).floor(), dt)?;
+            }
         }
         let ground_motion = self.ground_motion.build(dt, duration, base, &limits)?;
         let steps = ground_motion.accel.len() - 1;
@@ -1371,7 +1374,12 @@ impl RawStructure {
                 bytes: n * limits::FRAME_BYTES_PER_DOF,
                 step_seconds: RunShape::frame_step_seconds(n, lines),
             };
-            let asked = format!("a frame of {} bays and {} stories ({n:.0} DOFs)", f.bays, f.stories);
+            let asked = format!(
+                "a frame of {} bays and {} stories ({} DOFs)",
+                f.bays,
+                f.stories,
+                limits::number(n)
+            );
             (n, sparse, "structure.frame", asked)
         } else {
             let n = if self.sdof.is_some() {
@@ -1568,7 +1576,12 @@ fn check_samples(limits: &Limits, length: f64, dt: f64) -> Result<()> {
     };
     limits.check_memory(
         "integrator.dt",
-        &format!("a {length} s excitation at dt = {dt} s ({steps:.0} steps)"),
+        &format!(
+            "a {} s excitation at dt = {} s ({} steps)",
+            limits::number(length),
+            limits::number(dt),
+            limits::number(steps)
+        ),
         shape.excitation_bytes(),
     )
 }
@@ -1586,10 +1599,15 @@ impl RawConfig {
         };
         limits.check_memory(
             "integrator.dt",
-            &format!("a {} s excitation at dt = {dt} s ({steps:.0} steps)", steps * dt),
+            &format!(
+                "a {} s excitation at dt = {} s ({} steps)",
+                limits::number(steps * dt),
+                limits::number(dt),
+                limits::number(steps)
+            ),
             shape.excitation_bytes(),
         )?;
-        let mut asked = format!("{steps:.0} steps of a {:.0}-DOF model", m.n);
+        let mut asked = format!("{} steps of a {}-DOF model", limits::number(steps), limits::number(m.n));
         if let Some(s) = &self.substructure {
             if s.substeps == 0 || s.coupling_dofs.is_empty() {
                 return Ok(()); // refused with its own message when the substructure is built
@@ -1609,7 +1627,7 @@ impl RawConfig {
             shape.inner_steps = inner as f64;
             let dt_inner = dt / shape.substeps / shape.inner_steps;
             if actuator.delay.is_finite() && actuator.delay > 0.0 {
-                shape.delay_samples = 2.0 * ((actuator.delay / dt_inner).ceil() + 2.0);
+                shape.delay_samples = crate::transfer::DelayLine::samples(actuator.delay, dt_inner);
             }
             if s.phase_lag.as_ref().is_some_and(|p| p.kind != "none") {
                 shape.extra_substep_columns = 2.0;
@@ -1619,7 +1637,8 @@ impl RawConfig {
                 &format!(
                     "a delay of {} s sampled every {dt_inner:.3e} s (dt / substeps / inner_steps: {:.3e} samples \
                      per actuator)",
-                    actuator.delay, shape.delay_samples
+                    limits::number(actuator.delay),
+                    shape.delay_samples
                 ),
                 shape.delay_bytes(),
             )?;

@@ -42,6 +42,10 @@ impl Default for Limits {
     }
 }
 
+/// Largest test-definition file: its `[limits]` are inside it, so this one is fixed. Inline
+/// matrices of a few hundred DOFs take well under a MiB; large models belong in `.mtx` files.
+pub const CONFIG_MAX_BYTES: f64 = 16.0 * MIB;
+
 /// `1.5 GiB`, `320 MiB`, `12 KiB`, `800 B`; exponent form beyond PiB (absurd requests).
 pub fn bytes(b: f64) -> String {
     let units = [
@@ -51,7 +55,10 @@ pub fn bytes(b: f64) -> String {
         ("MiB", MIB),
         ("KiB", 1024.0),
     ];
-    if !b.is_finite() || b >= 1024.0 * units[0].1 {
+    if !b.is_finite() {
+        return "an unbounded amount".into();
+    }
+    if b >= 1024.0 * units[0].1 {
         return format!("{b:.2e} B");
     }
     for (name, size) in units {
@@ -60,6 +67,16 @@ pub fn bytes(b: f64) -> String {
         }
     }
     format!("{b:.0} B")
+}
+
+/// A count or a value of a message: plain up to 10¹⁵ (`2000`, `0.01`), exponent form beyond
+/// or for tiny values (`1.000e300`), so an absurd request does not print 300 digits.
+pub fn number(x: f64) -> String {
+    if x == 0.0 || (x.abs() >= 1e-4 && x.abs() < 1e15) || !x.is_finite() {
+        format!("{x}")
+    } else {
+        format!("{x:.3e}")
+    }
 }
 
 /// `42 s`, `2.5 h`, `3.1 days`, `1.2e9 years`.

@@ -38,8 +38,13 @@ pub struct Simulation {
 }
 
 impl Simulation {
-    /// Build the integrator, or the controller and the virtual lab, at rest at `t = 0`.
+    /// Build the integrator, or the controller and the virtual lab, at rest at `t = 0`. Input
+    /// errors (e.g. an effective stiffness that is not positive definite) name the config.
     pub fn new(def: &TestDefinition) -> Result<Self> {
+        Self::build(def).map_err(|e| in_config(e, &def.source))
+    }
+
+    fn build(def: &TestDefinition) -> Result<Self> {
         let model = &def.model;
         if def.ground_motion.accel.len() < 2 {
             return Err(Error::invalid("ground_motion", "needs at least two samples (one step)"));
@@ -146,6 +151,20 @@ impl Simulation {
     }
 }
 
+/// `CONFIG: what: reason` for input and numerical errors of a defined test, so that every
+/// refusal names the config it came from (run-time stops and file errors already say where).
+fn in_config(e: Error, source: &str) -> Error {
+    match e {
+        Error::InvalidInput { what, reason } if !what.starts_with(source) => {
+            Error::invalid(format!("{source}: {what}"), reason)
+        }
+        Error::Numerical { what, reason } if !what.starts_with(source) => {
+            Error::numerical(format!("{source}: {what}"), reason)
+        }
+        other => other,
+    }
+}
+
 /// One linear specimen inside the assembled model: global DOFs (attached, then internal), its
 /// stiffness and damping rows of the attached DOFs, and the coupling index of each attached DOF.
 struct SpecimenRows {
@@ -170,8 +189,12 @@ pub struct Reference {
 }
 
 impl Reference {
-    /// `None` for monolithic runs and when a specimen is not linear.
+    /// `None` for monolithic runs and when a specimen is not linear. Errors name the config.
     pub fn new(def: &TestDefinition) -> Result<Option<Self>> {
+        Self::build(def).map_err(|e| in_config(e, &def.source))
+    }
+
+    fn build(def: &TestDefinition) -> Result<Option<Self>> {
         let Some(s) = &def.substructure else {
             return Ok(None);
         };

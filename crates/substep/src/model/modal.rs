@@ -36,7 +36,22 @@ pub fn modes(mass: &DMatrix<f64>, stiffness: &DMatrix<f64>) -> Result<Modes> {
         .solve_lower_triangular(&x.transpose())
         .ok_or_else(|| Error::numerical("modal analysis", "singular mass factor"))?;
     a = (&a + a.transpose()) * 0.5;
-    let eig = nalgebra::SymmetricEigen::new(a);
+    if a.iter().any(|x| !x.is_finite()) {
+        return Err(Error::numerical(
+            "modal analysis",
+            "M⁻¹ᐟ² K M⁻ᐟ² is not finite (stiffness and mass outside what f64 can represent)",
+        ));
+    }
+    // nalgebra's `SymmetricEigen::new` iterates until convergence without a cap.
+    let eig = nalgebra::SymmetricEigen::try_new(a, f64::EPSILON, 1000 * n.max(10)).ok_or_else(|| {
+        Error::numerical(
+            "modal analysis",
+            format!(
+                "the eigenvalues of the {n}-DOF model did not converge in {} iterations",
+                1000 * n.max(10)
+            ),
+        )
+    })?;
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
     let scale = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);

@@ -208,6 +208,21 @@ impl ActuatorSpec {
 
     fn build_linear(&self, dt_inner: f64, a: DMatrix<f64>, b: DMatrix<f64>) -> Result<Actuator> {
         let n = a.nrows();
+        if self.delay > 0.0 {
+            // A backstop for callers that did not size the line first (configs are checked
+            // against `[limits] max_memory`, sites against their own limits).
+            let samples = DelayLine::samples(self.delay, dt_inner);
+            if !(samples <= DELAY_MAX_SAMPLES as f64) {
+                return Err(Error::invalid(
+                    "actuator.delay",
+                    format!(
+                        "a delay of {} s at a sub-step of {dt_inner:e} s needs {samples:.3e} samples of history, \
+                         more than {DELAY_MAX_SAMPLES}",
+                        self.delay
+                    ),
+                ));
+            }
+        }
         let delay = (self.delay > 0.0).then(|| DelayLine::new(self.delay, dt_inner));
         Ok(Actuator {
             spec: self.clone(),
@@ -242,7 +257,17 @@ pub struct DelayLine {
     now: f64,
 }
 
+/// Most samples a [`DelayLine`] built by [`ActuatorSpec::build`] may hold (2³⁰: 16 GiB of
+/// times and values); see [`DelayLine::samples`].
+pub const DELAY_MAX_SAMPLES: usize = 1 << 30;
+
 impl DelayLine {
+    /// Samples of the history a line for `delay` at spacing `dt_nominal` holds (as `f64`, to
+    /// be checked before [`DelayLine::new`] allocates them; infinite or NaN for absurd input).
+    pub fn samples(delay: f64, dt_nominal: f64) -> f64 {
+        2.0 * ((delay / dt_nominal).ceil() + 2.0)
+    }
+
     pub fn new(delay: f64, dt_nominal: f64) -> Self {
         // Twice the needed length tolerates sub-steps re-spaced down to half their length.
         let cap = 2 * ((delay / dt_nominal).ceil() as usize + 2);

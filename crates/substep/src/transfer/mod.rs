@@ -29,7 +29,7 @@ pub mod noise;
 mod sensor;
 pub mod servo;
 
-pub use actuator::{Actuator, ActuatorSpec, DelayLine, Dynamics, ServoSpec};
+pub use actuator::{Actuator, ActuatorSpec, DELAY_MAX_SAMPLES, DelayLine, Dynamics, ServoSpec};
 pub use controlled::ControlledSite;
 pub use lab::{AttachedSpecimen, LabOptions, VirtualLab};
 pub use sensor::{NoiseGenerator, Sensor, SensorSpec, channel_seed, channel_seed_for, channel_sensors};
