@@ -26,7 +26,7 @@ pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
 const BALANCE_MAX_SWEEPS: usize = 100;
 
 /// Parlett–Reinsch balancing (as nalgebra's `balance_parlett_reinsch`, radix 2, 2-norms) with
-/// every loop bounded: at most [`BALANCE_MAX_SWEEPS`] sweeps, and scale factors limited to the
+/// every loop bounded: at most `BALANCE_MAX_SWEEPS` sweeps, and scale factors limited to the
 /// exponent range of `f64`. `None` for a matrix whose row or column norms are not finite.
 /// Balancing is a similarity transform, so stopping early changes accuracy, not eigenvalues.
 pub fn balance(m: &mut DMatrix<f64>) -> Option<()> {

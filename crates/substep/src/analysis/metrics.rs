@@ -1,14 +1,14 @@
 //! Tracking and accuracy metrics in the style of the RTHS benchmark's J criteria (Silva et al.
 //! 2020), for any pair of sampled signals.
 //!
-//! * [`tracking_delay`]`(desired, measured, h, max_lag) -> Result<f64>` [s]: the lag `I·h`,
+//! * [`tracking_delay`]`(desired, measured, h, max_lag) -> Result<f64>` \[s\]: the lag `I·h`,
 //!   `I ∈ 0..=max_lag`, of the first maximum of the Pearson correlation
 //!   `r(j) = corr(measured[j..N], desired[0..N−j])`.
 //! * [`nrms_error`]`(x, r) -> Result<f64>`: `std(x − r) / std(r)` (population std; the ratio
 //!   does not depend on the normalisation).
 //! * [`peak_error`]`(x, r) -> Result<f64>`: `max|x − r| / max|r|`.
 //! * [`round_percent`]`(ratio)`: the benchmark's `round(10000·ratio)/100` [%], and
-//!   [`round_delay_ms`]`(seconds)`: `round(10000·s)/10` [ms]; both round half away from zero.
+//!   [`round_delay_ms`]`(seconds)`: `round(10000·s)/10` \[ms\]; both round half away from zero.
 //!
 //! Errors (never panics): different lengths, fewer than 2 samples, a reference with zero spread
 //! (or zero peak), or `max_lag ≥ N − 1`.
@@ -78,7 +78,7 @@ pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
-/// Lag [s] of the first maximum of the cross-correlation (module docs).
+/// Lag \[s\] of the first maximum of the cross-correlation (module docs).
 pub fn tracking_delay(desired: &[f64], measured: &[f64], h: f64, max_lag: usize) -> Result<f64> {
     check(desired, measured)?;
     crate::error::require_positive("metrics.h", h)?;
@@ -104,7 +104,7 @@ pub fn round_percent(ratio: f64) -> f64 {
     (10000.0 * ratio).round() / 100.0
 }
 
-/// `round(10000·seconds)/10` [ms] (0.1 ms steps).
+/// `round(10000·seconds)/10` \[ms\] (0.1 ms steps).
 pub fn round_delay_ms(seconds: f64) -> f64 {
     (10000.0 * seconds).round() / 10.0
 }

@@ -23,7 +23,7 @@ const MIB: f64 = 1024.0 * 1024.0;
 pub struct Limits {
     /// Estimated memory of the model, the excitation and the buffers [bytes].
     pub max_memory: f64,
-    /// Estimated computing time of the whole run [s].
+    /// Estimated computing time of the whole run \[s\].
     pub max_run_time: f64,
     /// Estimated size of `history.csv` plus `substeps.csv` [bytes].
     pub max_output_bytes: f64,
@@ -171,7 +171,7 @@ pub struct RunShape {
     pub n_dofs: f64,
     /// Estimated memory of the numerical model [bytes].
     pub model_bytes: f64,
-    /// Estimated time of one step of the numerical model [s].
+    /// Estimated time of one step of the numerical model \[s\].
     pub step_seconds: f64,
     pub steps: f64,
     /// Coupling DOFs (0 for a monolithic run).

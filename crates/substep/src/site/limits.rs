@@ -11,11 +11,11 @@ pub struct SiteLimits {
     pub max_coupling: usize,
     /// Largest `k_sub` (`max_substeps`).
     pub max_substeps: usize,
-    /// Shortest sub-step `Δτ` [s] (`min_dtau`), also for the `Δτ` of each `Substep` message.
+    /// Shortest sub-step `Δτ` \[s\] (`min_dtau`), also for the `Δτ` of each `Substep` message.
     pub min_dtau: f64,
-    /// Longest time step `Δt` [s] (`max_dt`); a `Substep`'s `Δτ` may not exceed the session's `Δt`.
+    /// Longest time step `Δt` \[s\] (`max_dt`); a `Substep`'s `Δτ` may not exceed the session's `Δt`.
     pub max_dt: f64,
-    /// Largest estimated memory of one session [bytes] (`max_session_memory`, in MB there).
+    /// Largest estimated memory of one session \[bytes\] (`max_session_memory`, in MB there).
     pub max_session_bytes: usize,
     /// Largest estimated work of one request, in inner-step × actuator-history operations
     /// (`max_request_work`): bounds the CPU time of one `Step` or `Substep`.
@@ -39,7 +39,7 @@ impl Default for SiteLimits {
 /// e.g. [`super::VirtualLabSpec::cost`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SessionCost {
-    /// Memory of the hosted substructure [bytes].
+    /// Memory of the hosted substructure \[bytes\].
     pub bytes: usize,
     /// Work of one sub-step (same unit as [`SiteLimits::max_request_work`]).
     pub work_per_substep: u64,

@@ -16,7 +16,7 @@
 use super::{ExperimentalSubstructure, SubstepObserver};
 use crate::error::{Error, Result, require_positive};
 
-/// Longest ramp to the safe position [s]. A lab ramps actuators down in seconds; a longer
+/// Longest ramp to the safe position \[s\]. A lab ramps actuators down in seconds; a longer
 /// value is a typo (`1e6`) that would keep the stop running for days.
 pub const MAX_RAMP_TIME: f64 = 60.0;
 /// Most sub-steps of one ramp (`ceil(ramp_time / Δτ)`): bounds the time and the memory of a
@@ -64,7 +64,7 @@ impl SafetyLimits {
     }
 
     /// [`validate`](Self::validate), and the ramp fits in [`MAX_RAMP_SUBSTEPS`] sub-steps of
-    /// length `dtau` [s].
+    /// length `dtau` \[s\].
     pub fn validate_for(&self, n_c: usize, dtau: f64) -> Result<()> {
         self.validate(n_c)?;
         let substeps = ramp_substeps(self.ramp_time, dtau);

@@ -20,7 +20,7 @@ pub struct ControlledSite {
 }
 
 impl ControlledSite {
-    /// One copy of `controller` per coupling DOF of `inner`, discretised at `dtau` [s]; `what`
+    /// One copy of `controller` per coupling DOF of `inner`, discretised at `dtau` \[s\]; `what`
     /// names the controller in errors (an unstable discretisation is refused).
     pub fn new(
         inner: Box<dyn ExperimentalSubstructure>,

@@ -86,7 +86,7 @@ impl TransferFunction {
         self.eval(Complex::new(0.0, 2.0 * std::f64::consts::PI * f_hz))
     }
 
-    /// Gain `|G(jω)|` and phase delay `−arg G(jω)/ω` [s] at `f_hz > 0` (the phase is unwrapped
+    /// Gain `|G(jω)|` and phase delay `−arg G(jω)/ω` \[s\] at `f_hz > 0` (the phase is unwrapped
     /// to `(−2π, 0]`, i.e. read as a lag).
     pub fn gain_and_delay(&self, f_hz: f64) -> (f64, f64) {
         let g = self.frequency_response(f_hz);

@@ -134,12 +134,12 @@ impl ServoActuator {
     pub fn params(&self) -> &ServoParams {
         &self.p
     }
-    /// Specimen displacement `x` [m].
+    /// Specimen displacement `x` \[m\].
     #[inline]
     pub fn displacement(&self) -> f64 {
         self.s[3]
     }
-    /// Actuator force `F` [N].
+    /// Actuator force `F` \[N\].
     #[inline]
     pub fn force(&self) -> f64 {
         self.s[2]

@@ -14,7 +14,7 @@ pub const STIFFNESS: [[f64; 3]; 3] = [
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Case {
     pub number: u8,
-    /// Floor mass [kg].
+    /// Floor mass \[kg\].
     pub mass: f64,
     /// Modal damping ratio (all modes).
     pub zeta: f64,
@@ -137,7 +137,7 @@ pub fn influence() -> Vector3<f64> {
     Vector3::repeat(1.0)
 }
 
-/// Longest record the benchmark loop accepts [s] (bounds the memory of the histories).
+/// Longest record the benchmark loop accepts \[s\] (bounds the memory of the histories).
 pub const MAX_DURATION: f64 = 600.0;
 /// Most rows a record file may have.
 pub const MAX_ROWS: usize = 2_000_000;
@@ -249,7 +249,7 @@ impl GroundRecord {
         })
     }
 
-    /// Last time [s].
+    /// Last time \[s\].
     pub fn duration(&self) -> f64 {
         self.t[self.t.len() - 1]
     }

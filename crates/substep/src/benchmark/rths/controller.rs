@@ -197,7 +197,7 @@ pub struct Controller {
 }
 
 impl Controller {
-    /// The command `u_k` from the desired `y_n(t_k)` and the measured `x_m(t_k)` [m].
+    /// The command `u_k` from the desired `y_n(t_k)` and the measured `x_m(t_k)` \[m\].
     #[inline]
     pub fn command(&mut self, desired: f64, measured: f64) -> f64 {
         let (d, x) = match &self.converter {

@@ -12,14 +12,14 @@
 //!    `f_k = k_e x_k + c_e D1_k + m_e D2_k` from backward differences, and the measured
 //!    `x_m = x + σ_x n_k`, `f_m = f + σ_f n_k` (one normal `n_k` of the benchmark generator for
 //!    both, [`crate::transfer::noise`]);
-//! 2. the controller: `u_k = C(y_n(t_k) = q₁(t_k), x_m(t_k))` ([`controller`]);
+//! 2. the controller: `u_k = C(y_n(t_k) = q₁(t_k), x_m(t_k))` (module `controller`);
 //! 3. the one-sample delay stores `f_m(t_k)`;
 //! 4. RK4 over `[t_k, t_{k+1}]` of the plant ([`crate::transfer::servo`], `u_k` held) and of the
 //!    numerical substructure `M_N q̈ + C_N q̇ + K_N q = −M ι a_g − e₁ f_m(t_{k−1})`, `a_g`
 //!    linearly interpolated from the record at the stage times.
 //!
 //! The reference is the exact first-order-hold discretisation of the full 3-DOF model at `h`
-//! ([`reference`]). J1 is the lag of the first maximum of the correlation of `x_m` with `y_n`,
+//! ([`reference()`](fn@reference)). J1 is the lag of the first maximum of the correlation of `x_m` with `y_n`,
 //! J2/J3 NRMS/peak of `x_m − y_n`, J4/J5 of `x_m − x_r1`, J6–J9 of floors 2 and 3 against the
 //! reference ([`crate::analysis::metrics`]). A run diverges (and stops: `stable = false`) when a
 //! displacement leaves ±[`DIVERGENCE_LIMIT`] or is not finite; a run that completes with
@@ -64,7 +64,7 @@ pub use run::{
 };
 
 /// Published results (Silva et al. 2020, table 3): the sample controller, El Centro at 0.4,
-/// nominal plant; rows cases 1–4, columns J1 [ms], J2…J9 [%].
+/// nominal plant; rows cases 1–4, columns J1 \[ms\], J2…J9 [%].
 pub const PUBLISHED_SAMPLE: [[f64; 9]; 4] = [
     [4.6, 10.4, 11.5, 36.1, 19.0, 32.3, 32.4, 14.8, 14.8],
     [4.6, 9.8, 11.1, 33.1, 17.1, 30.5, 30.5, 15.3, 15.2],

@@ -19,11 +19,11 @@ pub const SAMPLE_TIME: f64 = 1.0 / 4096.0;
 pub const NOISE_POWER_X: f64 = 6.25e-14;
 /// Force-sensor noise power `P_f` [N²·s] (σ_f = √(P_f/h) ≈ 2.18 N).
 pub const NOISE_POWER_F: f64 = 1.16e-3;
-/// A run with `max |F| ≥` this [N] exceeds the actuator's capacity.
+/// A run with `max |F| ≥` this \[N\] exceeds the actuator's capacity.
 pub const FORCE_CAPACITY: f64 = 8900.0;
 /// Lags of the J1 correlation (0..=49 samples: J1 saturates at 12.0 ms).
 pub const MAX_LAG: usize = 49;
-/// A displacement beyond this [m] (140× the stroke) stops the run as diverged.
+/// A displacement beyond this \[m\] (140× the stroke) stops the run as diverged.
 pub const DIVERGENCE_LIMIT: f64 = 1.0;
 
 /// A run whose tracking error J2 exceeds this [%] counts as unstable.
@@ -42,7 +42,7 @@ pub enum Algorithm {
 /// Settings of the sub-step algorithm in a benchmark run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SubstepSpec {
-    /// Time step Δt [s]; a whole number of controller samples.
+    /// Time step Δt \[s\]; a whole number of controller samples.
     pub dt: f64,
     pub k_sub: usize,
     pub beta: f64,
@@ -153,7 +153,7 @@ impl RthsInput {
 /// J1…J9 of a run.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Criteria {
-    /// J1 [ms], J2…J9 [%], rounded as the benchmark rounds.
+    /// J1 \[ms\], J2…J9 [%], rounded as the benchmark rounds.
     pub j: [f64; 9],
     /// The same unrounded (J1 = lag·h in ms, J2…J9 as 100 × ratio).
     pub raw: [f64; 9],
@@ -178,11 +178,11 @@ pub struct RthsResult {
     pub case: u8,
     /// `None` if the run diverged.
     pub criteria: Option<Criteria>,
-    /// Largest |F| of the actuator [N] (ideal transfer: of the load-cell force).
+    /// Largest |F| of the actuator \[N\] (ideal transfer: of the load-cell force).
     pub max_force: f64,
     pub stable: bool,
     pub capacity_exceeded: bool,
-    /// Time at which the run diverged [s].
+    /// Time at which the run diverged \[s\].
     pub diverged_at: Option<f64>,
     /// Why the phase-lag compensator's guard disabled it, if it did.
     pub guard_trip: Option<String>,
