@@ -145,6 +145,9 @@ impl<S: ExperimentalSubstructure + ?Sized> ExperimentalSubstructure for Compensa
     fn phase_lag(&self) -> Option<&dyn PhaseLagReport> {
         Some(self)
     }
+    fn take_stop_log(&mut self) -> Option<crate::substructure::StopLog> {
+        self.inner.take_stop_log()
+    }
 
     fn is_linear(&self) -> Result<()> {
         if !self.frozen {

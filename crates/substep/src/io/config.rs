@@ -191,6 +191,13 @@ impl SubstructureDefinition {
                 }
             },
         };
+        // The limits sit next to the actuators: they check the command actually sent (after the
+        // tracking controller and the phase-lag compensator), and their ramp to the safe
+        // position bypasses both.
+        let site: Box<dyn ExperimentalSubstructure> = match &self.limits {
+            Some(l) => Box::new(LimitedSite::new(site, l.clone())?),
+            None => site,
+        };
         let site: Box<dyn ExperimentalSubstructure> = match &self.controller {
             None => site,
             Some(c) => Box::new(ControlledSite::new(
@@ -205,10 +212,7 @@ impl SubstructureDefinition {
             None => site,
             Some(p) => Box::new(p.wrap(site).map_err(|e| prefixed(e, "substructure."))?),
         };
-        Ok(match &self.limits {
-            Some(l) => Box::new(LimitedSite::new(site, l.clone())?),
-            None => site,
-        })
+        Ok(site)
     }
 
     /// A per-step remote test (`mode = "per_step"`): the site runs the sub-steps of each step.

@@ -282,6 +282,15 @@ impl ExperimentalSubstructure for LimitedSite {
     fn take_stop_log(&mut self) -> Option<StopLog> {
         self.log.take()
     }
+    fn true_force(&self) -> Option<&[f64]> {
+        self.inner.true_force()
+    }
+    fn true_displacement(&self) -> Option<&[f64]> {
+        self.inner.true_displacement()
+    }
+    fn phase_lag(&self) -> Option<&dyn crate::compensate::PhaseLagReport> {
+        self.inner.phase_lag()
+    }
 
     fn is_linear(&self) -> Result<()> {
         self.inner.is_linear()

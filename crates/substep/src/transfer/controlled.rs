@@ -87,6 +87,9 @@ impl ExperimentalSubstructure for ControlledSite {
     fn true_displacement(&self) -> Option<&[f64]> {
         self.inner.true_displacement()
     }
+    fn take_stop_log(&mut self) -> Option<crate::substructure::StopLog> {
+        self.inner.take_stop_log()
+    }
 
     fn is_linear(&self) -> Result<()> {
         self.inner.is_linear()
