@@ -587,7 +587,7 @@ fn draw_heatmap<DB: DrawingBackend>(
     };
     root.fill(&WHITE).map_err(e)?;
     let (w, _) = root.dim_in_pixel();
-    let (main, bar) = root.split_horizontally(w - px(130.0));
+    let (main, bar) = root.split_horizontally(w - px(150.0));
     let (x0, x1) = (half(xs, 0).0, half(xs, xs.len() - 1).1);
     let (y0, y1) = (half(ys, 0).0, half(ys, ys.len() - 1).1);
     let mut chart = ChartBuilder::on(&main)
@@ -633,7 +633,7 @@ fn draw_heatmap<DB: DrawingBackend>(
         .margin_bottom(px(62.0))
         .margin_right(px(10.0))
         .y_label_area_size(px(0.0))
-        .right_y_label_area_size(px(64.0))
+        .right_y_label_area_size(px(78.0))
         .build_cartesian_2d(0.0..1.0, r_lo..r_hi)
         .map_err(e)?
         .set_secondary_coord(0.0..1.0, r_lo..r_hi);
