@@ -166,7 +166,8 @@ fn every_key_the_parser_accepts_is_documented() {
 #[test]
 fn the_example_site_file_is_valid_and_every_example_config_parses() {
     let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples"));
-    let site = substep::io::site_config::SiteDefinition::from_file(dir.join("site.toml")).expect("examples/site.toml");
+    let site = substep::io::site_config::SiteDefinition::from_file(dir.join("site/SITE.toml"))
+        .expect("examples/site/SITE.toml");
     assert_eq!(site.listen(), "127.0.0.1:8090");
     for name in [
         "default.toml",
