@@ -366,7 +366,17 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, s: f
                     .draw_series(r.iter().map(|&q| Circle::new(q, px(3.0), color.filled())))
                     .map_err(e)?;
             }
-            if r.len() > 1 {
+            if r.len() > 1 && s > 1.0 {
+                // Bitmap (supersampled): plotters joins a thick polyline with unlimited miters,
+                // which shoot spikes out of the axes at sharp reversals of noisy data; separate
+                // segments have no joins.
+                chart
+                    .draw_series(
+                        r.windows(2)
+                            .map(|w| PathElement::new(vec![w[0], w[1]], color.stroke_width(width))),
+                    )
+                    .map_err(e)?;
+            } else if r.len() > 1 {
                 chart
                     .draw_series(LineSeries::new(r.iter().copied(), color.stroke_width(width)))
                     .map_err(e)?;
