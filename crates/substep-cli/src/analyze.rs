@@ -533,7 +533,11 @@ fn accuracy_plots(
         }
         line_chart(
             &a.out.join(file),
-            &format!("{label} vs {x_name} (η_p = {})", eta_ps[0]),
+            &if vary == Some(Parameter::EtaP) {
+                format!("{label} vs {x_name} (η_T = {})", eta_ts[0])
+            } else {
+                format!("{label} vs {x_name} (η_p = {})", eta_ps[0])
+            },
             x_name,
             label,
             &curves,

@@ -366,7 +366,17 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, s: f
                     .draw_series(r.iter().map(|&q| Circle::new(q, px(3.0), color.filled())))
                     .map_err(e)?;
             }
-            if r.len() > 1 {
+            if r.len() > 1 && s > 1.0 {
+                // Bitmap (supersampled): plotters joins a thick polyline with unlimited miters,
+                // which shoot spikes out of the axes at sharp reversals of noisy data; separate
+                // segments have no joins.
+                chart
+                    .draw_series(
+                        r.windows(2)
+                            .map(|w| PathElement::new(vec![w[0], w[1]], color.stroke_width(width))),
+                    )
+                    .map_err(e)?;
+            } else if r.len() > 1 {
                 chart
                     .draw_series(LineSeries::new(r.iter().copied(), color.stroke_width(width)))
                     .map_err(e)?;
@@ -598,7 +608,7 @@ fn draw_heatmap<DB: DrawingBackend>(
     };
     root.fill(&WHITE).map_err(e)?;
     let (w, _) = root.dim_in_pixel();
-    let (main, bar) = root.split_horizontally(w - px(130.0));
+    let (main, bar) = root.split_horizontally(w - px(150.0));
     let (x0, x1) = (half(xs, 0).0, half(xs, xs.len() - 1).1);
     let (y0, y1) = (half(ys, 0).0, half(ys, ys.len() - 1).1);
     let mut chart = ChartBuilder::on(&main)
@@ -644,7 +654,7 @@ fn draw_heatmap<DB: DrawingBackend>(
         .margin_bottom(px(62.0))
         .margin_right(px(10.0))
         .y_label_area_size(px(0.0))
-        .right_y_label_area_size(px(64.0))
+        .right_y_label_area_size(px(78.0))
         .build_cartesian_2d(0.0..1.0, r_lo..r_hi)
         .map_err(e)?
         .set_secondary_coord(0.0..1.0, r_lo..r_hi);

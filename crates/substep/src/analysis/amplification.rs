@@ -78,18 +78,10 @@ impl StepMap {
     /// column) or are never set (zero row) only add eigenvalues 0 and are removed, repeatedly.
     /// Returns the reduced matrix and the kept indices.
     pub fn reduced(&self) -> (DMatrix<f64>, Vec<usize>) {
-        let mut keep: Vec<usize> = (0..self.a.nrows()).collect();
-        loop {
-            let drop = keep.iter().position(|&i| {
-                keep.iter().all(|&r| self.a[(r, i)] == 0.0) || keep.iter().all(|&c| self.a[(i, c)] == 0.0)
-            });
-            match drop {
-                Some(p) => {
-                    keep.remove(p);
-                }
-                None => break,
-            }
-        }
+        let keep = prune(&self.a, |i, row_zero, col_zero| {
+            let _ = i;
+            row_zero || col_zero
+        });
         let m = DMatrix::from_fn(keep.len(), keep.len(), |r, c| self.a[(keep[r], keep[c])]);
         (m, keep)
     }
@@ -123,6 +115,40 @@ impl StepMap {
     }
 }
 
+/// The states of `a` kept after repeatedly dropping those for which `drop(i, zero row, zero
+/// column)` holds (rows and columns restricted to the kept states). Each pass is `O(n²)`: the
+/// nonzero counts are kept per row and column and updated as states go.
+fn prune(a: &DMatrix<f64>, drop: impl Fn(usize, bool, bool) -> bool) -> Vec<usize> {
+    let n = a.nrows();
+    let mut alive = vec![true; n];
+    let mut row_nz: Vec<usize> = (0..n).map(|i| (0..n).filter(|&c| a[(i, c)] != 0.0).count()).collect();
+    let mut col_nz: Vec<usize> = (0..n).map(|j| (0..n).filter(|&r| a[(r, j)] != 0.0).count()).collect();
+    loop {
+        let gone: Vec<usize> = (0..n)
+            .filter(|&i| alive[i] && drop(i, row_nz[i] == 0, col_nz[i] == 0))
+            .collect();
+        if gone.is_empty() {
+            break;
+        }
+        for &i in &gone {
+            alive[i] = false;
+        }
+        for &i in &gone {
+            for k in 0..n {
+                if a[(i, k)] != 0.0 && alive[k] {
+                    col_nz[k] -= 1;
+                }
+                if a[(k, i)] != 0.0 && alive[k] {
+                    row_nz[k] -= 1;
+                }
+            }
+            // Entries between two removed states were counted on both; `alive` is already
+            // false for them, so they are skipped above and need no correction.
+        }
+    }
+    (0..n).filter(|&i| alive[i]).collect()
+}
+
 /// The discrete frequency response of one state, prepared for many frequencies: `A` is reduced
 /// once to upper Hessenberg form `A = Q H Qᵀ` (`O(n³)`), after which each frequency costs one
 /// Hessenberg solve `(zI − H) y = Qᵀ(B0 + z B1)`, `O(n²)`, instead of a dense LU, `O(n³)`.
@@ -148,20 +174,9 @@ impl FrequencyResponse {
         // States that feed nothing (zero column; not the output) and states that are never set
         // and never driven (zero row, zero B) do not change the output's response: drop them,
         // repeatedly (a delay line keeps many such states).
-        let mut keep: Vec<usize> = (0..n).collect();
-        loop {
-            let drop = keep.iter().position(|&i| {
-                let col_zero = keep.iter().all(|&r| map.a[(r, i)] == 0.0);
-                let row_zero = keep.iter().all(|&c| map.a[(i, c)] == 0.0) && map.b0[i] == 0.0 && map.b1[i] == 0.0;
-                i != output && (col_zero || row_zero)
-            });
-            match drop {
-                Some(p) => {
-                    keep.remove(p);
-                }
-                None => break,
-            }
-        }
+        let keep = prune(&map.a, |i, row_zero, col_zero| {
+            i != output && (col_zero || (row_zero && map.b0[i] == 0.0 && map.b1[i] == 0.0))
+        });
         let m = keep.len();
         let a = DMatrix::from_fn(m, m, |r, c| map.a[(keep[r], keep[c])]);
         let b0 = DVector::from_fn(m, |r, _| map.b0[keep[r]]);
