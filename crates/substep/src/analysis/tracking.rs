@@ -134,10 +134,24 @@ impl DelayAccumulator {
         let len = self.recent_d.len();
         self.head = (self.head + 1) % len;
         self.recent_d[self.head] = d;
+        // cross[j] += x · d_{k−j}: lags 0..=head read the ring backwards from head, the rest
+        // wrap around to its end (two straight loops, no index arithmetic per lag).
         let lags = self.max_lag.min(self.count);
-        for j in 0..=lags {
-            let dj = self.recent_d[(self.head + len - j) % len];
-            self.cross[j] += x * dj;
+        let first = lags.min(self.head);
+        for (c, &d) in self.cross[..=first]
+            .iter_mut()
+            .zip(self.recent_d[..=self.head].iter().rev())
+        {
+            *c += x * d;
+        }
+        if lags > self.head {
+            let rest = lags - self.head;
+            for (c, &d) in self.cross[self.head + 1..=lags]
+                .iter_mut()
+                .zip(self.recent_d[len - rest..].iter().rev())
+            {
+                *c += x * d;
+            }
         }
         if self.first_x.len() < self.max_lag {
             self.first_x.push(x);
