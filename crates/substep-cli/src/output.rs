@@ -29,23 +29,9 @@ pub const OWNED_OUTPUTS: &[&str] = &[
     "spectrum.csv",
 ];
 
-/// The figures `substep run` draws (file stems), each in any of [`FIGURE_EXTENSIONS`]; a run
-/// removes all of them as it does [`OWNED_OUTPUTS`].
-pub const OWNED_FIGURES: &[&str] = &[
-    "displacement",
-    "acceleration",
-    "coupling_force",
-    "error_force",
-    "hysteresis",
-    "reference",
-    "compensation_force",
-    "tracking_error",
-    "energy",
-    "base_shear",
-    "storeys",
-    "ground_motion",
-    "response_spectrum",
-];
+/// The figures `substep run` draws (file stems, the names `[output.plots] figures` accepts), each
+/// in any of [`FIGURE_EXTENSIONS`]; a run removes all of them as it does [`OWNED_OUTPUTS`].
+pub use substep::io::config::PLOT_FIGURES as OWNED_FIGURES;
 
 /// The extensions of the plot formats (`--plot-format`).
 pub const FIGURE_EXTENSIONS: &[&str] = &["png", "svg", "pdf"];
