@@ -113,3 +113,24 @@ pub fn one_norm(a: &DMatrix<f64>) -> f64 {
 pub fn spectral_radius(m: &DMatrix<f64>) -> f64 {
     eigenvalues(m).map_or(f64::NAN, |ev| ev.iter().map(|z| z.norm()).fold(0.0, f64::max))
 }
+
+/// `a + w b` for the fixed-size states of small plants (the RK4 stages of the benchmark's
+/// numerical substructure and of the servo-hydraulic actuator).
+#[inline]
+pub fn axpy_array<const N: usize>(a: &[f64; N], w: f64, b: &[f64; N]) -> [f64; N] {
+    let mut out = *a;
+    for (o, &bi) in out.iter_mut().zip(b) {
+        *o += w * bi;
+    }
+    out
+}
+
+/// The classical RK4 update `z₀ + h/6 (k₁ + 2k₂ + 2k₃ + k₄)` of a fixed-size state.
+#[inline]
+pub fn rk4_combine<const N: usize>(z0: &[f64; N], h: f64, k: [&[f64; N]; 4]) -> [f64; N] {
+    let mut out = *z0;
+    for i in 0..N {
+        out[i] = z0[i] + h / 6.0 * (k[0][i] + 2.0 * k[1][i] + 2.0 * k[2][i] + k[3][i]);
+    }
+    out
+}

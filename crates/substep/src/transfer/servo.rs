@@ -26,6 +26,7 @@
 
 use super::lti::{TransferFunction, poly_add, poly_mul};
 use crate::error::{Error, Result};
+use crate::linalg::{axpy_array, rk4_combine};
 
 /// Parameters of the servo-hydraulic plant (SI: m, N, s, kg).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -212,27 +213,16 @@ impl ServoActuator {
             Derivative::FiniteDifference => (x0 - self.x_prev) / h,
         };
         let k1 = self.rhs(&s0, u, d1);
-        let s2 = add(&s0, 0.5 * h, &k1);
+        let s2 = axpy_array(&s0, 0.5 * h, &k1);
         let k2 = self.rhs(&s2, u_mid, self.dx(&s2, x0, 0.5 * h));
-        let s3 = add(&s0, 0.5 * h, &k2);
+        let s3 = axpy_array(&s0, 0.5 * h, &k2);
         let k3 = self.rhs(&s3, u_mid, self.dx(&s3, x0, 0.5 * h));
-        let s4 = add(&s0, h, &k3);
+        let s4 = axpy_array(&s0, h, &k3);
         let k4 = self.rhs(&s4, u_end, self.dx(&s4, x0, h));
-        for i in 0..5 {
-            self.s[i] = s0[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
+        self.s = rk4_combine(&s0, h, [&k1, &k2, &k3, &k4]);
         self.x_prev = x0;
         self.steps += 1;
     }
-}
-
-#[inline]
-fn add(a: &[f64; 5], w: f64, b: &[f64; 5]) -> [f64; 5] {
-    let mut out = *a;
-    for i in 0..5 {
-        out[i] += w * b[i];
-    }
-    out
 }
 
 /// The load-cell force from backward differences of the measured displacement (module docs).

@@ -6,6 +6,7 @@ use super::controller::ControllerSpec;
 use crate::analysis::metrics::{nrms_error, peak_error, round_delay_ms, round_percent, tracking_delay};
 use crate::error::{Error, Result};
 use crate::integrate::FohMap;
+use crate::linalg::{axpy_array, rk4_combine};
 use crate::model::StructuralModel;
 use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings};
 use crate::transfer::noise::{BENCHMARK_SEED, MinStdPolar, NoiseLevel};
@@ -277,22 +278,11 @@ impl Numerical {
     fn step(&mut self, ag: [f64; 3], f: f64, h: f64) {
         let z0 = self.z;
         let k1 = self.rhs(&z0, ag[0], f);
-        let k2 = self.rhs(&axpy6(&z0, 0.5 * h, &k1), ag[1], f);
-        let k3 = self.rhs(&axpy6(&z0, 0.5 * h, &k2), ag[1], f);
-        let k4 = self.rhs(&axpy6(&z0, h, &k3), ag[2], f);
-        for i in 0..6 {
-            self.z[i] = z0[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
+        let k2 = self.rhs(&axpy_array(&z0, 0.5 * h, &k1), ag[1], f);
+        let k3 = self.rhs(&axpy_array(&z0, 0.5 * h, &k2), ag[1], f);
+        let k4 = self.rhs(&axpy_array(&z0, h, &k3), ag[2], f);
+        self.z = rk4_combine(&z0, h, [&k1, &k2, &k3, &k4]);
     }
-}
-
-#[inline]
-fn axpy6(a: &[f64; 6], w: f64, b: &[f64; 6]) -> [f64; 6] {
-    let mut o = *a;
-    for i in 0..6 {
-        o[i] += w * b[i];
-    }
-    o
 }
 
 /// The experimental side at one sample: plant (or ideal transfer), load cell, noise.
