@@ -18,8 +18,14 @@ fn temp_dir(name: &str) -> PathBuf {
 /// Run `substep run CONFIG --out out` in `dir`; `(exit code, stderr)`. Killed (and the test
 /// failed) if it does not finish within 60 s: a refusal must not wait for anything.
 fn run(dir: &Path, config: &str) -> (i32, String) {
+    run_args(dir, &["run", config, "--out", "out", "--quiet", "--no-plots"])
+}
+
+/// The binary with `args` in `dir`: exit code and stderr, failing the test if it does not end.
+fn run_args(dir: &Path, args: &[&str]) -> (i32, String) {
+    let config = args.join(" ");
     let mut child = Command::new(env!("CARGO_BIN_EXE_substep"))
-        .args(["run", config, "--out", "out", "--quiet", "--no-plots"])
+        .args(args)
         .current_dir(dir)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
@@ -33,7 +39,7 @@ fn run(dir: &Path, config: &str) -> (i32, String) {
         }
         if started.elapsed() > Duration::from_secs(60) {
             let _ = child.kill();
-            panic!("substep run {config} did not finish (hang or runaway work)");
+            panic!("substep {config} did not finish (hang or runaway work)");
         }
         std::thread::sleep(Duration::from_millis(10));
     };
@@ -344,6 +350,15 @@ fn devices_and_fifos_are_refused_without_reading() {
         stderr.trim_end(),
         "error: fifo: is not a regular file (a device, FIFO or socket is never read as input)"
     );
+    // A site file, too.
+    for file in ["/dev/zero", "fifo"] {
+        let (code, stderr) = run_args(&dir, &["site", "serve", file, "--once"]);
+        assert_eq!(code, 2, "{stderr}");
+        assert_eq!(
+            stderr.trim_end(),
+            format!("error: {file}: is not a regular file (a device, FIFO or socket is never read as input)")
+        );
+    }
 }
 
 #[test]

@@ -118,7 +118,8 @@ impl SiteDefinition {
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::file(&name, format!("cannot read file: {e}")))?;
+        // Bounded, regular files only (as a test definition): `/dev/zero` or a FIFO is refused.
+        let text = super::limits::read_text(path, super::limits::CONFIG_MAX_BYTES)?;
         let base = path.parent().unwrap_or(Path::new("."));
         Self::from_toml(&text, &name, base)
     }
