@@ -947,14 +947,20 @@ impl OpenFrescoSite {
 
     /// Send `values` (action code first), zero-padded to `data_size`.
     fn send(&mut self, values: &[f64]) -> Result<()> {
+        self.send_with(|tx| tx[..values.len()].copy_from_slice(values))
+    }
+
+    /// Send the message that `fill` writes into the zeroed send buffer (action code first):
+    /// the per-sub-step trial goes out without a temporary vector.
+    fn send_with(&mut self, fill: impl FnOnce(&mut [f64])) -> Result<()> {
         if let Some(b) = &self.broken {
             let reason = format!("connection unusable after an earlier failure: {b}");
             return Err(Error::invalid(format!("openfresco site {}", self.peer), reason));
         }
         self.tx_values.iter_mut().for_each(|x| *x = 0.0);
-        self.tx_values[..values.len()].copy_from_slice(values);
+        fill(&mut self.tx_values);
         f64s_to_le(&self.tx_values, &mut self.tx);
-        let code = values[0];
+        let code = self.tx_values[0];
         write_all(&mut self.stream, &self.tx, self.timeout).map_err(|e| {
             let reason = match e {
                 LinkError::Closed { .. } => format!("the site closed the connection (sending action {code})"),
@@ -1017,11 +1023,12 @@ impl ExperimentalSubstructure for OpenFrescoSite {
             ));
         }
         self.time += dtau;
-        let mut trial = Vec::with_capacity(n + 2);
-        trial.push(action::SET_TRIAL_RESPONSE as f64);
-        trial.extend_from_slice(command);
-        trial.push(self.time);
-        self.send(&trial)?;
+        let time = self.time;
+        self.send_with(|tx| {
+            tx[0] = action::SET_TRIAL_RESPONSE as f64;
+            tx[1..=n].copy_from_slice(command);
+            tx[n + 1] = time;
+        })?;
         self.send(&[action::GET_DAQ_RESPONSE as f64])?;
         self.receive(action::GET_DAQ_RESPONSE)?;
         // DAQ blocks in order: displacement (n), force (n).
