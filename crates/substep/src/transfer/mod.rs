@@ -9,8 +9,10 @@
 //! sub-step: the dynamics are integrated exactly (first-order hold) for an input that is linear
 //! over each inner interval. A fractional delay moves the corners of the command signal off
 //! that grid, which costs an `O(h²)` interpolation error (bounded; see `tests/transfer.rs`).
-//! Displacement-sensor filter states and noise generators are not part of the saved state
-//! (they never feed back into the algorithm).
+//! Displacement-sensor filter states and noise generators are not part of the saved state: the
+//! sub-step algorithm reads only forces, but a phase-lag compensator that reads the measured
+//! displacement (ARX, inverse FIR) does see them, so a frozen-compensator analysis of a lab with
+//! a displacement low-pass omits that state (docs/theory.md §6.7).
 //!
 //! Lab-grade building blocks (used by the RTHS benchmark, [`crate::benchmark::rths`]): continuous
 //! LTI systems from transfer functions or state space ([`lti`]), Tustin-discretised controllers
