@@ -282,3 +282,200 @@ pub fn accuracy<'py>(
     }
     Ok(out)
 }
+
+/// `|h(r)|` of the algorithm and of the exact system; see `substep.analyze.transfer_function`.
+#[pyfunction]
+#[pyo3(signature = (case_name, eta_m, eta_f, zeta, zeta_s, error_force, eta_p, k_sub, eta_t, r))]
+#[allow(clippy::too_many_arguments)]
+pub fn transfer_function<'py>(
+    py: Python<'py>,
+    case_name: &str,
+    eta_m: Option<f64>,
+    eta_f: Option<f64>,
+    zeta: Option<f64>,
+    zeta_s: Option<f64>,
+    error_force: &str,
+    eta_p: f64,
+    k_sub: usize,
+    eta_t: f64,
+    r: Vec<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let base = case(case_name, eta_m, eta_f, zeta, zeta_s, error_force)?;
+    k_subs(&[k_sub])?;
+    if !(eta_t > 0.0 && eta_t < 0.5) {
+        return Err(bad(
+            "eta_t",
+            format!("{eta_t} is outside (0, 0.5) (η_T = Δt/T; the discrete response needs Δt < T/2)"),
+        ));
+    }
+    if !(eta_p >= 0.0 && eta_p.is_finite()) {
+        return Err(bad("eta_p", format!("{eta_p} is negative or not finite")));
+    }
+    if let Some(x) = r.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+        return Err(bad("r", format!("frequency ratios must be finite and > 0, got {x}")));
+    }
+    let c = AnalysisCase { k_sub, eta_p, ..base }.with(Parameter::EtaT, eta_t);
+    let (h, h_exact) = py
+        .detach(|| -> substep::Result<(Vec<f64>, Vec<f64>)> {
+            let resp = substep::analysis::frequency::DiscreteResponse::new(&c)?;
+            let h = r.iter().map(|&x| resp.amplification(x)).collect();
+            let exact = r
+                .iter()
+                .map(|&x| substep::analysis::frequency::exact_amplification(&c, x).unwrap_or(f64::NAN))
+                .collect();
+            Ok((h, exact))
+        })
+        .map_err(|e| to_py(&e))?;
+    let out = PyDict::new(py);
+    out.set_item("r", r)?;
+    out.set_item("h", h)?;
+    out.set_item("h_exact", h_exact)?;
+    Ok(out)
+}
+
+/// The test planner for a test definition; see `substep.analyze.plan`.
+#[pyfunction]
+#[pyo3(signature = (kind, text, name, base_dir, dt, k_sub, delay, tolerance, margin, budget))]
+#[allow(clippy::too_many_arguments)]
+pub fn plan<'py>(
+    py: Python<'py>,
+    kind: &str,
+    text: &str,
+    name: &str,
+    base_dir: &str,
+    dt: Option<Vec<f64>>,
+    k_sub: Option<Vec<usize>>,
+    delay: Option<Vec<f64>>,
+    tolerance: f64,
+    margin: f64,
+    budget: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    use substep::analysis::plan::{ErrorSource, PlanSettings, plan as scan};
+    let def = py
+        .detach(|| crate::definition(kind, text, name, base_dir))
+        .map_err(|e| to_py(&e))?;
+    let Some(sub) = &def.substructure else {
+        return Err(bad(
+            &def.source,
+            "plan needs a [substructure] section (a monolithic run has nothing to plan)".into(),
+        ));
+    };
+    let dts = dt.unwrap_or_else(|| vec![2.0 * def.integrator.dt, def.integrator.dt, 0.5 * def.integrator.dt]);
+    if let Some(b) = dts.iter().find(|&&v| !(v > 0.0 && v.is_finite())) {
+        return Err(bad("dt", format!("{b} is not > 0")));
+    }
+    let mut k_subs = match k_sub {
+        Some(k) => self::k_subs(&k)?,
+        None => vec![1, 2, 4, 8, sub.substeps],
+    };
+    k_subs.sort_unstable();
+    k_subs.dedup();
+    let delays = delay.unwrap_or_else(|| vec![sub.actuator.delay]);
+    if let Some(b) = delays.iter().find(|&&v| !(v >= 0.0 && v.is_finite())) {
+        return Err(bad("delay", format!("{b} is not ≥ 0")));
+    }
+    for (what, v) in [("tolerance", tolerance), ("margin", margin), ("budget", budget)] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(bad(what, format!("must be a number ≥ 0, got {v}")));
+        }
+    }
+    let model = def.model.dense("substep analyze plan").map_err(|e| to_py(&e))?;
+    let settings = PlanSettings {
+        dts,
+        k_subs,
+        delays,
+        tolerance,
+        min_margin: margin,
+        budget,
+        cost_steps: 200,
+    };
+    let result = py.detach(|| scan(sub, &model, &settings)).map_err(|e| to_py(&e))?;
+    // The columns of plan.csv, one row per peak of each scanned point.
+    let mut num: Vec<(&str, Vec<f64>)> = [
+        "dt",
+        "k_sub",
+        "delay",
+        "rho",
+        "margin",
+        "error",
+        "error_dt",
+        "error_substep",
+        "error_delay",
+        "us_per_step",
+        "budget_share",
+        "peak",
+        "freq_hz",
+        "freq_hz_exact",
+        "amplitude_error",
+        "period_error",
+    ]
+    .into_iter()
+    .map(|n| (n, Vec::new()))
+    .collect();
+    let (mut class, mut dominant) = (Vec::new(), Vec::new());
+    for p in &result.points {
+        let cls = substep::analysis::Stability::classify(p.rho, 1e-9).name();
+        let dom = match p.dominant() {
+            ErrorSource::TimeStep => "dt",
+            ErrorSource::SubStepping => "sub-step",
+            ErrorSource::Delay => "delay",
+        };
+        let head = [
+            p.dt,
+            p.k_sub as f64,
+            p.delay,
+            p.rho,
+            p.margin(),
+            p.error,
+            p.error_dt,
+            p.error_substep,
+            p.error_delay,
+            p.cost * 1e6,
+            p.utilisation(),
+        ];
+        let peaks: Vec<[f64; 5]> = if p.peaks.is_empty() {
+            vec![[f64::NAN; 5]]
+        } else {
+            p.peaks
+                .iter()
+                .enumerate()
+                .map(|(i, pk)| {
+                    [
+                        (i + 1) as f64,
+                        pk.freq_hz,
+                        pk.freq_hz_exact,
+                        pk.amplitude_error,
+                        pk.period_error,
+                    ]
+                })
+                .collect()
+        };
+        for pk in peaks {
+            for (c, x) in num.iter_mut().zip(head.iter().chain(&pk)) {
+                c.1.push(*x);
+            }
+            class.push(cls);
+            dominant.push(dom);
+        }
+    }
+    let out = PyDict::new(py);
+    for (i, (name, c)) in num.into_iter().enumerate() {
+        out.set_item(name, c)?;
+        if i == 4 {
+            out.set_item("class", class.clone())?;
+        }
+        if i == 8 {
+            out.set_item("dominant", dominant.clone())?;
+        }
+    }
+    out.set_item("phase_lag_note", result.phase_lag_note.clone())?;
+    let recommended = result.recommended.map(|i| &result.points[i]).map(|p| {
+        let d = PyDict::new(py);
+        d.set_item("dt", p.dt)?;
+        d.set_item("k_sub", p.k_sub)?;
+        d.set_item("delay", p.delay)?;
+        Ok::<_, PyErr>(d)
+    });
+    out.set_item("recommended", recommended.transpose()?)?;
+    Ok(out)
+}

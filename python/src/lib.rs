@@ -49,7 +49,7 @@ pub(crate) fn to_py(e: &substep::Error) -> PyErr {
 }
 
 /// A test definition from a path, TOML text or a JSON text (a Python dict).
-fn definition(kind: &str, text: &str, name: &str, base_dir: &str) -> substep::Result<TestDefinition> {
+pub(crate) fn definition(kind: &str, text: &str, name: &str, base_dir: &str) -> substep::Result<TestDefinition> {
     match kind {
         "path" => TestDefinition::from_file(text),
         "toml" => TestDefinition::from_toml(text, name, Path::new(base_dir)),
@@ -188,6 +188,8 @@ fn _substep(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_csv, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::stability, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::accuracy, m)?)?;
+    m.add_function(wrap_pyfunction!(analyze::transfer_function, m)?)?;
+    m.add_function(wrap_pyfunction!(analyze::plan, m)?)?;
     m.add_function(wrap_pyfunction!(benchmark::rths, m)?)?;
     Ok(())
 }

@@ -15,7 +15,7 @@ from . import _substep
 
 Grid = Tuple[float, float, int]
 
-__all__ = ["stability", "accuracy"]
+__all__ = ["stability", "accuracy", "transfer_function", "plan"]
 
 
 def _grid(what: str, g) -> Grid:
@@ -102,3 +102,61 @@ def accuracy(
         _substep.accuracy(case, eta_m, eta_f, zeta, zeta_s, error_force, [float(x) for x in eta_p],
                           [int(k) for k in k_sub], [float(x) for x in eta_t], name, grid)
     )
+
+
+def transfer_function(
+    *,
+    case: str = "typical",
+    eta_m: Optional[float] = None,
+    eta_f: Optional[float] = None,
+    zeta: Optional[float] = None,
+    zeta_s: Optional[float] = None,
+    error_force: str = "none",
+    eta_p: float = 0.0,
+    k_sub: int = 1,
+    eta_t: float = 0.05,
+    r: Optional[Sequence[float]] = None,
+) -> Dict[str, np.ndarray]:
+    """Dynamic amplification ``h = |u₁| ω²/|a_g|`` of the primary DOF against the frequency ratio
+    ``r = ω_exc/ω``: the sub-step algorithm's (``h``) and the exact system's (``h_exact``), as the
+    CLI's ``transfer_function_k*.png`` draws them (default grid: r = 0.5 … 1.5, 601 points).
+    Case parameters as for :func:`stability`.
+    """
+    grid = np.linspace(0.5, 1.5, 601) if r is None else np.asarray(r, dtype=float)
+    return _arrays(
+        _substep.transfer_function(case, eta_m, eta_f, zeta, zeta_s, error_force, float(eta_p), int(k_sub),
+                                   float(eta_t), [float(x) for x in grid])
+    )
+
+
+def plan(
+    config,
+    *,
+    dt: Optional[Sequence[float]] = None,
+    k_sub: Optional[Sequence[int]] = None,
+    delay: Optional[Sequence[float]] = None,
+    tolerance: float = 0.02,
+    margin: float = 1e-3,
+    budget: float = 0.5,
+) -> Dict[str, object]:
+    """Which Δt / k_sub / delay for this test? ``substep analyze plan`` for a test definition
+    (a path, TOML text or dict with a ``[substructure]`` of linear specimens).
+
+    ``dt`` (default: the config's Δt × 2, 1, 1/2), ``k_sub`` (default: 1, 2, 4, 8 and the
+    config's), ``delay`` (default: the config's); ``tolerance``: accepted peak error;
+    ``margin``: required 1 − ρ; ``budget``: share of Δt the computation may take.
+
+    Returns the columns of ``plan.csv`` as arrays (one row per peak of each scanned setting;
+    ``us_per_step`` and ``budget_share`` are measured on this machine), ``recommended`` (a dict
+    ``dt, k_sub, delay`` or None) and ``phase_lag_note``.
+    """
+    from . import _config_source
+    import os
+
+    kind, text, name = _config_source(config)
+    out = _substep.plan(kind, text, name, os.getcwd(),
+                        None if dt is None else [float(x) for x in dt],
+                        None if k_sub is None else [int(k) for k in k_sub],
+                        None if delay is None else [float(x) for x in delay],
+                        float(tolerance), float(margin), float(budget))
+    return {k: (np.asarray(v) if isinstance(v, list) else v) for k, v in out.items()}

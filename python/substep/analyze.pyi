@@ -31,3 +31,26 @@ def accuracy(
     eta_t: Sequence[float] = ...,
     vary: Optional[Union[Tuple[str, Grid], str]] = None,
 ) -> Dict[str, np.ndarray]: ...
+def transfer_function(
+    *,
+    case: str = "typical",
+    eta_m: Optional[float] = None,
+    eta_f: Optional[float] = None,
+    zeta: Optional[float] = None,
+    zeta_s: Optional[float] = None,
+    error_force: str = "none",
+    eta_p: float = 0.0,
+    k_sub: int = 1,
+    eta_t: float = 0.05,
+    r: Optional[Sequence[float]] = None,
+) -> Dict[str, np.ndarray]: ...
+def plan(
+    config: object,
+    *,
+    dt: Optional[Sequence[float]] = None,
+    k_sub: Optional[Sequence[int]] = None,
+    delay: Optional[Sequence[float]] = None,
+    tolerance: float = 0.02,
+    margin: float = 1e-3,
+    budget: float = 0.5,
+) -> Dict[str, object]: ...

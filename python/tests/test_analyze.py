@@ -57,3 +57,48 @@ def test_rths_equals_the_cli_json(cli):
     assert 0 < got["cases"][0]["J4"] < 100
     with pytest.raises(substep.ConfigError, match="^intensity: must be a finite number >= 0"):
         substep.benchmark.rths(case=1, intensity=-1)
+
+
+def test_plan_equals_plan_csv(cli, root, tmp_path, monkeypatch):
+    monkeypatch.chdir(root)
+    p = run_cli(cli, "analyze", "plan", "examples/tmd_substructure.toml", "--out", str(tmp_path), "--quiet")
+    assert p.returncode == 0, p.stderr
+    import csv
+
+    with open(tmp_path / "plan.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    got = substep.analyze.plan("examples/tmd_substructure.toml")
+    assert len(got["dt"]) == len(rows) > 0
+    timing = ("us_per_step", "budget_share")
+    for name in rows[0]:
+        if name in timing:
+            continue
+        for i, row in enumerate(rows):
+            x = got[name][i]
+            if name in ("class", "dominant"):
+                assert x == row[name], (name, i)
+            elif row[name] == "":
+                assert np.isnan(x), (name, i)
+            else:
+                assert float(x) == float(row[name]), (name, i, x, row[name])
+    assert got["recommended"] is None or got["recommended"]["k_sub"] in set(got["k_sub"])
+
+
+def test_plan_refuses_a_monolithic_test(root, monkeypatch):
+    monkeypatch.chdir(root)
+    with pytest.raises(substep.ConfigError, match="^examples/monolithic_tmd.toml: plan needs a \\[substructure\\]"):
+        substep.analyze.plan("examples/monolithic_tmd.toml")
+
+
+def test_transfer_function_peaks_are_the_accuracy_peaks():
+    a = substep.analyze.accuracy(k_sub=[2], eta_t=[0.05])
+    r = np.linspace(0.5, 1.5, 20001)
+    tf = substep.analyze.transfer_function(k_sub=2, eta_t=0.05, r=r)
+    h, h_exact = tf["h"], tf["h_exact"]
+    for peak_r, peak_h, col in ((a["freq_ratio"], a["h"], h), (a["freq_ratio_exact"], a["h_exact"], h_exact)):
+        for rp, hp in zip(peak_r, peak_h):
+            near = np.abs(r - rp) < 0.02
+            # The grid's largest value near each peak is the peak (to the grid's resolution).
+            assert col[near].max() == pytest.approx(hp, rel=1e-4)
+    # Two peaks of a tuned mass damper, around r = 0.89 and 1.11, in both.
+    assert len(a["peak"]) == 2
