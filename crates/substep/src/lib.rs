@@ -30,5 +30,6 @@ pub mod linalg;
 pub mod site;
 pub mod sparse;
 pub mod specimen;
+pub mod study;
 pub mod substructure;
 pub mod transfer;
