@@ -11,4 +11,4 @@ df = r.to_pandas()
 err = (df.u1 - df.uref1).abs().max() / df.uref1.abs().max()
 print(f"max |u - u_ref| / max |u_ref| = {100 * err:.3f} %")
 assert err == r.summary["reference"]["max_displacement_error"]
-print("written:", ", ".join(r.save("results_py")))
+print("written:", ", ".join(r.save("results/python")))

@@ -6,7 +6,7 @@
 use crate::to_py;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use substep::analysis::frequency::peak_errors;
+use substep::analysis::accuracy::{AccuracyGrid, accuracy_rows, transfer_functions};
 use substep::analysis::stability::{linear_grid, stability_map};
 use substep::analysis::{AnalysisCase, FrozenPhaseLag, Parameter};
 use substep::substructure::ErrorForceSpec;
@@ -202,39 +202,16 @@ pub fn accuracy<'py>(
         (None, None) => None,
         _ => return Err(bad("vary", "give both the name and the grid".into())),
     };
-    let values: Vec<Option<f64>> = match &vary {
-        Some((_, v)) => v.iter().map(|&x| Some(x)).collect(),
-        None => vec![None],
+    let grid = AccuracyGrid {
+        k_subs,
+        eta_ps: eta_p,
+        eta_ts: eta_t,
+        vary,
     };
-    // The CLI's job order: k_sub, η_p, the varied value, η_T.
-    let mut jobs = Vec::new();
-    for &k in &k_subs {
-        for &ep in &eta_p {
-            for &v in &values {
-                for &et in &eta_t {
-                    jobs.push((k, ep, v, et));
-                }
-            }
-        }
-    }
     let rows = py
-        .detach(|| {
-            jobs.iter()
-                .map(|&(k, ep, v, et)| {
-                    let mut c = AnalysisCase {
-                        k_sub: k,
-                        eta_p: ep,
-                        ..base
-                    }
-                    .with(Parameter::EtaT, et);
-                    if let (Some((p, _)), Some(x)) = (&vary, v) {
-                        c = c.with(*p, x);
-                    }
-                    peak_errors(&c).map(|peaks| (k, ep, v, et, peaks))
-                })
-                .collect::<substep::Result<Vec<_>>>()
-        })
+        .detach(|| accuracy_rows(&base, &grid, &|_| {}))
         .map_err(|e| to_py(&e))?;
+    let vary = grid.vary;
     let mut cols: Vec<(&str, Vec<f64>)> = [
         "k_sub",
         "eta_T",
@@ -251,13 +228,13 @@ pub fn accuracy<'py>(
     .into_iter()
     .map(|n| (n, Vec::new()))
     .collect();
-    for (k, ep, v, et, peaks) in &rows {
-        for e in peaks {
+    for r in &rows {
+        for e in &r.peaks {
             let row = [
-                *k as f64,
-                *et,
-                *ep,
-                v.unwrap_or(f64::NAN),
+                r.k_sub as f64,
+                r.eta_t,
+                r.eta_p,
+                r.value.unwrap_or(f64::NAN),
                 e.peak as f64,
                 e.sub.freq_ratio,
                 e.sub.h,
@@ -314,21 +291,12 @@ pub fn transfer_function<'py>(
     if let Some(x) = r.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
         return Err(bad("r", format!("frequency ratios must be finite and > 0, got {x}")));
     }
-    let c = AnalysisCase { k_sub, eta_p, ..base }.with(Parameter::EtaT, eta_t);
-    let (h, h_exact) = py
-        .detach(|| -> substep::Result<(Vec<f64>, Vec<f64>)> {
-            let resp = substep::analysis::frequency::DiscreteResponse::new(&c)?;
-            let h = r.iter().map(|&x| resp.amplification(x)).collect();
-            let exact = r
-                .iter()
-                .map(|&x| substep::analysis::frequency::exact_amplification(&c, x).unwrap_or(f64::NAN))
-                .collect();
-            Ok((h, exact))
-        })
+    let (curves, h_exact) = py
+        .detach(|| transfer_functions(&base, k_sub, eta_p, &[eta_t], &r))
         .map_err(|e| to_py(&e))?;
     let out = PyDict::new(py);
     out.set_item("r", r)?;
-    out.set_item("h", h)?;
+    out.set_item("h", curves.into_iter().next().unwrap_or_default())?;
     out.set_item("h_exact", h_exact)?;
     Ok(out)
 }

@@ -1,5 +1,5 @@
 //! `substep.benchmark.rths`: the virtual RTHS benchmark (Silva et al. 2020, docs/benchmark.md),
-//! `substep::benchmark::rths::run` per case as `substep benchmark rths --json` runs it (the
+//! `substep::benchmark::rths::run_study` as `substep benchmark rths --json` runs it (the
 //! nominal plant; perturbed plants and k_sub series stay with the CLI).
 
 use crate::to_py;
@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::sync::Arc;
 use substep::benchmark::rths::{
-    Algorithm, BenchmarkConfig, Case, ControllerKind, GroundRecord, RthsInput, Transfer, run,
+    Algorithm, BenchmarkConfig, Case, ControllerKind, GroundRecord, RthsInput, Transfer, run_study,
 };
 use substep::transfer::servo::ServoParams;
 
@@ -92,20 +92,11 @@ pub fn rths<'py>(
     algorithm: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (cases, base, kind) = setup(case, intensity, controller, config, algorithm).map_err(|e| to_py(&e))?;
-    let results = py
-        .detach(|| {
-            cases
-                .iter()
-                .map(|&c| {
-                    let mut input = base.clone();
-                    input.case = c;
-                    run(&input)
-                })
-                .collect::<substep::Result<Vec<_>>>()
-        })
+    let rows = py
+        .detach(|| run_study(&base, &cases, &[None], None, 1))
         .map_err(|e| to_py(&e))?;
     let list = PyList::empty(py);
-    for r in &results {
+    for r in rows.iter().map(|row| &row.nominal) {
         let d = PyDict::new(py);
         d.set_item("case", r.case)?;
         for i in 0..9 {

@@ -7,7 +7,7 @@ are the ones the ``substep`` command line writes.
 >>> import substep
 >>> r = substep.run("examples/default.toml")
 >>> r.summary["reference"]["max_displacement_error"]     # doctest: +SKIP
-0.0171...
+0.01714...
 >>> r.to_pandas().head()                                  # doctest: +SKIP
 
 See ``docs/python.md`` for a worked example.
