@@ -14,6 +14,9 @@ use std::path::{Path, PathBuf};
 use substep::io::TestDefinition;
 use substep::run::{EngineeringRow, EngineeringSummary, InputMotion, round_time};
 
+/// A figure and the file stem it is written to.
+type NamedFigure = (&'static str, Figure);
+
 /// Rows kept for the figures.
 const PLOT_ROWS: usize = 4000;
 
@@ -196,7 +199,7 @@ pub fn ground_motion_outputs(
     def: &TestDefinition,
     motion: &InputMotion,
     dir: &Path,
-) -> Result<(Vec<PathBuf>, Vec<(&'static str, Figure)>)> {
+) -> Result<(Vec<PathBuf>, Vec<NamedFigure>)> {
     let dt = def.integrator.dt;
     let ag = &def.ground_motion.accel;
     let mut files = Vec::new();

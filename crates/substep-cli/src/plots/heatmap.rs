@@ -19,7 +19,7 @@ fn rho_color(rho: f64) -> RGBColor {
 }
 
 /// Segments of the `ρ = 1` contour by marching squares on the grid points.
-fn contour_segments(xs: &[f64], ys: &[f64], rho: &[Vec<f64>]) -> Vec<[(f64, f64); 2]> {
+pub(super) fn contour_segments(xs: &[f64], ys: &[f64], rho: &[Vec<f64>]) -> Vec<[(f64, f64); 2]> {
     let mut out = Vec::new();
     for iy in 0..ys.len().saturating_sub(1) {
         for ix in 0..xs.len().saturating_sub(1) {
@@ -51,6 +51,8 @@ fn contour_segments(xs: &[f64], ys: &[f64], rho: &[Vec<f64>]) -> Vec<[(f64, f64)
     out
 }
 
+// The backend, the scale, three labels and the grid: a struct would only rename them.
+#[allow(clippy::too_many_arguments)]
 fn draw_heatmap<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     s: f64,
@@ -193,168 +195,4 @@ pub fn rho_heatmap(
         }
     })
     .map(|_| ())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn ticks_and_ranges() {
-        assert_eq!(tick(0.0, 1.0), "0");
-        assert_eq!(tick(-1e-17, 0.1), "0");
-        assert_eq!(tick(0.5, 1.0), "0.5");
-        assert_eq!(tick(0.06, 0.07), "0.060");
-        assert_eq!(tick(400.0, 750.0), "400");
-        assert_eq!(tick(2.0e-4, 3.0e-4), "0.00020");
-        assert_eq!(tick(2.0e-5, 3.0e-5), "2.0e-5");
-        assert_eq!(log_tick(0.0), "1");
-        assert_eq!(log_tick(-1.0), "0.10");
-        assert_eq!(range([0.0, 0.0].into_iter()), (-1.0, 1.0));
-        let (lo, hi) = range([1.0, 3.0].into_iter());
-        assert!(lo < 1.0 && hi > 3.0);
-    }
-
-    /// PNG width and height from the IHDR chunk.
-    fn png_size(bytes: &[u8]) -> (u32, u32) {
-        assert_eq!(&bytes[1..4], b"PNG");
-        let be = |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
-        (be(16), be(20))
-    }
-
-    /// Pixels within a small distance of `c` in a decoded PNG.
-    fn pixels_near(path: &Path, c: RGBColor) -> usize {
-        let img = image::open(path).unwrap().to_rgb8();
-        img.pixels()
-            .filter(|p| {
-                let d = |a: u8, b: u8| (a as i32 - b as i32).abs();
-                d(p[0], c.0) + d(p[1], c.1) + d(p[2], c.2) < 60
-            })
-            .count()
-    }
-
-    #[test]
-    fn every_figure_kind_renders_in_every_format() {
-        let dir = std::env::temp_dir().join(format!("substep-plots-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let t: Vec<f64> = (0..500).map(|i| i as f64 * 0.01).collect();
-        let sine = |f: f64| t.iter().map(|&x| (f * x).sin()).collect::<Vec<_>>();
-        let mut with_gap = sine(3.0);
-        with_gap[100] = f64::NAN;
-        let curves = vec![
-            Curve {
-                label: "a".into(),
-                x: t.clone(),
-                y: sine(2.0),
-            },
-            Curve {
-                label: "b".into(),
-                x: t.clone(),
-                y: with_gap,
-            },
-            Curve {
-                label: "c".into(),
-                x: t.clone(),
-                y: sine(5.0),
-            },
-        ];
-        let multi = Figure::new("three panels")
-            .panel(Panel::new("t [s]", "u [m]").curves(curves.clone()).highlight(1.0, 2.0))
-            .panel(Panel::new("t [s]", "e [m]").curves(curves[..1].to_vec()).height(0.4))
-            .panel(
-                Panel::new("t [s]", "u [m]")
-                    .curves(curves.clone())
-                    .window(1.0, 2.0)
-                    .height(0.6),
-            );
-        let periods: Vec<f64> = (1..50).map(|i| 0.02 * i as f64).collect();
-        let logf = Figure::new("log x").panel(
-            Panel::new("T [s]", "S [m/s²]")
-                .curves(vec![Curve {
-                    label: "S".into(),
-                    x: periods.clone(),
-                    y: periods.iter().map(|p| 1.0 / p).collect(),
-                }])
-                .log_x()
-                .markers(),
-        );
-        let cols = Figure::new("columns")
-            .columns(2)
-            .panel(Panel::new("x", "y").curves(curves.clone()))
-            .panel(Panel::new("x", "y").curves(curves[..2].to_vec()));
-        let xs: Vec<f64> = (0..30).map(|i| 0.1 * i as f64).collect();
-        let ys: Vec<f64> = (0..20).map(|i| 0.01 * i as f64).collect();
-        let rho: Vec<Vec<f64>> = ys
-            .iter()
-            .map(|y| xs.iter().map(|x| 0.95 + 0.04 * x - y).collect())
-            .collect();
-        for fmt in [PlotFormat::Png, PlotFormat::Svg, PlotFormat::Pdf] {
-            set_format(fmt);
-            let mut written = Vec::new();
-            for (name, fig) in [("multi", &multi), ("log", &logf), ("cols", &cols)] {
-                written.push((
-                    figure(&dir.join(name), fig).unwrap(),
-                    fig.size(),
-                    fig.panels.iter().map(|p| p.curves.len()).max().unwrap(),
-                ));
-            }
-            line_chart(&dir.join("line.png"), "one", "x", "y", &curves).unwrap();
-            written.push((output_path(&dir.join("line.png")), (1100, 560), 3));
-            rho_heatmap(&dir.join("map.png"), "ρ", "Ω", "ζ_s", &xs, &ys, &rho).unwrap();
-            written.push((output_path(&dir.join("map.png")), (1000, 700), 0));
-            for (path, size, series) in written {
-                assert_eq!(path.extension().unwrap(), fmt.extension());
-                let bytes = std::fs::read(&path).unwrap();
-                assert!(bytes.len() > 2000, "{}: {} bytes", path.display(), bytes.len());
-                match fmt {
-                    PlotFormat::Png => {
-                        assert_eq!(png_size(&bytes), size, "{}", path.display());
-                        for k in 0..series {
-                            assert!(
-                                pixels_near(&path, COLORS[k]) > 200,
-                                "{}: series {k} not drawn",
-                                path.display()
-                            );
-                        }
-                    }
-                    PlotFormat::Svg => {
-                        let text = String::from_utf8(bytes).unwrap();
-                        let tree = svg2pdf::usvg::Tree::from_str(&text, &svg2pdf::usvg::Options::default());
-                        assert!(tree.is_ok(), "{}: {:?}", path.display(), tree.err());
-                        assert!(text.contains(&format!("width=\"{}\"", size.0)), "{}", path.display());
-                        for k in 0..series {
-                            let c = COLORS[k];
-                            assert!(
-                                text.contains(&format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2)),
-                                "{}: series {k}",
-                                path.display()
-                            );
-                        }
-                    }
-                    PlotFormat::Pdf => {
-                        assert!(bytes.starts_with(b"%PDF-"), "{}", path.display());
-                        let tail = String::from_utf8_lossy(&bytes[bytes.len() - 64..]).to_string();
-                        assert!(tail.contains("%%EOF"), "{}: {tail}", path.display());
-                    }
-                }
-            }
-        }
-        set_format(PlotFormat::Png);
-        std::fs::remove_dir_all(&dir).ok();
-    }
-
-    #[test]
-    fn contour_of_a_plane_is_a_straight_line() {
-        // ρ − 1 = x − 0.5 on a 3×3 grid: the contour is x = 0.5 in both rows of cells.
-        let xs = [0.0, 0.4, 1.0];
-        let ys = [0.0, 1.0, 2.0];
-        let rho: Vec<Vec<f64>> = ys.iter().map(|_| xs.iter().map(|x| 0.5 + x).collect()).collect();
-        let segs = contour_segments(&xs, &ys, &rho);
-        assert_eq!(segs.len(), 2);
-        for s in segs {
-            for p in s {
-                assert!((p.0 - 0.5).abs() < 1e-12, "{p:?}");
-            }
-        }
-    }
 }

@@ -398,9 +398,9 @@ impl<'d> Run<'d> {
         let mut failure: Option<Error> = None;
         loop {
             let i = sim.steps_done();
-            extra_values(&sim, groups, &mut extra);
+            extra_values(sim, groups, &mut extra);
             if let Some(e) = engineering
-                && let Err(err) = e.record(&sim)
+                && let Err(err) = e.record(sim)
             {
                 failure = Some(err);
                 break;
@@ -417,7 +417,7 @@ impl<'d> Run<'d> {
                 reference: reference.as_ref().map(|r| r.u()),
                 engineering: engineering.as_ref().map(|e| e.row(sim.time())),
             });
-            recorder.record(&sim, reference.as_ref());
+            recorder.record(sim, reference.as_ref());
             if i == steps {
                 break;
             }
@@ -465,7 +465,7 @@ impl<'d> Run<'d> {
             Some(e) => (Some(done + 1), Some(e.to_string())),
             None => (None, None),
         };
-        let (estimation, phase_lag, warnings) = summary::compensation_summary(&sim);
+        let (estimation, phase_lag, warnings) = summary::compensation_summary(sim);
         let sub = def.substructure.as_ref();
         RunSummary {
             config: def.source.clone(),

@@ -207,7 +207,7 @@ fn structure() -> Result<StructuralModel> {
         story_mass: 1000.0,
         first_period: 1.0,
     };
-    Ok(shear_building(&b)?.with_damping(&DampingSpec::Modal { zeta: vec![0.02] })?)
+    shear_building(&b)?.with_damping(&DampingSpec::Modal { zeta: vec![0.02] })
 }
 
 fn specimen() -> SpecimenSpec {
