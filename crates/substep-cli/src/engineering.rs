@@ -14,11 +14,11 @@ use std::path::{Path, PathBuf};
 use substep::io::TestDefinition;
 use substep::run::{EngineeringRow, EngineeringSummary, InputMotion, round_time};
 
-/// A figure and the file stem it is written to.
-type NamedFigure = (&'static str, Figure);
-
 /// Rows kept for the figures.
 const PLOT_ROWS: usize = 4000;
+
+/// Figures by file stem.
+pub type Figures = Vec<(&'static str, Figure)>;
 
 /// `response.csv`, written row by row, and the decimated series of its figures.
 pub struct ResponseWriter {
@@ -80,7 +80,7 @@ impl ResponseWriter {
     }
 
     /// `energy.png`, `base_shear.png` and (shear chains) `storeys.png`.
-    pub fn figures(&self, s: &EngineeringSummary) -> Vec<(&'static str, Figure)> {
+    pub fn figures(&self, s: &EngineeringSummary) -> Figures {
         let t = self.table.column(0);
         let curve = |label: &str, c: usize| Curve {
             label: label.into(),
@@ -199,7 +199,7 @@ pub fn ground_motion_outputs(
     def: &TestDefinition,
     motion: &InputMotion,
     dir: &Path,
-) -> Result<(Vec<PathBuf>, Vec<NamedFigure>)> {
+) -> Result<(Vec<PathBuf>, Figures)> {
     let dt = def.integrator.dt;
     let ag = &def.ground_motion.accel;
     let mut files = Vec::new();

@@ -396,6 +396,7 @@ impl<'d> Run<'d> {
         let started = Instant::now();
         let mut compute = Duration::ZERO;
         let mut failure: Option<Error> = None;
+        let mut cancelled = false;
         loop {
             let i = sim.steps_done();
             extra_values(sim, groups, &mut extra);
@@ -422,6 +423,7 @@ impl<'d> Run<'d> {
                 break;
             }
             if flow.is_break() || cancel.load(Ordering::Relaxed) {
+                cancelled = true;
                 failure = Some(Error::Stopped {
                     step: i + 1,
                     time: def.time(i + 1),
@@ -441,14 +443,23 @@ impl<'d> Run<'d> {
             }
         }
         let wall = started.elapsed().as_secs_f64();
-        let motion_summary = match InputMotion::new(def) {
-            Ok(m) => {
+        // A cancelled run returns at once: the input motion's spectrum of a long record takes
+        // seconds, which an interrupted caller should not wait for.
+        let motion = if cancelled {
+            Ok(None)
+        } else {
+            InputMotion::new(def).map(Some)
+        };
+        let motion_summary = match motion {
+            Ok(Some(m)) => {
                 let s = m.summary.clone();
                 *input_motion = Some(m);
                 s
             }
-            Err(e) => {
-                failure.get_or_insert(e);
+            other => {
+                if let Err(e) = other {
+                    failure.get_or_insert(e);
+                }
                 InputMotionSummary {
                     pga_g: f64::NAN,
                     pga_m_s2: f64::NAN,
