@@ -45,7 +45,7 @@ use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec};
 pub struct VstSettings {
     /// Length of the sine sweep \[s\].
     pub duration: f64,
-    /// Sweep range \[Hz\] and amplitude [m/s²].
+    /// Sweep range \[Hz\] and amplitude \[m/s²\].
     pub f0: f64,
     pub f1: f64,
     pub amplitude: f64,
@@ -207,7 +207,7 @@ fn structure() -> Result<StructuralModel> {
         story_mass: 1000.0,
         first_period: 1.0,
     };
-    Ok(shear_building(&b)?.with_damping(&DampingSpec::Modal { zeta: vec![0.02] })?)
+    shear_building(&b)?.with_damping(&DampingSpec::Modal { zeta: vec![0.02] })
 }
 
 fn specimen() -> SpecimenSpec {
@@ -220,7 +220,7 @@ fn specimen() -> SpecimenSpec {
     }
 }
 
-/// The test definition of one run (force noise `sigma` [N]).
+/// The test definition of one run (force noise `sigma` \[N\]).
 pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result<TestDefinition> {
     let record = sine_sweep(s.amplitude, s.f0, s.f1, s.duration, s.dt)?;
     let steps = record.accel.len() - 1;
