@@ -29,5 +29,6 @@ pub mod linalg;
 pub mod site;
 pub mod sparse;
 pub mod specimen;
+pub mod study;
 pub mod substructure;
 pub mod transfer;
