@@ -10,6 +10,7 @@ mod bench;
 mod bench_compare;
 mod bench_models;
 mod benchmark;
+mod container;
 mod engineering;
 mod output;
 mod plots;
@@ -73,6 +74,11 @@ pub struct RunArgs {
     /// Figure format: png, svg or pdf (overrides `[output.plots] format`; default png)
     #[arg(long, value_enum, value_name = "FORMAT")]
     pub plot_format: Option<plots::PlotFormat>,
+    /// Result container besides the CSV files: csv (none), hdf5 (results.h5) or mat (MATLAB
+    /// v7.3 results.mat); overrides `[output] format`. hdf5 and mat need a build with
+    /// `--features hdf5`
+    #[arg(long, value_name = "FORMAT")]
+    pub format: Option<String>,
     /// Run against the wall clock (sub-steps paced at Δt/k_sub, see docs/realtime.md)
     #[arg(long)]
     pub realtime: bool,
