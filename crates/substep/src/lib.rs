@@ -19,6 +19,7 @@ pub mod integrate;
 pub mod io;
 pub mod model;
 pub mod realtime;
+pub mod run;
 
 pub use error::{Error, Result};
 pub mod analysis;
