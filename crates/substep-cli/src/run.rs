@@ -576,7 +576,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         .clone()
         .or_else(|| def.output.dir.clone())
         .unwrap_or_else(|| PathBuf::from("results"));
-    let container = crate::container::format(args.format.as_deref(), Default::default())?;
+    let container = crate::container::format(args.format.as_deref(), def.output.format)?;
     let result = run_definition(args, &def, out_dir.clone());
     crate::container::finish(args, &out_dir, container, result)
 }

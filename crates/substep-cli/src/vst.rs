@@ -282,6 +282,7 @@ fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result<TestDefini
             dir: None,
             plots: false,
             plot_options: Default::default(),
+            format: Default::default(),
         },
     })
 }

@@ -73,6 +73,23 @@ pub struct Row {
 /// content, with `completed` and `reason`) out; an error when the test cannot start.
 pub type Runner = dyn Fn(&TestDefinition) -> Result<serde_json::Value> + Sync;
 
+/// Records nothing: a study keeps only the summary of each run.
+struct SummaryOnly;
+
+impl crate::substructure::SubstepObserver for SummaryOnly {}
+
+impl crate::run::RunObserver for SummaryOnly {
+    fn step(&mut self, _row: &crate::run::StepRow<'_>) -> std::ops::ControlFlow<()> {
+        std::ops::ControlFlow::Continue(())
+    }
+}
+
+/// The runner of a study: [`crate::run::execute`], keeping only the summary.
+pub fn summary_runner(def: &TestDefinition) -> Result<serde_json::Value> {
+    let summary = crate::run::execute(def, &mut SummaryOnly, &std::sync::atomic::AtomicBool::new(false))?;
+    serde_json::to_value(&summary).map_err(|e| Error::invalid("summary", e.to_string()))
+}
+
 // --- the study file -------------------------------------------------------------------------
 
 #[derive(Debug, Deserialize)]
