@@ -17,6 +17,7 @@ mod plots;
 mod realtime;
 mod run;
 mod site;
+mod study;
 mod vst;
 
 use clap::{Parser, Subcommand};
@@ -54,6 +55,8 @@ enum Command {
     /// The virtual substructure test study (3-storey frame, TMD specimen, delayed actuator,
     /// 1 % force noise): every compensation method against the exact reference
     Vst(vst::VstArgs),
+    /// Parameter study: every variant of a base test on all cores, `study.csv` and plots (`study STUDY.toml`)
+    Study(study::StudyArgs),
     /// Community benchmarks reproduced: `benchmark rths` (the virtual RTHS benchmark, docs/benchmark.md)
     Benchmark(benchmark::BenchmarkArgs),
 }
@@ -112,6 +115,7 @@ fn main() -> ExitCode {
         Some(Command::Site(args)) => site::site(&args),
         Some(Command::Vst(args)) => vst::vst(&args),
         Some(Command::Benchmark(args)) => benchmark::benchmark(&args),
+        Some(Command::Study(args)) => study::study(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

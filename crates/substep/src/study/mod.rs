@@ -144,7 +144,7 @@ impl Study {
         let name = path.display().to_string();
         let text = crate::io::limits::read_text(path, crate::io::limits::CONFIG_MAX_BYTES)?;
         let dir = path.parent().unwrap_or(Path::new(""));
-        let raw: RawStudy = toml::from_str(&text).map_err(|e| Error::file(&name, flat(e.message())))?;
+        let raw: RawStudy = toml::from_str(&text).map_err(|e| toml_error(&e, &text, &name))?;
         let base_rel = raw
             .base
             .clone()
@@ -152,7 +152,7 @@ impl Study {
         let base_path = dir.join(&base_rel);
         let base_text = crate::io::limits::read_text(&base_path, crate::io::limits::CONFIG_MAX_BYTES)?;
         let base_name = base_path.display().to_string();
-        let base: Value = toml::from_str(&base_text).map_err(|e| Error::file(&base_name, flat(e.message())))?;
+        let base: Value = toml::from_str(&base_text).map_err(|e| toml_error(&e, &base_text, &base_name))?;
         Self::build(
             raw,
             base,
@@ -457,6 +457,17 @@ fn as_f64(v: &Value) -> Option<f64> {
         Value::Float(f) => Some(*f),
         Value::Integer(i) => Some(*i as f64),
         _ => None,
+    }
+}
+
+/// `FILE: line L: message` of a TOML syntax or schema error.
+fn toml_error(e: &toml::de::Error, text: &str, name: &str) -> Error {
+    match e.span() {
+        Some(span) => {
+            let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
+            Error::file(name, format!("line {line}: {}", flat(e.message())))
+        }
+        None => Error::file(name, flat(e.message())),
     }
 }
 
