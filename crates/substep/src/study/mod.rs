@@ -1,6 +1,12 @@
-//! Parameter studies: every variant of a base test definition, run in parallel, one row of
-//! metrics per run (docs/theory.md §14, docs/config.md "Study files").
+//! Studies. Parameter studies (this module): every variant of a base test definition, run in
+//! parallel, one row of metrics per run (docs/theory.md §14, docs/config.md "Study files").
+//! Study drivers: a fixed set-up run over a set of methods or parameters, returning typed
+//! results (numbers and series, no files); front ends print, plot and write them:
 //!
+//! * [`vst`]: the virtual substructure test study (every compensation method against the exact
+//!   reference, docs/vst.md).
+//!
+//! Parameter studies in detail:
 //! A [`Study`] is the base config (parsed TOML), a grid of dotted-key overrides (the cartesian
 //! product, first key slowest), optionally `n` seeded random samples per grid point
 //! ([`sampling`]) and optionally a list of noise seeds per variant. Run `i` is defined by `i`
@@ -14,6 +20,7 @@
 pub mod metrics;
 pub mod overrides;
 pub mod sampling;
+pub mod vst;
 
 use crate::error::{Error, Result};
 use crate::io::TestDefinition;
