@@ -104,3 +104,25 @@ def test_mat_v73_reads_back_equal_to_the_csv(tmp_path):
             np.testing.assert_array_equal(np.ravel(field), expected, err_msg=f"hdf5storage {table}.{col}")
     assert json.loads(m["summary"]) == json.loads((out / "summary.json").read_text())
     assert "[substructure]" in m["config"]
+
+
+def test_python_save_writes_the_cli_containers(tmp_path):
+    """Result.save("x.h5" | "x.mat") holds the same tables as the CLI's results.h5 / results.mat."""
+    substep = pytest.importorskip("substep")
+    if not substep._substep.has_hdf5():
+        pytest.skip("the package was built without the hdf5 feature")
+    out = run(tmp_path, "hdf5")
+    result = substep.run(short_config(tmp_path))
+    h5 = tmp_path / "py.h5"
+    assert result.save(h5) == [str(h5)]
+    with h5py.File(h5, "r") as mine, h5py.File(out / "results.h5", "r") as cli:
+        for table in ("history", "substeps", "response"):
+            assert list(mine[table].attrs["columns"]) == list(cli[table].attrs["columns"])
+            for col in cli[table].attrs["columns"]:
+                np.testing.assert_array_equal(mine[table][col][:], cli[table][col][:], err_msg=f"{table}/{col}")
+                assert mine[table][col].attrs["units"] == cli[table][col].attrs["units"]
+        assert json.loads(mine.attrs["summary"])["steps_done"] == 200
+    mat = tmp_path / "py.mat"
+    result.save(mat)
+    m = mat73.loadmat(str(mat))
+    np.testing.assert_array_equal(np.ravel(m["history"]["u1"]), result.history["u1"])
