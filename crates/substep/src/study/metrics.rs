@@ -112,7 +112,7 @@ impl Metric {
             && name
                 .split('.')
                 .all(|s| !s.is_empty() && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'));
-        if !valid || !name.contains('.') && !TOP_LEVEL_NUMBERS.contains(&name) {
+        if !valid || (!name.contains('.') && !TOP_LEVEL_NUMBERS.contains(&name)) {
             let names: Vec<&str> = BUILT_IN.iter().map(|b| b.0).collect();
             return Err(format!(
                 "unknown metric `{name}`: use one of {} or a dotted path into summary.json \
