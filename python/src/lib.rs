@@ -8,6 +8,7 @@
 
 mod analyze;
 mod benchmark;
+mod study;
 
 use numpy::PyArray2;
 use numpy::PyReadonlyArray2;
@@ -191,5 +192,9 @@ fn _substep(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(analyze::transfer_function, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::plan, m)?)?;
     m.add_function(wrap_pyfunction!(benchmark::rths, m)?)?;
+    m.add_function(wrap_pyfunction!(study::study_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(study::study_run, m)?)?;
+    m.add_function(wrap_pyfunction!(study::write_container, m)?)?;
+    m.add_function(wrap_pyfunction!(study::has_hdf5, m)?)?;
     Ok(())
 }

@@ -25,7 +25,7 @@ import numpy as np
 from . import _substep
 from ._substep import ConfigError, RunError
 
-__all__ = ["run", "Result", "Table", "ConfigError", "RunError", "analyze", "benchmark"]
+__all__ = ["run", "Result", "Table", "ConfigError", "RunError", "analyze", "benchmark", "study"]
 
 ConfigLike = Union[str, "os.PathLike[str]", Mapping[str, Any]]
 
@@ -157,14 +157,24 @@ class Result:
 
 
 def _save_binary(result: Result, path: Path, suffix: str) -> List[str]:
-    writer = getattr(_substep, "write_hdf5" if suffix in (".h5", ".hdf5") else "write_mat", None)
-    if writer is None:
-        what = "HDF5" if suffix in (".h5", ".hdf5") else "MATLAB .mat"
-        raise ConfigError(
-            f"{path}: {what} output is not available in this build of substep yet "
-            "(save to a directory or a .csv file instead)"
-        )
-    return writer(result, str(path))
+    """``results.h5`` / ``results.mat`` of the CLI (the same layout, docs/python.md "HDF5 /
+    MATLAB"), from the tables written as CSV into a temporary folder beside ``path``."""
+    import shutil
+    import tempfile
+
+    fmt = "mat" if suffix == ".mat" else "hdf5"
+    if not _substep.has_hdf5():
+        raise ConfigError(f"{path}: this build of substep has no HDF5 support (build it with the hdf5 feature)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".substep-", dir=path.parent))
+    try:
+        result.save(tmp)
+        written = _substep.write_container(str(tmp), fmt, (tmp / "summary.json").read_text(),
+                                           getattr(result, "config_text", "") or "")
+        os.replace(written, path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return [str(path)]
 
 
 def _config_source(config: ConfigLike) -> Tuple[str, str, str]:
@@ -209,3 +219,6 @@ def run(config: ConfigLike, *, raise_on_stop: bool = True) -> Result:
 
 
 from . import analyze, benchmark  # noqa: E402  (they use run's helpers)
+
+
+from .study import study  # noqa: E402  (needs _config_source above)

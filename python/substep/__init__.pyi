@@ -47,3 +47,16 @@ class Result:
 
 def run(config: ConfigLike, *, raise_on_stop: bool = True) -> Result:
     """Run a test definition (path, TOML text or dict) and return its histories and summary."""
+
+def study(
+    base: ConfigLike,
+    grid: Optional[Mapping[str, Any]] = None,
+    samples: Optional[Mapping[str, Any]] = None,
+    seeds: Optional[List[int]] = None,
+    metrics: Optional[List[Any]] = None,
+    client: Any = None,
+    *,
+    seed_key: Optional[str] = None,
+    threads: int = 0,
+    batch_size: Optional[int] = None,
+) -> pandas.DataFrame: ...

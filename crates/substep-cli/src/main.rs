@@ -10,12 +10,14 @@ mod bench;
 mod bench_compare;
 mod bench_models;
 mod benchmark;
+mod container;
 mod engineering;
 mod output;
 mod plots;
 mod realtime;
 mod run;
 mod site;
+mod study;
 mod vst;
 
 use clap::{Parser, Subcommand};
@@ -53,6 +55,8 @@ enum Command {
     /// The virtual substructure test study (3-storey frame, TMD specimen, delayed actuator,
     /// 1 % force noise): every compensation method against the exact reference
     Vst(vst::VstArgs),
+    /// Parameter study: every variant of a base test on all cores, `study.csv` and plots (`study STUDY.toml`)
+    Study(study::StudyArgs),
     /// Community benchmarks reproduced: `benchmark rths` (the virtual RTHS benchmark, docs/benchmark.md)
     Benchmark(benchmark::BenchmarkArgs),
 }
@@ -73,6 +77,11 @@ pub struct RunArgs {
     /// Figure format: png, svg or pdf (overrides `[output.plots] format`; default png)
     #[arg(long, value_enum, value_name = "FORMAT")]
     pub plot_format: Option<plots::PlotFormat>,
+    /// Result container besides the CSV files: csv (none), hdf5 (results.h5) or mat (MATLAB
+    /// v7.3 results.mat); overrides `[output] format`. hdf5 and mat need a build with
+    /// `--features hdf5`
+    #[arg(long, value_name = "FORMAT")]
+    pub format: Option<String>,
     /// Run against the wall clock (sub-steps paced at Δt/k_sub, see docs/realtime.md)
     #[arg(long)]
     pub realtime: bool,
@@ -106,6 +115,7 @@ fn main() -> ExitCode {
         Some(Command::Site(args)) => site::site(&args),
         Some(Command::Vst(args)) => vst::vst(&args),
         Some(Command::Benchmark(args)) => benchmark::benchmark(&args),
+        Some(Command::Study(args)) => study::study(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -27,6 +27,8 @@ pub const OWNED_OUTPUTS: &[&str] = &[
     "ground_motion.csv",
     "fourier.csv",
     "spectrum.csv",
+    "results.h5",
+    "results.mat",
 ];
 
 /// The figures `substep run` draws (file stems, the names `[output.plots] figures` accepts), each

@@ -576,6 +576,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
         .clone()
         .or_else(|| def.output.dir.clone())
         .unwrap_or_else(|| PathBuf::from("results"));
+    let container = crate::container::format(args.format.as_deref(), def.output.format)?;
+    let result = run_definition(args, &def, out_dir.clone());
+    crate::container::finish(args, &out_dir, container, result)
+}
+
+fn run_definition(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf) -> Result<()> {
     let format = args
         .plot_format
         .or_else(|| {

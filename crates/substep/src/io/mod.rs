@@ -7,6 +7,7 @@
 pub mod config;
 pub mod limits;
 pub mod matrix_market;
+pub mod results;
 pub mod run;
 pub mod site_config;
 

@@ -53,7 +53,7 @@ use ground_motion::RawGroundMotion;
 pub use integrator::IntegratorDefinition;
 use integrator::RawIntegrator;
 use nalgebra::DMatrix;
-use output::RawOutput;
+use output::{Format, RawOutput};
 pub use output::{OutputSettings, PLOT_FIGURES, PlotOptions};
 pub use remote::{RemoteDefinition, RemoteProtocol};
 pub(crate) use sensors::RawSensors;
@@ -370,6 +370,10 @@ impl RawConfig {
                     dir: self.output.dir.map(PathBuf::from),
                     plots,
                     plot_options,
+                    format: match &self.output.format {
+                        None => Format::Csv,
+                        Some(f) => Format::parse("output.format", f)?,
+                    },
                 }
             },
         })

@@ -1,7 +1,8 @@
 //! `[output]` and `[output.plots]` (docs/config.md, section `[output]`): output directory and
-//! figures.
+//! figures, and the result container (`format`, crate::io::results).
 
 use crate::error::{Error, Result};
+pub use crate::io::results::Format;
 use serde::Deserialize;
 use std::fmt;
 use std::path::PathBuf;
@@ -14,6 +15,8 @@ pub struct OutputSettings {
     pub plots: bool,
     /// `[output.plots]`: format, time window and which figures.
     pub plot_options: PlotOptions,
+    /// `[output] format`: the result container besides the CSV files.
+    pub format: Format,
 }
 
 /// Figure names accepted by `[output.plots] figures` (the file names without extension).
@@ -57,6 +60,7 @@ pub(crate) struct RawOutput {
     pub(crate) dir: Option<String>,
     #[serde(default)]
     pub(crate) plots: RawPlots,
+    pub(crate) format: Option<String>,
 }
 
 /// `[output] plots = true | false`, or the table `[output.plots]`.

@@ -102,7 +102,8 @@ fn base_config_is_valid_and_zero_based() {
         OutputSettings {
             dir: None,
             plots: true,
-            plot_options: PlotOptions::default()
+            plot_options: PlotOptions::default(),
+            format: Default::default(),
         }
     );
 }

@@ -277,6 +277,7 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
             dir: None,
             plots: false,
             plot_options: Default::default(),
+            format: Default::default(),
         },
     })
 }

@@ -1,0 +1,124 @@
+//! `substep study STUDY.toml`: every run of a parameter study (substep::study) on all cores,
+//! with a progress bar; writes `study.csv` (one row per run) and one figure per metric with a
+//! panel per varied parameter (`study_<metric>.png`).
+
+use crate::output::write_atomic;
+use crate::plots::{Curve, Figure, Panel};
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use substep::study::{Row, Study, summary_runner, to_csv};
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct StudyArgs {
+    /// Study file (TOML: base, [grid], [samples], seeds, metrics; see docs/config.md)
+    pub study: PathBuf,
+    /// Output directory
+    #[arg(long, value_name = "DIR", default_value = "study")]
+    pub out: PathBuf,
+    /// Threads (0: all cores)
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// No progress bar and no summary on stdout
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Do not draw figures
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+pub fn study(args: &StudyArgs) -> Result<()> {
+    let study = Study::from_file(&args.study)?;
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| substep::Error::file(args.out.display().to_string(), format!("cannot create: {e}")))?;
+    let n = study.len();
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        let b = ProgressBar::with_draw_target(Some(n as u64), ProgressDrawTarget::stderr());
+        b.set_style(
+            ProgressStyle::with_template("{spinner} {elapsed_precise} [{wide_bar}] {pos}/{len} runs, ETA {eta}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        b
+    };
+    if !args.quiet {
+        println!(
+            "substep study {}: {n} runs of {} parameter(s) ({}), metrics {}",
+            args.study.display(),
+            study.parameters().len(),
+            study.parameters().join(", "),
+            study.metrics().iter().map(|m| m.name()).collect::<Vec<_>>().join(", ")
+        );
+    }
+    let started = Instant::now();
+    let rows = study.run_all(args.threads, &summary_runner, &|| bar.inc(1))?;
+    bar.finish_and_clear();
+    let wall = started.elapsed().as_secs_f64();
+    let csv_path = args.out.join("study.csv");
+    write_atomic(&csv_path, to_csv(&study, &rows).as_bytes())
+        .with_context(|| format!("cannot write {}", csv_path.display()))?;
+    let mut outputs = vec![csv_path];
+    if !args.no_plots {
+        outputs.extend(figures(&study, &rows, &args.out)?);
+    }
+    let failed: Vec<&Row> = rows.iter().filter(|r| !r.completed).collect();
+    if !args.quiet {
+        println!(
+            "  {n} runs in {wall:.2} s ({:.1} ms per run)",
+            wall * 1e3 / n.max(1) as f64
+        );
+        if !failed.is_empty() {
+            println!("  {} of {n} runs did not complete (column `error`), e.g.", failed.len());
+            for r in failed.iter().take(3) {
+                println!("    {}", r.error);
+            }
+        }
+        let names: Vec<String> = outputs
+            .iter()
+            .filter_map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()))
+            .collect();
+        println!("  outputs in {}: {}", args.out.display(), names.join(", "));
+    }
+    Ok(())
+}
+
+/// One figure per metric, a panel per numeric parameter: every completed run as a point.
+fn figures(study: &Study, rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
+    let params = study.parameters();
+    let mut out = Vec::new();
+    for (m, metric) in study.metrics().iter().enumerate() {
+        let mut fig = Figure::new(&format!("{} over {} runs", metric.name(), rows.len()));
+        let mut panels = 0;
+        for (p, name) in params.iter().enumerate() {
+            // A NaN between points: each point is its own run, drawn as a marker (no lines).
+            let (mut x, mut y) = (Vec::new(), Vec::new());
+            for r in rows.iter().filter(|r| r.completed) {
+                let xv = match r.values.get(p) {
+                    Some(toml::Value::Float(f)) => *f,
+                    Some(toml::Value::Integer(i)) => *i as f64,
+                    _ => continue,
+                };
+                x.extend([xv, f64::NAN]);
+                y.extend([r.metrics[m], f64::NAN]);
+            }
+            if x.iter().all(|v| v.is_nan()) || y.iter().all(|v| v.is_nan()) {
+                continue;
+            }
+            fig = fig.panel(Panel::new(name, metric.name()).curves(vec![Curve {
+                label: String::new(),
+                x,
+                y,
+            }]));
+            panels += 1;
+        }
+        if panels == 0 {
+            continue;
+        }
+        let file = format!("study_{}", metric.name().replace('.', "_"));
+        out.push(crate::plots::figure(&dir.join(file), &fig.columns(panels.min(2)))?);
+    }
+    Ok(out)
+}

@@ -1,0 +1,321 @@
+//! Result containers: the CSV histories of a run gathered into one HDF5 file
+//! (`results.h5`) or one MATLAB v7.3 file (`results.mat`), `[output] format`.
+//!
+//! The CSV files are always written first, row by row while the run steps (a run killed at any
+//! moment keeps what it recorded); the container is built from them after the run, one table
+//! per CSV file, streamed in blocks of [`BLOCK_ROWS`] rows so that its memory does not grow with
+//! the length of the run. HDF5 needs the system library (Debian `libhdf5-dev`) and so the cargo
+//! feature `hdf5`; without it, choosing `hdf5` or `mat` is refused with a message saying how to
+//! enable it, and the CSV format works as before.
+//!
+//! Layout (both containers; see docs/config.md "Output formats"):
+//! * `results.h5`: a group per table (`/history`, `/substeps`, `/response`, ...), in it one 1-D
+//!   `f64` dataset per column (chunked, deflate-compressed) with a `units` attribute; the group
+//!   has a `columns` attribute listing the columns in CSV order. The root holds the run
+//!   summary as the JSON string attribute `summary` and the config text as `config`.
+//! * `results.mat`: MATLAB v7.3 (HDF5 with the 512-byte MATLAB user block); every table is a
+//!   MATLAB struct of column vectors (`history.u1`), `summary` and `config` are char variables.
+
+use crate::error::{Error, Result};
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+
+#[cfg(feature = "hdf5")]
+mod hdf5_writer;
+
+/// Rows converted per block (memory per column: 8 bytes × this).
+pub const BLOCK_ROWS: usize = 8192;
+
+/// The result tables in container order: CSV file stem (= group / struct name).
+pub const TABLES: &[&str] = &[
+    "history",
+    "substeps",
+    "response",
+    "ground_motion",
+    "fourier",
+    "spectrum",
+];
+
+/// `[output] format`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Format {
+    /// CSV files only.
+    #[default]
+    Csv,
+    /// CSV files and `results.h5`.
+    Hdf5,
+    /// CSV files and `results.mat` (MATLAB v7.3).
+    Mat,
+}
+
+/// How to get a build that writes HDF5 / MATLAB files (the one-line refusal without it).
+pub const ENABLE_HINT: &str = "this build of substep has no HDF5 support: install libhdf5-dev and pkg-config \
+     (apt-get install -y libhdf5-dev pkg-config) and build with `--features hdf5` \
+     (cargo install --path crates/substep-cli --features hdf5)";
+
+impl Format {
+    pub const NAMES: &'static [&'static str] = &["csv", "hdf5", "mat"];
+
+    /// The format named `name`; `what` (the config key or option) names it in errors. `hdf5`
+    /// and `mat` in a build without the `hdf5` feature are refused with [`ENABLE_HINT`].
+    pub fn parse(what: &str, name: &str) -> Result<Self> {
+        let f = match name {
+            "csv" => Self::Csv,
+            "hdf5" | "h5" => Self::Hdf5,
+            "mat" => Self::Mat,
+            other => {
+                return Err(Error::invalid(
+                    what,
+                    format!("unknown output format `{other}` (expected csv, hdf5 or mat)"),
+                ));
+            }
+        };
+        if f != Self::Csv && !Self::container_support() {
+            return Err(Error::invalid(what, format!("format `{name}`: {ENABLE_HINT}")));
+        }
+        Ok(f)
+    }
+
+    /// Whether this build can write HDF5 and MATLAB files (the `hdf5` feature).
+    pub const fn container_support() -> bool {
+        cfg!(feature = "hdf5")
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Csv => "csv",
+            Self::Hdf5 => "hdf5",
+            Self::Mat => "mat",
+        }
+    }
+
+    /// The container's file name in the output directory (`None` for CSV).
+    pub fn file_name(self) -> Option<&'static str> {
+        match self {
+            Self::Csv => None,
+            Self::Hdf5 => Some("results.h5"),
+            Self::Mat => Some("results.mat"),
+        }
+    }
+}
+
+/// SI unit of a result column, from its name (the CSV headers of `substep run`): `m`, `m/s`,
+/// `m/s^2`, `N`, `J`, `s`, `Hz`, or `1` for counts and indices.
+pub fn column_unit(table: &str, column: &str) -> &'static str {
+    let stem = column.trim_end_matches(|c: char| c.is_ascii_digit());
+    match (table, stem) {
+        ("fourier", "f_hz") => "Hz",
+        ("fourier", _) => "m/s^2",
+        ("spectrum", "period_s") => "s",
+        ("spectrum", "sd_m") => "m",
+        ("spectrum", "psv_m_s") => "m/s",
+        ("spectrum", _) => "m/s^2",
+        (_, "t") => "s",
+        (_, "step" | "substep" | "ramp") => "1",
+        (_, "u" | "uref" | "dm" | "cmd" | "te" | "du" | "drift") => "m",
+        (_, "v") => "m/s",
+        (_, "a" | "ag" | "a_abs") => "m/s^2",
+        (_, "fc" | "fe" | "fu" | "fei" | "fm" | "shear" | "base_shear") => "N",
+        (_, s) if s.starts_with("E_") => "J",
+        _ => "",
+    }
+}
+
+/// A CSV result table read back in blocks: header names, then rows of numbers.
+pub struct CsvTable<R> {
+    name: String,
+    columns: Vec<String>,
+    reader: R,
+    line: String,
+    line_no: usize,
+}
+
+/// The longest CSV line accepted (a table of 10⁵ DOFs is about 10 MB a row in the worst case).
+const MAX_LINE: usize = 64 << 20;
+
+impl<R: BufRead> CsvTable<R> {
+    /// Read the header of `reader`; `name` is the file named in errors.
+    pub fn new(name: impl Into<String>, mut reader: R) -> Result<Self> {
+        let name = name.into();
+        let mut line = String::new();
+        read_line(&mut reader, &mut line, &name, 1)?;
+        let columns: Vec<String> = line.trim_end().split(',').map(str::to_owned).collect();
+        if line.trim().is_empty() {
+            return Err(Error::file(&name, "has no header line"));
+        }
+        Ok(Self {
+            name,
+            columns,
+            reader,
+            line,
+            line_no: 1,
+        })
+    }
+
+    pub fn columns(&self) -> &[String] {
+        &self.columns
+    }
+
+    /// Append up to `max_rows` rows, column-major, to `columns` (one `Vec` per column); the
+    /// number of rows read (0 at the end).
+    pub fn read_block(&mut self, columns: &mut [Vec<f64>], max_rows: usize) -> Result<usize> {
+        let n = self.columns.len();
+        let mut rows = 0;
+        while rows < max_rows {
+            self.line_no += 1;
+            if !read_line(&mut self.reader, &mut self.line, &self.name, self.line_no)? {
+                break;
+            }
+            let text = self.line.trim_end();
+            if text.is_empty() {
+                continue;
+            }
+            let mut k = 0;
+            for field in text.split(',') {
+                if k == n {
+                    break;
+                }
+                let x: f64 = field.parse().map_err(|_| {
+                    Error::file(
+                        format!("{}:{}", self.name, self.line_no),
+                        format!("column `{}`: `{field}` is not a number", self.columns[k]),
+                    )
+                })?;
+                columns[k].push(x);
+                k += 1;
+            }
+            if k != n || text.split(',').count() != n {
+                return Err(Error::file(
+                    format!("{}:{}", self.name, self.line_no),
+                    format!("{} fields, the header has {n}", text.split(',').count()),
+                ));
+            }
+            rows += 1;
+        }
+        Ok(rows)
+    }
+}
+
+/// One line into `line` (cleared first); `false` at the end of the input.
+fn read_line<R: BufRead>(reader: &mut R, line: &mut String, name: &str, line_no: usize) -> Result<bool> {
+    line.clear();
+    let n = std::io::Read::take(&mut *reader, MAX_LINE as u64 + 1)
+        .read_line(line)
+        .map_err(|e| Error::file(format!("{name}:{line_no}"), format!("cannot read: {e}")))?;
+    if n > MAX_LINE {
+        return Err(Error::file(
+            format!("{name}:{line_no}"),
+            format!("line longer than {MAX_LINE} bytes"),
+        ));
+    }
+    Ok(n > 0)
+}
+
+/// What goes into a container besides the tables.
+#[derive(Debug, Clone, Default)]
+pub struct Metadata {
+    /// The run summary (`summary.json`) as a JSON string.
+    pub summary_json: String,
+    /// The test definition's TOML text (empty when not known).
+    pub config: String,
+}
+
+/// Gather the CSV tables of [`TABLES`] found in `dir` into the container of `format` in `dir`
+/// (nothing for CSV). Returns the file written. The file is written under a temporary name
+/// and renamed, so a failed conversion leaves no partial container.
+pub fn write_container(dir: &Path, format: Format, meta: &Metadata) -> Result<Option<PathBuf>> {
+    let Some(file_name) = format.file_name() else {
+        return Ok(None);
+    };
+    let path = dir.join(file_name);
+    let tables: Vec<(&str, PathBuf)> = TABLES
+        .iter()
+        .map(|t| (*t, dir.join(format!("{t}.csv"))))
+        .filter(|(_, p)| p.is_file())
+        .collect();
+    write_impl(&path, format, &tables, meta)?;
+    Ok(Some(path))
+}
+
+#[cfg(feature = "hdf5")]
+fn write_impl(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
+    hdf5_writer::write(path, format == Format::Mat, tables, meta)
+}
+
+#[cfg(not(feature = "hdf5"))]
+fn write_impl(path: &Path, format: Format, _tables: &[(&str, PathBuf)], _meta: &Metadata) -> Result<()> {
+    Err(Error::file(
+        path.display().to_string(),
+        format!("format `{}`: {ENABLE_HINT}", format.name()),
+    ))
+}
+
+/// A MATLAB identifier for a column name: letters, digits and `_`, starting with a letter (other
+/// characters become `_`, a leading non-letter gets an `x` in front), at most 63 characters.
+pub fn matlab_name(name: &str) -> String {
+    let mut s: String = name
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' })
+        .collect();
+    if !s.starts_with(|c: char| c.is_ascii_alphabetic()) {
+        s.insert(0, 'x');
+    }
+    s.truncate(63);
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_of_the_run_columns() {
+        assert_eq!(column_unit("history", "t"), "s");
+        assert_eq!(column_unit("history", "u12"), "m");
+        assert_eq!(column_unit("history", "uref3"), "m");
+        assert_eq!(column_unit("history", "a2"), "m/s^2");
+        assert_eq!(column_unit("history", "fei1"), "N");
+        assert_eq!(column_unit("response", "E_kinetic"), "J");
+        assert_eq!(column_unit("response", "a_abs4"), "m/s^2");
+        assert_eq!(column_unit("spectrum", "psv_m_s"), "m/s");
+        assert_eq!(column_unit("fourier", "f_hz"), "Hz");
+        assert_eq!(column_unit("substeps", "substep"), "1");
+    }
+
+    #[test]
+    fn csv_blocks_and_bad_rows() {
+        let text = "t,u1\n0,1.5\n0.01,NaN\n0.02,-2e-3\n";
+        let mut t = CsvTable::new("h.csv", text.as_bytes()).unwrap();
+        assert_eq!(t.columns(), ["t", "u1"]);
+        let mut cols = vec![Vec::new(), Vec::new()];
+        assert_eq!(t.read_block(&mut cols, 2).unwrap(), 2);
+        assert_eq!(t.read_block(&mut cols, 2).unwrap(), 1);
+        assert_eq!(t.read_block(&mut cols, 2).unwrap(), 0);
+        assert_eq!(cols[0], [0.0, 0.01, 0.02]);
+        assert_eq!(cols[1][0], 1.5);
+        assert!(cols[1][1].is_nan());
+        assert_eq!(cols[1][2], -2e-3);
+        let mut t = CsvTable::new("h.csv", "t,u1\n0,1\n1,x\n".as_bytes()).unwrap();
+        let e = t.read_block(&mut cols, 10).unwrap_err().to_string();
+        assert_eq!(e, "h.csv:3: column `u1`: `x` is not a number");
+        let mut t = CsvTable::new("h.csv", "t,u1\n0,1,2\n".as_bytes()).unwrap();
+        let e = t.read_block(&mut cols, 10).unwrap_err().to_string();
+        assert_eq!(e, "h.csv:2: 3 fields, the header has 2");
+    }
+
+    #[test]
+    fn formats_and_matlab_names() {
+        assert_eq!(Format::parse("output.format", "csv").unwrap(), Format::Csv);
+        let e = Format::parse("output.format", "xlsx").unwrap_err().to_string();
+        assert!(e.starts_with("output.format: unknown output format `xlsx`"), "{e}");
+        let h = Format::parse("output.format", "hdf5");
+        if Format::container_support() {
+            assert_eq!(h.unwrap(), Format::Hdf5);
+        } else {
+            let e = h.unwrap_err().to_string();
+            assert!(e.contains("--features hdf5"), "{e}");
+        }
+        assert_eq!(matlab_name("u1"), "u1");
+        assert_eq!(matlab_name("1a-b"), "x1a_b");
+    }
+}

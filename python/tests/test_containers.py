@@ -1,0 +1,128 @@
+"""HDF5 and MATLAB v7.3 result files read back equal to the CSV tables of the same run.
+
+Runs the `substep` CLI (built with `--features hdf5`; `SUBSTEP_BIN` or target/release/substep)
+on a short virtual substructure test and reads results.h5 with h5py, results.mat with the two
+MATLAB v7.3 readers on PyPI (mat73, hdf5storage).
+"""
+
+import csv as csvlib
+import json
+import os
+import pathlib
+import subprocess
+
+import numpy as np
+import pandas as pd
+import pytest
+
+h5py = pytest.importorskip("h5py")
+mat73 = pytest.importorskip("mat73")
+hdf5storage = pytest.importorskip("hdf5storage")
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+BIN = pathlib.Path(os.environ.get("SUBSTEP_BIN", ROOT / "target" / "release" / "substep"))
+TABLES = ["history", "substeps", "response", "ground_motion", "fourier", "spectrum"]
+
+
+def short_config(tmp_path):
+    """The embedded default example, shortened to 2 s (keeps its substructure, noise, reference)."""
+    text = (ROOT / "examples" / "default.toml").read_text()
+    text = text.replace("duration = 20.0", "duration = 2.0")
+    assert "duration = 2.0" in text
+    path = tmp_path / "short.toml"
+    path.write_text(text)
+    return path
+
+
+def run(tmp_path, fmt):
+    if not BIN.exists():
+        pytest.skip(f"{BIN} not built (cargo build --release --features hdf5)")
+    out = tmp_path / fmt
+    proc = subprocess.run(
+        [str(BIN), "run", str(short_config(tmp_path)), "--out", str(out), "--no-plots", "--quiet",
+         "--format", fmt],
+        capture_output=True, text=True, timeout=120,
+    )
+    if "no HDF5 support" in proc.stderr:
+        pytest.skip("substep built without --features hdf5")
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def csv(out, table):
+    """The table as {column: array}, parsed with Python's float() (exact for round-trip text)."""
+    with open(out / f"{table}.csv", newline="") as f:
+        rows = list(csvlib.reader(f))
+    data = np.array([[float(x) for x in r] for r in rows[1:]]).reshape(-1, len(rows[0]))
+    return pd.DataFrame(data, columns=rows[0])
+
+
+def tables_in(out):
+    return [t for t in TABLES if (out / f"{t}.csv").exists()]
+
+
+def test_hdf5_reads_back_equal_to_the_csv(tmp_path):
+    out = run(tmp_path, "hdf5")
+    assert set(tables_in(out)) >= {"history", "substeps", "response"}
+    with h5py.File(out / "results.h5", "r") as f:
+        for table in tables_in(out):
+            frame = csv(out, table)
+            group = f[table]
+            assert [c.decode() if isinstance(c, bytes) else c for c in group.attrs["columns"]] == list(frame.columns)
+            for col in frame.columns:
+                ds = group[col]
+                assert ds.dtype == np.float64 and ds.ndim == 1
+                assert ds.compression == "gzip" and ds.chunks is not None
+                np.testing.assert_array_equal(ds[:], frame[col].to_numpy(), err_msg=f"{table}/{col}")
+        assert f["history/u1"].attrs["units"] == "m"
+        assert f["history/t"].attrs["units"] == "s"
+        assert f["history/fc1"].attrs["units"] == "N"
+        assert f["response/E_kinetic"].attrs["units"] == "J"
+        summary = json.loads(f.attrs["summary"])
+        assert summary == json.loads((out / "summary.json").read_text())
+        assert summary["completed"] is True and summary["steps_done"] == 200
+        assert "[substructure]" in f.attrs["config"]
+
+
+def test_mat_v73_reads_back_equal_to_the_csv(tmp_path):
+    out = run(tmp_path, "mat")
+    path = out / "results.mat"
+    head = path.read_bytes()[:128]
+    assert head.startswith(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: ")
+    assert head[124:128] == b"\x00\x02IM"
+    m = mat73.loadmat(str(path))
+    s = hdf5storage.loadmat(str(path))
+    for table in tables_in(out):
+        frame = csv(out, table)
+        assert sorted(m[table].keys()) == sorted(frame.columns)
+        for col in frame.columns:
+            expected = frame[col].to_numpy()
+            np.testing.assert_array_equal(np.ravel(m[table][col]), expected, err_msg=f"mat73 {table}.{col}")
+            # hdf5storage: a struct array of one element whose fields are MATLAB's N x 1 columns
+            field = s[table][col][0]
+            assert np.shape(field) == (len(expected), 1), (table, col, np.shape(field))
+            np.testing.assert_array_equal(np.ravel(field), expected, err_msg=f"hdf5storage {table}.{col}")
+    assert json.loads(m["summary"]) == json.loads((out / "summary.json").read_text())
+    assert "[substructure]" in m["config"]
+
+
+def test_python_save_writes_the_cli_containers(tmp_path):
+    """Result.save("x.h5" | "x.mat") holds the same tables as the CLI's results.h5 / results.mat."""
+    substep = pytest.importorskip("substep")
+    if not substep._substep.has_hdf5():
+        pytest.skip("the package was built without the hdf5 feature")
+    out = run(tmp_path, "hdf5")
+    result = substep.run(short_config(tmp_path))
+    h5 = tmp_path / "py.h5"
+    assert result.save(h5) == [str(h5)]
+    with h5py.File(h5, "r") as mine, h5py.File(out / "results.h5", "r") as cli:
+        for table in ("history", "substeps", "response"):
+            assert list(mine[table].attrs["columns"]) == list(cli[table].attrs["columns"])
+            for col in cli[table].attrs["columns"]:
+                np.testing.assert_array_equal(mine[table][col][:], cli[table][col][:], err_msg=f"{table}/{col}")
+                assert mine[table][col].attrs["units"] == cli[table][col].attrs["units"]
+        assert json.loads(mine.attrs["summary"])["steps_done"] == 200
+    mat = tmp_path / "py.mat"
+    result.save(mat)
+    m = mat73.loadmat(str(mat))
+    np.testing.assert_array_equal(np.ravel(m["history"]["u1"]), result.history["u1"])
