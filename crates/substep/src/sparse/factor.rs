@@ -151,6 +151,24 @@ impl SymmetricFactor {
         }
     }
 
+    /// Sweep the sparse factor on two cores from now on: a worker thread takes one half of the
+    /// elimination tree (theory §11.4). Opt-in, for a machine with a core to spare; `false`
+    /// when the factor is banded or its tree has no balanced split (then nothing changes).
+    pub fn enable_second_core(&mut self) -> bool {
+        match &mut self.inner {
+            Inner::Banded(_) => false,
+            Inner::Sparse(s) => s.solve.enable_second_core(),
+        }
+    }
+
+    /// Whether solves run on two cores ([`SymmetricFactor::enable_second_core`]).
+    pub fn uses_second_core(&self) -> bool {
+        match &self.inner {
+            Inner::Banded(_) => false,
+            Inner::Sparse(s) => s.solve.uses_second_core(),
+        }
+    }
+
     /// The ordering of the sparse factor (`None` for the band).
     pub fn ordering(&self) -> Option<SparseOrdering> {
         match &self.inner {
