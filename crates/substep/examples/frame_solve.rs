@@ -1,7 +1,7 @@
 //! Experiment: sparse solve of a frame's effective stiffness, orderings and solves compared.
 //! `cargo run --release -p substep --example frame_solve -- 100000`
 use std::time::Instant;
-use substep::model::{Frame2d, frame_2d};
+use substep::model::{Frame2d, Frame3d, frame_2d, frame_3d};
 use substep::sparse::{CscMatrix, FactorKind, SparseOrdering, SymmetricFactor};
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -12,8 +12,23 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn main() {
     let dofs: usize = std::env::args().nth(1).map_or(10_000, |s| s.parse().unwrap());
     let reps: usize = std::env::args().nth(2).map_or(30, |s| s.parse().unwrap());
-    let f = Frame2d::with_about_dofs(dofs);
-    let m = frame_2d(&f).unwrap();
+    let three = std::env::var("THREE").is_ok();
+    let (m, label) = if three {
+        let f = Frame3d {
+            rigid_diaphragm: std::env::var("DIAPHRAGM").is_ok(),
+            ..Frame3d::with_about_dofs(dofs)
+        };
+        (
+            frame_3d(&f).unwrap(),
+            format!("3-D {} x {} bays x {} stories", f.bays_x, f.bays_y, f.stories),
+        )
+    } else {
+        let f = Frame2d::with_about_dofs(dofs);
+        (
+            frame_2d(&f).unwrap(),
+            format!("2-D {} bays x {} stories", f.bays, f.stories),
+        )
+    };
     let n = m.n_dofs();
     let dt = 0.01;
     let (a0, a1) = (4.0 / (dt * dt), 2.0 / dt);
