@@ -11,6 +11,7 @@ mod bench_compare;
 mod bench_models;
 mod benchmark;
 mod engineering;
+mod model_export;
 mod output;
 mod plots;
 mod realtime;
@@ -55,6 +56,8 @@ enum Command {
     Vst(vst::VstArgs),
     /// Community benchmarks reproduced: `benchmark rths` (the virtual RTHS benchmark, docs/benchmark.md)
     Benchmark(benchmark::BenchmarkArgs),
+    /// The numerical model of a test definition: `model export CONFIG --mtx DIR` (MatrixMarket)
+    Model(model_export::ModelArgs),
 }
 
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -106,6 +109,7 @@ fn main() -> ExitCode {
         Some(Command::Site(args)) => site::site(&args),
         Some(Command::Vst(args)) => vst::vst(&args),
         Some(Command::Benchmark(args)) => benchmark::benchmark(&args),
+        Some(Command::Model(args)) => model_export::model(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

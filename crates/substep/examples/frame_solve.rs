@@ -34,12 +34,7 @@ fn main() {
     let (a0, a1) = (4.0 / (dt * dt), 2.0 / dt);
     let (alpha, beta) = (0.1, 0.002);
     let k_hat = CscMatrix::linear_combination(&[(1.0 + a1 * beta, &m.stiffness), (a0 + a1 * alpha, &m.mass)]);
-    println!(
-        "frame {} bays x {} stories, n = {n}, nnz(K_hat) = {}",
-        f.bays,
-        f.stories,
-        k_hat.nnz()
-    );
+    println!("frame {label}, n = {n}, nnz(K_hat) = {}", k_hat.nnz());
     let rhs: Vec<f64> = (0..n).map(|i| ((i as f64) * 0.37).sin()).collect();
     let mut reference: Option<Vec<f64>> = None;
     for ord in [SparseOrdering::Amd, SparseOrdering::NestedDissection] {

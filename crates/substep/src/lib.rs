@@ -22,6 +22,7 @@ pub mod realtime;
 
 pub use error::{Error, Result};
 pub mod analysis;
+pub mod bench;
 pub mod benchmark;
 pub mod compensate;
 pub mod ident;
