@@ -143,3 +143,65 @@ fn translational_mass_is_floors_plus_members() {
         assert_eq!(m.n_dofs(), if diaphragm { 5 * (3 + 3 * 12) } else { 5 * 6 * 12 });
     }
 }
+
+mod config {
+    use super::*;
+    use std::path::Path;
+    use substep::io::TestDefinition;
+
+    const MOTION: &str =
+        "[ground_motion]\ngenerator = \"harmonic\"\namplitude = 1.0\nfrequency = 2.0\nduration = 0.1\n";
+
+    fn cfg(frame: &str) -> String {
+        format!(
+            "[structure]\nstorage = \"sparse\"\n[structure.frame]\n{frame}\n[structure.rayleigh]\nalpha = 0.1\nbeta = 0.002\n\
+             {MOTION}[integrator]\nscheme = \"newmark\"\ndt = 0.01\n"
+        )
+    }
+
+    fn parse(text: &str) -> substep::Result<TestDefinition> {
+        TestDefinition::from_toml(text, "cfg.toml", Path::new("."))
+    }
+
+    #[test]
+    fn dimensions_3_builds_the_space_frame_of_the_keys() {
+        let d = parse(&cfg(
+            "dimensions = 3\nbays = 2\nbays_y = 1\nstories = 3\nrigid_diaphragm = true\nbay_width_y = 5.0",
+        ))
+        .unwrap();
+        let f = Frame3d {
+            bays_x: 2,
+            bays_y: 1,
+            stories: 3,
+            bay_y: 5.0,
+            rigid_diaphragm: true,
+            ..Frame3d::default()
+        };
+        let want = frame_3d(&f).unwrap();
+        let got = d.model.as_sparse().expect("sparse storage");
+        assert_eq!(got.stiffness, want.stiffness);
+        assert_eq!(got.mass, want.mass);
+        assert_eq!(got.influence, want.influence);
+        // Rayleigh C = 0.1 M + 0.002 K on the space frame's matrices.
+        assert!((got.damping.get(0, 0) - (0.1 * want.mass.get(0, 0) + 0.002 * want.stiffness.get(0, 0))).abs() < 1e-6);
+        let mut sim = substep::io::Simulation::new(&d).unwrap();
+        for _ in 0..sim.steps_total() {
+            sim.step(&mut ()).unwrap();
+        }
+        assert!(sim.state().u.amax() > 0.0);
+    }
+
+    #[test]
+    fn space_keys_need_dimensions_3_and_dimensions_is_2_or_3() {
+        let e = parse(&cfg("bays_y = 2")).unwrap_err().to_string();
+        assert!(
+            e.contains("structure.frame.bays_y: is a space-frame key: it needs dimensions = 3"),
+            "{e}"
+        );
+        let e = parse(&cfg("dimensions = 4")).unwrap_err().to_string();
+        assert!(
+            e.contains("structure.frame.dimensions: must be 2 (plane frame) or 3 (space frame), got 4"),
+            "{e}"
+        );
+    }
+}
