@@ -20,7 +20,7 @@ use substep::bench::{DT, Spread, build, chain, check_agreement, median, monolith
 /// Steps of the agreement check.
 pub const CHECK_STEPS: usize = 50;
 /// Relative difference of the roof response above which a tool computes a different model.
-pub const AGREEMENT_TOLERANCE: f64 = 1e-6;
+pub const AGREEMENT_TOLERANCE: f64 = 1e-9;
 /// Timed batches per round.
 pub const BATCHES: usize = 5;
 
