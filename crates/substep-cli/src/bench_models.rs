@@ -125,17 +125,18 @@ pub fn print_sweep(s: &Sweep) {
         s.steps
     );
     println!(
-        "  {:>7} {:>10} {:>10} {:>10} {:>10} {:>9}  solver",
-        "DOFs", "median µs", "p99 µs", "max µs", "mono µs", "RSS MiB"
+        "  {:>7} {:>10} {:>10} {:>10} {:>10} {:>10} {:>9}  solver",
+        "DOFs", "median µs", "p99 µs", "max µs", "mono µs", "floor µs", "RSS MiB"
     );
     for r in &s.runs {
         println!(
-            "  {:>7} {:>10.1} {:>10.1} {:>10.1} {:>10.1} {:>9.1}  {}",
+            "  {:>7} {:>10.1} {:>10.1} {:>10.1} {:>10.1} {:>10.1} {:>9.1}  {}",
             r.dofs,
             r.us_per_step_median,
             r.us_per_step_p99,
             r.us_per_step_max,
             r.us_per_step_monolithic_median,
+            r.solve_floor_us,
             r.peak_rss_bytes as f64 / 1048576.0,
             r.solver
         );

@@ -184,6 +184,11 @@ pub struct ModelBench {
     pub realtime_ratio: f64,
     /// Monolithic Newmark (same model, no sub-steps), median µs per step.
     pub us_per_step_monolithic_median: f64,
+    /// Streaming read bandwidth of one core, measured after the run \[GB/s\]
+    /// ([`super::read_bandwidth_gbs`]).
+    pub read_bandwidth_gbs: f64,
+    /// The physical floor of one solve: `solve_bytes` over that bandwidth \[µs\].
+    pub solve_floor_us: f64,
     /// Peak RSS while the model is held and the substructure test is built and run (the peak
     /// is reset after the model is built; the monolithic run comes after) \[bytes\].
     pub peak_rss_bytes: u64,
@@ -287,6 +292,7 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
     }
     mono.sort_by(f64::total_cmp);
     cpu.sort_by(f64::total_cmp);
+    let bandwidth = super::read_bandwidth_gbs();
     let mean = samples.iter().sum::<f64>() / samples.len() as f64;
     samples.sort_by(f64::total_cmp);
     Ok(ModelBench {
@@ -312,6 +318,8 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
         cpu_us_per_step_median: quantile(&cpu, 0.5),
         realtime_ratio: timed_wall / (o.steps as f64 * DT),
         us_per_step_monolithic_median: quantile(&mono, 0.5),
+        read_bandwidth_gbs: bandwidth,
+        solve_floor_us: solve_bytes as f64 / (bandwidth * 1e3),
         peak_rss_bytes: peak,
     })
 }
