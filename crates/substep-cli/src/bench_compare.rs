@@ -133,7 +133,7 @@ fn floats(v: &Value, key: &str) -> Vec<f64> {
 
 pub fn compare(args: &BenchArgs) -> Result<()> {
     let steps = args.steps;
-    if steps < BATCHES || steps % BATCHES != 0 {
+    if steps < BATCHES || !steps.is_multiple_of(BATCHES) {
         return Err(substep::Error::invalid(
             "--steps",
             format!("with --compare must be a multiple of {BATCHES} (the timed batches per round), got {steps}"),

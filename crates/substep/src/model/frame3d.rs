@@ -413,19 +413,9 @@ pub(crate) fn space_member_stiffness(e: f64, g: f64, sec: Section3d, len: f64, d
     };
     // K = Tᵀ k T, T = diag(R, R, R, R).
     let t = |i: usize, j: usize| if i / 3 == j / 3 { r[i % 3][j % 3] } else { 0.0 };
-    let mut kt = [[0.0; 12]; 12];
-    for i in 0..12 {
-        for j in 0..12 {
-            kt[i][j] = (0..12).map(|m| k[i][m] * t(m, j)).sum();
-        }
-    }
-    let mut out = [[0.0; 12]; 12];
-    for i in 0..12 {
-        for j in 0..12 {
-            out[i][j] = (0..12).map(|m| t(m, i) * kt[m][j]).sum();
-        }
-    }
-    out
+    let kt: [[f64; 12]; 12] =
+        std::array::from_fn(|i| std::array::from_fn(|j| (0..12).map(|m| k[i][m] * t(m, j)).sum()));
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..12).map(|m| t(m, i) * kt[m][j]).sum()))
 }
 
 /// The undamped space frame in sparse storage; add damping with [`SparseModel::with_damping`].

@@ -372,7 +372,7 @@ impl SecondCore {
         while self.shared.done.load(Ordering::Acquire) != self.sequence {
             std::hint::spin_loop();
             spins = spins.wrapping_add(1);
-            if spins % 4096 == 0 {
+            if spins.is_multiple_of(4096) {
                 // The worker may have been descheduled (a loaded machine): give it the core.
                 std::thread::yield_now();
             }
@@ -452,7 +452,7 @@ fn worker_loop(sh: &Shared) {
             }
             std::hint::spin_loop();
             spins = spins.wrapping_add(1);
-            if spins % 1024 == 0 && started.elapsed() > SPIN {
+            if spins.is_multiple_of(1024) && started.elapsed() > SPIN {
                 sh.parked.store(true, Ordering::SeqCst);
                 if sh.command.load(Ordering::SeqCst) >> 2 == seen {
                     std::thread::park();
