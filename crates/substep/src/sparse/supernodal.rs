@@ -375,6 +375,11 @@ impl SecondCore {
             if spins.is_multiple_of(4096) {
                 // The worker may have been descheduled (a loaded machine): give it the core.
                 std::thread::yield_now();
+                // A worker that ended cannot finish the sweep: fail loudly rather than hang.
+                assert!(
+                    self.worker.as_ref().is_some_and(|w| !w.is_finished()),
+                    "the sparse-solve worker thread ended during a solve"
+                );
             }
         }
     }
