@@ -325,7 +325,7 @@ fn markdown(setup: &Setup, rows: &[RthsRow], command: &str, plots: &[PathBuf]) -
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let cells = |j: Option<[f64; 9]>| match j {
         Some(j) => j.iter().map(|v| format!("{v:.2}")).collect::<Vec<_>>().join(" | "),
-        None => vec!["–"; 9].join(" | "),
+        None => ["–"; 9].join(" | "),
     };
     for row in rows {
         let r = &row.nominal;

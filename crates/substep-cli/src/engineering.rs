@@ -17,6 +17,9 @@ use substep::run::{EngineeringRow, EngineeringSummary, InputMotion, round_time};
 /// Rows kept for the figures.
 const PLOT_ROWS: usize = 4000;
 
+/// Figures by file stem.
+pub type Figures = Vec<(&'static str, Figure)>;
+
 /// `response.csv`, written row by row, and the decimated series of its figures.
 pub struct ResponseWriter {
     w: BufWriter<File>,
@@ -77,7 +80,7 @@ impl ResponseWriter {
     }
 
     /// `energy.png`, `base_shear.png` and (shear chains) `storeys.png`.
-    pub fn figures(&self, s: &EngineeringSummary) -> Vec<(&'static str, Figure)> {
+    pub fn figures(&self, s: &EngineeringSummary) -> Figures {
         let t = self.table.column(0);
         let curve = |label: &str, c: usize| Curve {
             label: label.into(),
@@ -196,7 +199,7 @@ pub fn ground_motion_outputs(
     def: &TestDefinition,
     motion: &InputMotion,
     dir: &Path,
-) -> Result<(Vec<PathBuf>, Vec<(&'static str, Figure)>)> {
+) -> Result<(Vec<PathBuf>, Figures)> {
     let dt = def.integrator.dt;
     let ag = &def.ground_motion.accel;
     let mut files = Vec::new();

@@ -105,6 +105,8 @@ fn a_cancelled_run_says_so_and_keeps_its_rows() {
     assert_eq!((s.steps_done, s.stopped_at_step), (0, Some(1)));
     assert!(s.reason.as_deref().unwrap().contains("cancelled"), "{:?}", s.reason);
     assert_eq!(table.history.rows(), 1);
+    // An interrupted caller does not wait for the input motion's spectrum.
+    assert!(s.input_motion.pga_m_s2.is_nan() && s.input_motion.spectrum_peak.is_none());
 
     /// Stops after `n` steps.
     struct StopAfter(usize);

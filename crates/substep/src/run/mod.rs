@@ -396,11 +396,12 @@ impl<'d> Run<'d> {
         let started = Instant::now();
         let mut compute = Duration::ZERO;
         let mut failure: Option<Error> = None;
+        let mut cancelled = false;
         loop {
             let i = sim.steps_done();
-            extra_values(&sim, groups, &mut extra);
+            extra_values(sim, groups, &mut extra);
             if let Some(e) = engineering
-                && let Err(err) = e.record(&sim)
+                && let Err(err) = e.record(sim)
             {
                 failure = Some(err);
                 break;
@@ -417,11 +418,12 @@ impl<'d> Run<'d> {
                 reference: reference.as_ref().map(|r| r.u()),
                 engineering: engineering.as_ref().map(|e| e.row(sim.time())),
             });
-            recorder.record(&sim, reference.as_ref());
+            recorder.record(sim, reference.as_ref());
             if i == steps {
                 break;
             }
             if flow.is_break() || cancel.load(Ordering::Relaxed) {
+                cancelled = true;
                 failure = Some(Error::Stopped {
                     step: i + 1,
                     time: def.time(i + 1),
@@ -441,14 +443,23 @@ impl<'d> Run<'d> {
             }
         }
         let wall = started.elapsed().as_secs_f64();
-        let motion_summary = match InputMotion::new(def) {
-            Ok(m) => {
+        // A cancelled run returns at once: the input motion's spectrum of a long record takes
+        // seconds, which an interrupted caller should not wait for.
+        let motion = if cancelled {
+            Ok(None)
+        } else {
+            InputMotion::new(def).map(Some)
+        };
+        let motion_summary = match motion {
+            Ok(Some(m)) => {
                 let s = m.summary.clone();
                 *input_motion = Some(m);
                 s
             }
-            Err(e) => {
-                failure.get_or_insert(e);
+            other => {
+                if let Err(e) = other {
+                    failure.get_or_insert(e);
+                }
                 InputMotionSummary {
                     pga_g: f64::NAN,
                     pga_m_s2: f64::NAN,
@@ -465,7 +476,7 @@ impl<'d> Run<'d> {
             Some(e) => (Some(done + 1), Some(e.to_string())),
             None => (None, None),
         };
-        let (estimation, phase_lag, warnings) = summary::compensation_summary(&sim);
+        let (estimation, phase_lag, warnings) = summary::compensation_summary(sim);
         let sub = def.substructure.as_ref();
         RunSummary {
             config: def.source.clone(),

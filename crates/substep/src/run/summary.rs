@@ -51,7 +51,7 @@ pub struct CouplingError {
 #[derive(Debug, Clone, Serialize)]
 pub struct TrackingSummary {
     pub dof: usize,
-    /// Cross-correlation lag of the measured displacement behind the command [s]; null when
+    /// Cross-correlation lag of the measured displacement behind the command \[s\]; null when
     /// the command does not move. Equal to `max_delay_s` means "at least that".
     pub delay_s: Option<f64>,
     pub max_delay_s: f64,
@@ -96,9 +96,9 @@ pub struct RunSummary {
     /// Sub-steps of the ramp to the safe position after a safety stop (in `substeps.csv`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ramp_substeps: Option<usize>,
-    /// Wall time of the stepping loop including recording [s].
+    /// Wall time of the stepping loop including recording \[s\].
     pub wall_time_s: f64,
-    /// Compute time of the simulation steps alone per step [µs].
+    /// Compute time of the simulation steps alone per step \[µs\].
     pub us_per_step: f64,
     pub peaks: Vec<DofPeaks>,
     #[serde(skip_serializing_if = "Option::is_none")]

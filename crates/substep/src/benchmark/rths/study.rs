@@ -29,7 +29,7 @@ pub struct PerturbedStats {
     /// Stable runs, and stable runs that stay under the force capacity.
     pub stable: usize,
     pub under_capacity: usize,
-    /// Largest `max |F|` over all runs [N] (0 without runs).
+    /// Largest `max |F|` over all runs \[N\] (0 without runs).
     pub max_force: f64,
 }
 

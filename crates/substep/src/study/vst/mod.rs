@@ -43,21 +43,21 @@ use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec};
 /// The set-up of the study.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VstSettings {
-    /// Length of the sine sweep [s].
+    /// Length of the sine sweep \[s\].
     pub duration: f64,
-    /// Sweep range [Hz] and amplitude [m/s²].
+    /// Sweep range \[Hz\] and amplitude \[m/s²\].
     pub f0: f64,
     pub f1: f64,
     pub amplitude: f64,
-    /// Pure delay of the actuator [s].
+    /// Pure delay of the actuator \[s\].
     pub delay: f64,
     /// Force noise as a fraction of the reference's peak coupling force.
     pub noise_ratio: f64,
     pub dt: f64,
     pub k_sub: usize,
-    /// Phase-lag ramp-in [steps] (from t = 0).
+    /// Phase-lag ramp-in \[steps\] (from t = 0).
     pub ramp_steps: usize,
-    /// Statistics of tracking and error force from this time on [s] (after ramp-in and warm-up).
+    /// Statistics of tracking and error force from this time on \[s\] (after ramp-in and warm-up).
     pub settle: f64,
 }
 
@@ -82,7 +82,7 @@ impl VstSettings {
             ..Self::full(delay)
         }
     }
-    /// The sub-step `Δτ = Δt/k_sub` [s].
+    /// The sub-step `Δτ = Δt/k_sub` \[s\].
     pub fn dtau(&self) -> f64 {
         self.dt / self.k_sub as f64
     }
@@ -207,7 +207,7 @@ fn structure() -> Result<StructuralModel> {
         story_mass: 1000.0,
         first_period: 1.0,
     };
-    Ok(shear_building(&b)?.with_damping(&DampingSpec::Modal { zeta: vec![0.02] })?)
+    shear_building(&b)?.with_damping(&DampingSpec::Modal { zeta: vec![0.02] })
 }
 
 fn specimen() -> SpecimenSpec {
@@ -220,7 +220,7 @@ fn specimen() -> SpecimenSpec {
     }
 }
 
-/// The test definition of one run (force noise `sigma` [N]).
+/// The test definition of one run (force noise `sigma` \[N\]).
 pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result<TestDefinition> {
     let record = sine_sweep(s.amplitude, s.f0, s.f1, s.duration, s.dt)?;
     let steps = record.accel.len() - 1;

@@ -11,21 +11,21 @@ use crate::{Error, Result};
 #[derive(Debug, Clone, Default)]
 pub struct Series {
     pub t: Vec<f64>,
-    /// Top-floor displacement [m].
+    /// Top-floor displacement \[m\].
     pub u: Vec<f64>,
-    /// Noise-free coupling force at the step's end [N].
+    /// Noise-free coupling force at the step's end \[N\].
     pub f_true: Vec<f64>,
-    /// Measured coupling force [N].
+    /// Measured coupling force \[N\].
     pub f_meas: Vec<f64>,
-    /// Measured coupling displacement [m].
+    /// Measured coupling displacement \[m\].
     pub d_meas: Vec<f64>,
-    /// Error force e, compensation force f_u and the ideal value of e [N].
+    /// Error force e, compensation force f_u and the ideal value of e \[N\].
     pub e: Vec<f64>,
     pub fu: Vec<f64>,
     pub ideal: Vec<f64>,
-    /// The force the step was closed with (`f^(k−1)` or the estimate `f̂^(k)`) [N].
+    /// The force the step was closed with (`f^(k−1)` or the estimate `f̂^(k)`) \[N\].
     pub closing: Vec<f64>,
-    /// Tracking error of the last sub-step [m].
+    /// Tracking error of the last sub-step \[m\].
     pub tracking: Vec<f64>,
 }
 
@@ -41,15 +41,15 @@ pub struct RunResult {
     pub force_rms: f64,
     pub force_peak: f64,
     pub force_meas_rms: f64,
-    /// RMS of `d_target − y_true` over all sub-steps after `settle` [m].
+    /// RMS of `d_target − y_true` over all sub-steps after `settle` \[m\].
     pub tracking_rms: f64,
-    /// RMS of the error force `e` and of its ideal value after `settle` [N].
+    /// RMS of the error force `e` and of its ideal value after `settle` \[N\].
     pub e_rms: f64,
     pub ideal_rms: f64,
-    /// RMS of the true equilibrium error `f°^(k) − f_close` after `settle` [N]: how far the force
+    /// RMS of the true equilibrium error `f°^(k) − f_close` after `settle` \[N\]: how far the force
     /// the step was closed with is from the true force at the step's end.
     pub equilibrium_rms: f64,
-    /// RMS of `e − ideal` [N] and the coherence of `e` and its ideal value over the sweep's band
+    /// RMS of `e − ideal` \[N\] and the coherence of `e` and its ideal value over the sweep's band
     /// (with P = 1 and the estimation `e` is the compensation force `f_u`).
     pub diff_rms: f64,
     pub coherence: f64,
@@ -63,7 +63,7 @@ pub struct RunResult {
 /// The whole study.
 pub struct Study {
     pub settings: VstSettings,
-    /// Force noise [N] and the reference peaks.
+    /// Force noise \[N\] and the reference peaks.
     pub sigma: f64,
     pub ref_peak_u: f64,
     pub ref_peak_f: f64,
