@@ -1,7 +1,11 @@
 #!/usr/bin/env bash
 # Regenerate docs/performance.json: chain and frame sweeps (k_sub = 10, each size in its own
-# process) and the 5000-DOF comparison with OpenSees and SciPy (skipped if not installed).
-# Usage: bash benches/performance.sh   (from the repository root; takes a few minutes)
+# process; the frame on one and on two cores), the 3-D frame at 10^4 DOFs, and the comparisons
+# with OpenSees, SciPy splu (COLAMD, MMD) and CHOLMOD (each skipped if not installed) on the
+# 5000-DOF chain and the 10^4- and 10^5-DOF frames. Peers: python3 -m venv .venv &&
+# .venv/bin/pip install scipy openseespy (OpenSees needs apt-get install libblas3 liblapack3;
+# CHOLMOD: libsuitesparse-dev + scikit-sparse).
+# Usage: bash benches/performance.sh   (from the repository root; takes a quarter of an hour)
 set -euo pipefail
 cargo build --release -q
 bin=target/release/substep
@@ -9,7 +13,11 @@ tmp=$(mktemp -d)
 load_before=$(cut -d' ' -f1-3 /proc/loadavg)
 $bin bench --model chain --sweep --steps 2000 --json > "$tmp/chain.json"
 $bin bench --model frame --sweep --steps 1000 --json > "$tmp/frame.json"
+$bin bench --model frame --sweep --sizes 10000,30000,100000 --steps 1000 --two-cores --json > "$tmp/frame2.json"
+$bin bench --model frame3d --dofs 10000 --steps 1000 --json > "$tmp/frame3d.json"
 $bin bench --compare --steps 1000 --json > "$tmp/compare.json"
+$bin bench --compare --compare-model frame --compare-dofs 10000 --steps 200 --json > "$tmp/compare_frame_1e4.json"
+$bin bench --compare --compare-model frame --compare-dofs 100000 --steps 50 --json > "$tmp/compare_frame_1e5.json"
 load_after=$(cut -d' ' -f1-3 /proc/loadavg)
 python3 - "$tmp" "$load_before" "$load_after" > docs/performance.json <<'PY'
 import json, os, platform, sys
@@ -21,7 +29,11 @@ out = {
     "command": "bash benches/performance.sh",
     "chain_sweep": json.load(open(f"{tmp}/chain.json")),
     "frame_sweep": json.load(open(f"{tmp}/frame.json")),
+    "frame_sweep_two_cores": json.load(open(f"{tmp}/frame2.json")),
+    "frame3d_1e4": json.load(open(f"{tmp}/frame3d.json")),
     "compare_5000_dof_chain": json.load(open(f"{tmp}/compare.json")),
+    "compare_frame_1e4": json.load(open(f"{tmp}/compare_frame_1e4.json")),
+    "compare_frame_1e5": json.load(open(f"{tmp}/compare_frame_1e5.json")),
 }
 print(json.dumps(out, indent=1))
 PY

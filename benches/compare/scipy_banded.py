@@ -2,11 +2,11 @@
 """Newmark (average acceleration) on the substep comparison chain with NumPy/SciPy: the
 effective stiffness is factorised once (`scipy.linalg.cholesky_banded`), each step forms the
 effective load with vector operations on the band and solves with `cho_solve_banded`.
-Prints the median of 5 rounds of µs per step (one JSON line)."""
+Check steps and timed batches as in common.py (one JSON line)."""
 
 import time
 
-from common import parse_args, report, skip
+from common import ag, parse_args, report, skip
 
 args = parse_args(__doc__)
 try:
@@ -48,7 +48,7 @@ wm, wc, kw, rhs = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
 
 def step(i):
     global u, v, a, wm, wc, kw, rhs
-    ag = np.sin(2 * np.pi * (i + 1) * dt)
+    g = ag(i + 1, dt)
     # F_hat = M (a0 u + a2 v + a3 a) + C (a1 u + a4 v + a5 a), C = alpha M + beta K
     np.multiply(a1, u, out=wc)
     wc += a4 * v
@@ -59,32 +59,34 @@ def step(i):
     wm += alpha * wc
     np.multiply(mv, wm, out=rhs)
     rhs += beta * kmul(wc, kw)
-    rhs -= mv * ag
+    rhs -= mv * g
     un = cho_solve_banded((cb, False), rhs, check_finite=False)
     an = a0 * (un - u) - a2 * v - a3 * a
     vn = v + a6 * a + a7 * an
     u, v, a = un, vn, an
 
 
-for i in range(20):
+roof = args.roof if args.roof is not None else n - 1
+roof_u = []
+i = 0
+for _ in range(args.check_steps):
     step(i)
-rounds = []
-i = 20
-for _ in range(5):
-    t0 = time.perf_counter()
-    for _ in range(args.steps):
+    i += 1
+    roof_u.append(float(u[roof]))
+batches = []
+for _ in range(args.batches):
+    c0 = time.process_time()
+    for _ in range(args.batch_steps):
         step(i)
         i += 1
-    rounds.append((time.perf_counter() - t0) * 1e6 / args.steps)
-rounds.sort()
+    batches.append((time.process_time() - c0) * 1e6 / max(args.batch_steps, 1))
 if not np.all(np.isfinite(u)):
     skip("the SciPy loop diverged")
 report(
     tool="scipy_banded",
-    us_per_step=rounds[len(rounds) // 2],
-    rounds=rounds,
+    roof_u=roof_u,
+    cpu_us_per_batch=batches,
     best="cho_solve_banded",
     numpy=np.__version__,
     scipy=__import__("scipy").__version__,
-    roof_u=float(u[-1]),
 )

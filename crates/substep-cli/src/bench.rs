@@ -37,9 +37,12 @@ pub struct BenchArgs {
     /// Print one JSON object instead of the table
     #[arg(long)]
     pub json: bool,
-    /// Large-model benchmark on a sparse model: chain (shear building) or frame
-    #[arg(long, value_enum)]
+    /// Large-model benchmark on a sparse model: chain (shear building), frame (2-D) or frame3d
+    #[arg(long, value_parser = bench_models::parse_model)]
     pub model: Option<BenchModel>,
+    /// Sweep the sparse factor on two cores (a worker thread takes half of the elimination tree)
+    #[arg(long)]
+    pub two_cores: bool,
     /// DOFs of the --model benchmark (the frame takes the nearest size its layout allows)
     #[arg(long)]
     pub dofs: Option<usize>,
@@ -53,13 +56,20 @@ pub struct BenchArgs {
     /// Sizes for --sweep (comma-separated)
     #[arg(long, value_delimiter = ',', requires = "sweep")]
     pub sizes: Option<Vec<usize>>,
-    /// Time the 5000-DOF chain (monolithic Newmark) against OpenSees and a SciPy banded loop
-    /// (benches/compare/*.py; skipped when python3, openseespy or scipy are missing)
+    /// Time monolithic Newmark on one model against OpenSees (chain), SciPy splu (COLAMD, MMD)
+    /// and CHOLMOD on the exported matrices, after checking that they compute the same
+    /// response (benches/compare/*.py; tools that are missing are skipped)
     #[arg(long, conflicts_with = "model")]
     pub compare: bool,
-    /// DOFs of the --compare chain
+    /// Model of --compare: chain, frame or frame3d
+    #[arg(long, default_value = "chain", value_parser = bench_models::parse_model, requires = "compare")]
+    pub compare_model: BenchModel,
+    /// DOFs of the --compare model
     #[arg(long, default_value_t = 5000, requires = "compare")]
     pub compare_dofs: usize,
+    /// Timing rounds of --compare, interleaved over the tools (the median is reported)
+    #[arg(long, default_value_t = 3, requires = "compare")]
+    pub rounds: usize,
 }
 
 #[derive(Debug, Serialize)]
@@ -229,7 +239,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     if let Some(model) = args.model {
         if args.sweep {
             let sizes = args.sizes.clone().unwrap_or_else(|| bench_models::SWEEP_DOFS.to_vec());
-            let s = bench_models::sweep(model, &sizes, args.steps, args.substeps)?;
+            let s = bench_models::sweep(model, &sizes, args.steps, args.substeps, args.two_cores)?;
             if args.json {
                 println!("{}", serde_json::to_string(&s).expect("sweep serialises"));
             } else {
@@ -240,7 +250,13 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         let dofs = args
             .dofs
             .ok_or_else(|| substep::Error::invalid("--dofs", "is required with --model (or use --sweep)"))?;
-        let r = bench_models::bench_model(model, dofs, args.steps, args.substeps)?;
+        let r = bench_models::bench_model(&bench_models::ModelBenchOptions {
+            model,
+            dofs,
+            steps: args.steps,
+            substeps: args.substeps,
+            second_core: args.two_cores,
+        })?;
         if args.json {
             println!("{}", serde_json::to_string(&r).expect("bench result serialises"));
         } else {

@@ -1,39 +1,67 @@
-//! `substep bench --compare`: per-step time of monolithic Newmark (average acceleration,
-//! linear) on the same chain (default 5000 DOFs) in substep, in OpenSees (openseespy, fastest of
-//! several linear-system solvers) and in a NumPy/SciPy loop around `cho_solve_banded`, measured
-//! in one run, with the ratios. The Python side lives in `benches/compare/*.py`; a script that
-//! cannot run (no python3, no openseespy, no scipy) is reported as skipped.
+//! `substep bench --compare`: monolithic Newmark (average acceleration, linear) on one model
+//! in substep and in other tools, measured in one run with one statistic. The model (chain,
+//! 2-D or 3-D frame; `--compare-model`) is exported as MatrixMarket files for the tools that
+//! read matrices (SciPy `splu` with COLAMD and with MMD, CHOLMOD); OpenSees builds the chain
+//! itself from its parameters. Every tool first runs `CHECK_STEPS` steps and reports the roof
+//! displacement after each: a tool whose response differs from substep's (relative
+//! `AGREEMENT_TOLERANCE`) is refused and not timed. Then `--rounds` rounds, interleaved over the
+//! tools, each of `BATCHES` batches of `--steps / BATCHES` steps timed in CPU time: per round the
+//! median over its batches, per tool the median (and min–max) over the rounds. The scripts live
+//! in `benches/compare/*.py`; a script that cannot run is reported as skipped.
 
 use crate::bench::BenchArgs;
-use crate::bench_models::{self, BenchModel, DT, chain};
+use crate::bench_models::{BenchModel, ModelBenchOptions, bench_model};
 use anyhow::Result;
 use serde::Serialize;
 use serde_json::Value;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use substep::bench::{DT, Spread, build, chain, check_agreement, median, monolithic_run};
+
+/// Steps of the agreement check.
+pub const CHECK_STEPS: usize = 50;
+/// Relative difference of the roof response above which a tool computes a different model.
+pub const AGREEMENT_TOLERANCE: f64 = 1e-9;
+/// Timed batches per round.
+pub const BATCHES: usize = 5;
 
 #[derive(Debug, Serialize)]
 struct ToolResult {
     tool: String,
-    /// Median µs per step, or `None` if skipped.
-    us_per_step: Option<f64>,
-    /// Their time over substep's monolithic step.
-    ratio: Option<f64>,
+    /// `agreed`, `refused` or `skipped`.
+    status: String,
+    /// Why refused or skipped.
+    reason: Option<String>,
+    /// Relative difference of the roof response from substep's over the check steps.
+    agreement: Option<f64>,
+    /// CPU µs per step: median, min, max over the rounds.
+    cpu_us_per_step: Option<Spread>,
+    /// Their median over substep's monolithic median, and over substep's full substructure step.
+    ratio_to_monolithic: Option<f64>,
+    ratio_to_substructure_step: Option<f64>,
     detail: Value,
 }
 
 #[derive(Debug, Serialize)]
 struct Comparison {
+    model: String,
     dofs: usize,
-    steps: usize,
+    layout: String,
     dt: f64,
-    story_mass: f64,
-    story_stiffness: f64,
     rayleigh_alpha: f64,
     rayleigh_beta: f64,
-    substep_us_per_step: f64,
+    check_steps: usize,
+    rounds: usize,
+    batches: usize,
+    batch_steps: usize,
     substep_solver: String,
-    /// Full substructure step (k_sub sub-steps, n_c = 1) on the same chain, for reference.
-    substep_substructure_us_per_step: f64,
+    substep_second_core: bool,
+    substep_solve_bytes: usize,
+    /// substep monolithic step, CPU µs: median, min, max over the rounds.
+    substep_cpu_us_per_step: Spread,
+    /// Full substructure step (k_sub sub-steps, n_c = 1) on the same model: median CPU µs and
+    /// wall p99 µs over `--steps` steps.
+    substep_substructure_cpu_us_per_step: f64,
+    substep_substructure_p99_us: f64,
     tools: Vec<ToolResult>,
 }
 
@@ -48,77 +76,266 @@ fn scripts_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../benches/compare"))
 }
 
-pub fn compare(args: &BenchArgs) -> Result<()> {
-    let n = args.compare_dofs;
-    let steps = args.steps.max(100);
-    let (b, alpha, beta) = chain(n)?;
-    // substep: monolithic Newmark and the full substructure step on the same chain, per-step
-    // medians after a warm-up (see bench_models::bench_model).
-    let sub = bench_models::bench_model(BenchModel::Chain, n, steps, args.substeps)?;
-    let ours = sub.us_per_step_monolithic_median;
-    let solver = sub.solver.clone();
+/// `SUBSTEP_PYTHON`, else the project's `.venv` (see docs/performance.md), else `python3`.
+fn python() -> String {
+    if let Ok(p) = std::env::var("SUBSTEP_PYTHON") {
+        return p;
+    }
+    for venv in [
+        ".venv/bin/python",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../../.venv/bin/python"),
+    ] {
+        if Path::new(venv).is_file() {
+            return venv.to_string();
+        }
+    }
+    "python3".into()
+}
 
-    let python = std::env::var("SUBSTEP_PYTHON").unwrap_or_else(|_| "python3".into());
+/// A peer: a display name, its script and the arguments that describe the model.
+struct Peer {
+    tool: &'static str,
+    script: &'static str,
+    args: Vec<String>,
+}
+
+/// Run a peer script; `Ok(json)` with `roof_u` and `cpu_us_per_batch`, or `Err(reason)` for a skip.
+fn run_peer(python: &str, dir: &Path, p: &Peer, extra: &[String]) -> std::result::Result<Value, String> {
+    let path = dir.join(p.script);
+    if !path.is_file() {
+        return Err(format!("skipped: {} not found", path.display()));
+    }
+    let out = std::process::Command::new(python)
+        .arg(&path)
+        .args(&p.args)
+        .args(extra)
+        .output()
+        .map_err(|e| format!("skipped: cannot run {python}: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    match text.lines().rev().find_map(|l| serde_json::from_str::<Value>(l).ok()) {
+        Some(v) if v.get("skipped").is_some() => Err(format!("skipped: {}", v["skipped"].as_str().unwrap_or("?"))),
+        Some(v) if v.get("roof_u").is_some() && v.get("cpu_us_per_batch").is_some() => Ok(v),
+        _ => Err(format!(
+            "skipped: {} exited with {} and printed no result: {}",
+            path.display(),
+            out.status,
+            String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("")
+        )),
+    }
+}
+
+fn floats(v: &Value, key: &str) -> Vec<f64> {
+    v.get(key)
+        .and_then(Value::as_array)
+        .map(|a| a.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect())
+        .unwrap_or_default()
+}
+
+pub fn compare(args: &BenchArgs) -> Result<()> {
+    let steps = args.steps;
+    if steps < BATCHES || !steps.is_multiple_of(BATCHES) {
+        return Err(substep::Error::invalid(
+            "--steps",
+            format!("with --compare must be a multiple of {BATCHES} (the timed batches per round), got {steps}"),
+        )
+        .into());
+    }
+    if args.rounds == 0 {
+        return Err(substep::Error::invalid("--rounds", "must be at least 1").into());
+    }
+    let batch_steps = steps / BATCHES;
+    let model = args.compare_model;
+    let built = build(model, args.compare_dofs)?;
+    let (m, roof) = (&built.model, built.roof);
+    let (alpha, beta) = built.rayleigh;
+    let n = m.n_dofs();
+
+    // The exported model, for the tools that read matrices.
+    let export_dir = std::env::temp_dir().join(format!("substep-compare-{}", std::process::id()));
+    crate::model_export::export(m, &[roof], &export_dir, "substep bench --compare")?;
+    let mtx = vec![
+        "--mtx".to_string(),
+        export_dir.display().to_string(),
+        "--roof".into(),
+        roof.to_string(),
+        "--dt".into(),
+        DT.to_string(),
+    ];
+    let mut peers = Vec::new();
+    if model == BenchModel::Chain {
+        let (b, _, _) = chain(n)?;
+        let chain_args = vec![
+            "--dofs".to_string(),
+            n.to_string(),
+            "--mass".into(),
+            b.story_mass.to_string(),
+            "--stiffness".into(),
+            b.story_stiffness().to_string(),
+            "--alpha".into(),
+            alpha.to_string(),
+            "--beta".into(),
+            beta.to_string(),
+            "--dt".into(),
+            DT.to_string(),
+        ];
+        peers.push(Peer {
+            tool: "opensees",
+            script: "opensees_chain.py",
+            args: chain_args.clone(),
+        });
+        peers.push(Peer {
+            tool: "scipy_banded",
+            script: "scipy_banded.py",
+            args: chain_args,
+        });
+    }
+    for (tool, solver) in [
+        ("scipy_splu_colamd", "splu_colamd"),
+        ("scipy_splu_mmd", "splu_mmd"),
+        ("cholmod", "cholmod"),
+    ] {
+        let mut a = mtx.clone();
+        a.extend(["--solver".to_string(), solver.to_string()]);
+        peers.push(Peer {
+            tool,
+            script: "scipy_sparse.py",
+            args: a,
+        });
+    }
+
+    // Agreement first: the same response after the same steps, or no timing.
+    let (ours_roof, _) = monolithic_run(m, roof, args.two_cores, CHECK_STEPS, 0, 0)?;
+    let python = python();
     let dir = scripts_dir();
-    let mut tools = Vec::new();
-    for (tool, script) in [("opensees", "opensees_chain.py"), ("scipy_banded", "scipy_banded.py")] {
-        let path = dir.join(script);
-        let out = std::process::Command::new(&python)
-            .arg(&path)
-            .args([
-                "--dofs",
-                &n.to_string(),
-                "--steps",
-                &steps.to_string(),
-                "--dt",
-                &DT.to_string(),
-            ])
-            .args([
-                "--mass",
-                &b.story_mass.to_string(),
-                "--stiffness",
-                &b.story_stiffness().to_string(),
-            ])
-            .args(["--alpha", &alpha.to_string(), "--beta", &beta.to_string()])
-            .output();
-        let (us, detail) = match out {
-            Err(e) => (None, Value::String(format!("skipped: cannot run {python}: {e}"))),
-            Ok(o) => {
-                let text = String::from_utf8_lossy(&o.stdout);
-                let json = text.lines().rev().find_map(|l| serde_json::from_str::<Value>(l).ok());
-                match json {
-                    Some(v) if v.get("us_per_step").and_then(Value::as_f64).is_some() => (v["us_per_step"].as_f64(), v),
-                    Some(v) => (None, v),
-                    None => (
-                        None,
-                        Value::String(format!(
-                            "skipped: {} exited with {} and printed no result: {}",
-                            path.display(),
-                            o.status,
-                            String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")
-                        )),
-                    ),
+    let check = [
+        "--check-steps".to_string(),
+        CHECK_STEPS.to_string(),
+        "--batches".into(),
+        "0".into(),
+    ];
+    let mut tools: Vec<ToolResult> = Vec::new();
+    for p in &peers {
+        let r = match run_peer(&python, &dir, p, &check) {
+            Err(reason) => ToolResult {
+                tool: p.tool.into(),
+                status: "skipped".into(),
+                reason: Some(reason),
+                agreement: None,
+                cpu_us_per_step: None,
+                ratio_to_monolithic: None,
+                ratio_to_substructure_step: None,
+                detail: Value::Null,
+            },
+            Ok(v) => {
+                let theirs = floats(&v, "roof_u");
+                match check_agreement(p.tool, &ours_roof, &theirs, AGREEMENT_TOLERANCE) {
+                    Ok(d) => ToolResult {
+                        tool: p.tool.into(),
+                        status: "agreed".into(),
+                        reason: None,
+                        agreement: Some(d),
+                        cpu_us_per_step: None,
+                        ratio_to_monolithic: None,
+                        ratio_to_substructure_step: None,
+                        detail: v,
+                    },
+                    Err(e) => ToolResult {
+                        tool: p.tool.into(),
+                        status: "refused".into(),
+                        reason: Some(e.to_string()),
+                        agreement: Some(substep::bench::max_rel_difference(&ours_roof, &theirs)),
+                        cpu_us_per_step: None,
+                        ratio_to_monolithic: None,
+                        ratio_to_substructure_step: None,
+                        detail: Value::Null,
+                    },
                 }
             }
         };
-        tools.push(ToolResult {
-            tool: tool.into(),
-            ratio: us.map(|u| u / ours),
-            us_per_step: us,
-            detail,
-        });
+        if !args.json {
+            eprintln!(
+                "  {:<18} {}{}",
+                r.tool,
+                r.status,
+                r.agreement
+                    .map_or(String::new(), |d| format!(" (roof response within {d:.1e})"))
+            );
+        }
+        tools.push(r);
     }
-    let c = Comparison {
-        dofs: n,
+
+    // Timing: rounds interleaved over substep and the tools that agreed.
+    let timed = [
+        "--check-steps".to_string(),
+        "0".into(),
+        "--batches".into(),
+        BATCHES.to_string(),
+        "--batch-steps".into(),
+        batch_steps.to_string(),
+    ];
+    let mut ours_rounds = Vec::new();
+    let mut theirs_rounds: Vec<Vec<f64>> = vec![Vec::new(); peers.len()];
+    for round in 0..args.rounds {
+        let (_, batches) = monolithic_run(m, roof, args.two_cores, 0, BATCHES, batch_steps)?;
+        ours_rounds.push(median(&batches));
+        for (k, p) in peers.iter().enumerate() {
+            if tools[k].status != "agreed" {
+                continue;
+            }
+            match run_peer(&python, &dir, p, &timed) {
+                Ok(v) => {
+                    theirs_rounds[k].push(median(&floats(&v, "cpu_us_per_batch")));
+                    tools[k].detail = v;
+                }
+                Err(reason) => {
+                    tools[k].status = "skipped".into();
+                    tools[k].reason = Some(format!("round {}: {reason}", round + 1));
+                }
+            }
+        }
+        if !args.json {
+            eprintln!("  round {}/{} done", round + 1, args.rounds);
+        }
+    }
+    let ours = Spread::of(&ours_rounds);
+    let sub = bench_model(&ModelBenchOptions {
+        model,
+        dofs: args.compare_dofs,
         steps,
+        substeps: args.substeps,
+        second_core: args.two_cores,
+    })?;
+    for (k, t) in tools.iter_mut().enumerate() {
+        if t.status == "agreed" && !theirs_rounds[k].is_empty() {
+            let s = Spread::of(&theirs_rounds[k]);
+            t.ratio_to_monolithic = Some(s.median / ours.median);
+            t.ratio_to_substructure_step = Some(s.median / sub.cpu_us_per_step_median);
+            t.cpu_us_per_step = Some(s);
+        }
+        // The timing rounds' detail holds what the tools report about themselves; the
+        // response histories are not needed again.
+        if let Some(o) = t.detail.as_object_mut() {
+            o.remove("roof_u");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&export_dir);
+    let c = Comparison {
+        model: model.name().into(),
+        dofs: n,
+        layout: built.layout.clone(),
         dt: DT,
-        story_mass: b.story_mass,
-        story_stiffness: b.story_stiffness(),
         rayleigh_alpha: alpha,
         rayleigh_beta: beta,
-        substep_us_per_step: ours,
-        substep_solver: solver,
-        substep_substructure_us_per_step: sub.us_per_step_median,
+        check_steps: CHECK_STEPS,
+        rounds: args.rounds,
+        batches: BATCHES,
+        batch_steps,
+        substep_solver: sub.solver.clone(),
+        substep_second_core: sub.second_core,
+        substep_solve_bytes: sub.solve_bytes,
+        substep_cpu_us_per_step: ours,
+        substep_substructure_cpu_us_per_step: sub.cpu_us_per_step_median,
+        substep_substructure_p99_us: sub.us_per_step_p99,
         tools,
     };
     if args.json {
@@ -126,20 +343,41 @@ pub fn compare(args: &BenchArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "substep bench --compare: {n}-DOF chain, Newmark average acceleration, Rayleigh 5 %, dt = {DT} s, {steps} steps"
+        "substep bench --compare: {} model, {n} DOFs ({}), Newmark average acceleration, Rayleigh 5 %, dt = {DT} s",
+        c.model, c.layout
     );
-    println!("  substep (monolithic step, {}): {ours:.1} µs", c.substep_solver);
     println!(
-        "  substep (full substructure step, k_sub = {}, n_c = 1): {:.1} µs",
-        args.substeps, c.substep_substructure_us_per_step
+        "  CPU µs per step, median (min-max) over {} rounds of {BATCHES} batches of {batch_steps} steps, interleaved",
+        args.rounds
+    );
+    println!(
+        "  {:<34} {:>10.1} ({:.1}-{:.1})",
+        format!(
+            "substep monolithic{}",
+            if c.substep_second_core { ", two cores" } else { "" }
+        ),
+        ours.median,
+        ours.min,
+        ours.max
+    );
+    println!(
+        "  {:<34} {:>10.1} (p99 wall {:.1})   solver: {}",
+        format!("substep substructure step, k_sub = {}", args.substeps),
+        c.substep_substructure_cpu_us_per_step,
+        c.substep_substructure_p99_us,
+        c.substep_solver
     );
     for t in &c.tools {
-        match (t.us_per_step, t.ratio) {
-            (Some(us), Some(r)) => {
-                let best = t.detail.get("best").and_then(Value::as_str).unwrap_or("");
-                println!("  {:<13} {us:>10.1} µs per step   {r:>7.1} x substep  {best}", t.tool);
-            }
-            _ => println!("  {:<13} {}", t.tool, t.detail),
+        match (&t.cpu_us_per_step, t.ratio_to_monolithic, t.ratio_to_substructure_step) {
+            (Some(s), Some(r), Some(rs)) => println!(
+                "  {:<34} {:>10.1} ({:.1}-{:.1})   {r:.2} x substep monolithic, {rs:.2} x substep substructure step",
+                t.tool, s.median, s.min, s.max
+            ),
+            _ => println!(
+                "  {:<34} {}",
+                t.tool,
+                t.reason.clone().unwrap_or_else(|| t.status.clone())
+            ),
         }
     }
     Ok(())

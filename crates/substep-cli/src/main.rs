@@ -12,6 +12,7 @@ mod bench_models;
 mod benchmark;
 mod container;
 mod engineering;
+mod model_export;
 mod output;
 mod plots;
 mod realtime;
@@ -59,6 +60,8 @@ enum Command {
     Study(study::StudyArgs),
     /// Community benchmarks reproduced: `benchmark rths` (the virtual RTHS benchmark, docs/benchmark.md)
     Benchmark(benchmark::BenchmarkArgs),
+    /// The numerical model of a test definition: `model export CONFIG --mtx DIR` (MatrixMarket)
+    Model(model_export::ModelArgs),
 }
 
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -116,6 +119,7 @@ fn main() -> ExitCode {
         Some(Command::Vst(args)) => vst::vst(&args),
         Some(Command::Benchmark(args)) => benchmark::benchmark(&args),
         Some(Command::Study(args)) => study::study(&args),
+        Some(Command::Model(args)) => model_export::model(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

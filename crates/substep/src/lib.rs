@@ -23,6 +23,7 @@ pub mod run;
 
 pub use error::{Error, Result};
 pub mod analysis;
+pub mod bench;
 pub mod benchmark;
 pub mod compensate;
 pub mod ident;

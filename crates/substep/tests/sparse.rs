@@ -217,6 +217,17 @@ fn monolithic_newmark_sparse_matches_dense() {
 
 /// Coupling DOFs and spring specimens (10 % of a story stiffness) on the top of the model.
 fn substructured(model: ModelRef, coupling: &[usize], k_spec: f64, ag: &[f64], dt: f64) -> Vec<DVector<f64>> {
+    substructured_with(model, coupling, k_spec, ag, dt, false)
+}
+
+fn substructured_with(
+    model: ModelRef,
+    coupling: &[usize],
+    k_spec: f64,
+    ag: &[f64],
+    dt: f64,
+    second_core: bool,
+) -> Vec<DVector<f64>> {
     let k_sub = 10;
     let settings = SubstepSettings {
         dt,
@@ -247,7 +258,10 @@ fn substructured(model: ModelRef, coupling: &[usize], k_spec: f64, ag: &[f64], d
     )
     .unwrap();
     let load0 = -model.effective_mass_vector() * ag[0];
-    let ctrl = SubstepController::new(model, &settings, &load0).unwrap();
+    let mut ctrl = SubstepController::new(model, &settings, &load0).unwrap();
+    if second_core {
+        assert!(ctrl.enable_second_core(), "{}", ctrl.solver());
+    }
     let mut test = SubstructureTest::new(model, ctrl, Box::new(lab)).unwrap();
     let mut out = vec![];
     for i in 0..ag.len() - 1 {
@@ -526,4 +540,105 @@ mod config {
         sim.step(&mut ()).unwrap();
         std::fs::remove_dir_all(&dir).ok();
     }
+}
+
+/// `K̂ = K + a0 M + a1 C` of a frame (Rayleigh `C = 0.1 M + 0.002 K`, `dt = 0.01 s`).
+fn frame_k_hat(f: &Frame2d) -> CscMatrix {
+    let m = frame_2d(f).unwrap();
+    let (a0, a1) = (4.0 / 1e-4, 2.0 / 0.01);
+    CscMatrix::linear_combination(&[(1.0 + a1 * 0.002, &m.stiffness), (a0 + a1 * 0.1, &m.mass)])
+}
+
+#[test]
+fn supernodal_solves_match_dense_cholesky_for_both_orderings() {
+    use substep::sparse::SparseOrdering;
+    // A frame (3-DOF nodes, supernodes of many widths) and a frame with a rigid diaphragm
+    // (one DOF shared by a floor: wide, dense rows), plus two unconnected frames in one matrix
+    // (a forest: the elimination tree has two roots).
+    let a = Frame2d {
+        bays: 9,
+        stories: 17,
+        ..Frame2d::default()
+    };
+    let b = Frame2d {
+        bays: 5,
+        stories: 11,
+        rigid_diaphragm: true,
+        ..Frame2d::default()
+    };
+    let (ka, kb) = (frame_k_hat(&a), frame_k_hat(&b));
+    // Two copies of the frame: balanced roots, so the two-core split is at the virtual root
+    // (no top separator).
+    let na = ka.n();
+    let mut t = Vec::new();
+    for (off, k) in [(0, &ka), (na, &ka)] {
+        for j in 0..k.n() {
+            let (rows, vals) = k.col(j);
+            t.extend(rows.iter().zip(vals).map(|(&i, &v)| (i + off, j + off, v)));
+        }
+    }
+    let forest = CscMatrix::from_triplets(2 * na, &t);
+    for (name, k) in [("frame", &ka), ("diaphragm frame", &kb), ("two frames", &forest)] {
+        let dense = k.to_dense().cholesky().expect("K_hat is SPD");
+        let rhs: Vec<f64> = (0..k.n()).map(|i| ((i * 7919) % 101) as f64 - 50.0).collect();
+        let want = dense.solve(&DVector::from_row_slice(&rhs));
+        for ord in [
+            SparseOrdering::Amd,
+            SparseOrdering::NestedDissection,
+            SparseOrdering::Auto,
+        ] {
+            let mut fac = SymmetricFactor::with_ordering(k, FactorKind::Sparse, ord, "K_hat").unwrap();
+            assert!(fac.describe().starts_with("supernodal"), "{}", fac.describe());
+            let mut x = rhs.clone();
+            fac.solve_in_place(&mut x);
+            // Solving twice with the same factor gives the same bits (no state left behind).
+            let mut y = rhs.clone();
+            fac.solve_in_place(&mut y);
+            assert_eq!(x, y, "{name} {ord:?}: rerun differs");
+            let err = (DVector::from_row_slice(&x) - &want).amax() / want.amax();
+            assert!(err < 1e-10, "{name} {ord:?}: {err}");
+            assert!(fac.bytes_per_solve() >= 16 * fac.factor_len() / 2, "{name}: bytes");
+            // The same factor swept on two cores: the halves of the tree below the top
+            // separator (nested dissection always has them here).
+            if fac.enable_second_core() {
+                assert!(fac.uses_second_core());
+                let mut z = rhs.clone();
+                fac.solve_in_place(&mut z);
+                let err2 = (DVector::from_row_slice(&z) - &want).amax() / want.amax();
+                assert!(err2 < 1e-10, "{name} {ord:?} two cores: {err2}");
+                for _ in 0..3 {
+                    let mut z2 = rhs.clone();
+                    fac.solve_in_place(&mut z2);
+                    assert_eq!(z, z2, "{name} {ord:?}: two-core rerun differs");
+                }
+            } else {
+                assert_ne!(ord, SparseOrdering::NestedDissection, "{name}: no split");
+            }
+        }
+    }
+}
+
+#[test]
+fn substructured_frame_on_two_cores_matches_one() {
+    // A 10-bay, 20-storey frame, spring specimen on the roof: the sub-step controller with the
+    // predictor solve on one core and on two gives the same response (to rounding).
+    let f = Frame2d {
+        bays: 10,
+        stories: 20,
+        ..Frame2d::default()
+    };
+    let m = frame_2d(&f)
+        .unwrap()
+        .with_damping(&DampingSpec::Rayleigh {
+            alpha: 0.2,
+            beta: 0.002,
+        })
+        .unwrap();
+    let roof = f.dof(f.stories, 0, FrameDof::Ux).unwrap();
+    let ag = ground(200, 0.01);
+    let one = substructured(ModelRef::Sparse(&m), &[roof], 1e6, &ag, 0.01);
+    let two = substructured_with(ModelRef::Sparse(&m), &[roof], 1e6, &ag, 0.01, true);
+    let d = max_rel_diff(&two, &one);
+    assert!(d < 1e-10, "{d}");
+    assert!(one.last().unwrap().amax() > 0.0);
 }

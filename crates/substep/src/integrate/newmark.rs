@@ -128,6 +128,27 @@ impl NewmarkCore {
         }
     }
 
+    /// Sweep a sparse `K̂` on two cores (see [`SymmetricFactor::enable_second_core`]); `false`
+    /// for dense and banded factors and trees without a balanced split.
+    pub fn enable_second_core(&mut self) -> bool {
+        match &mut self.backend {
+            Backend::Dense { .. } => false,
+            Backend::Sparse { k_hat, .. } => k_hat.enable_second_core(),
+        }
+    }
+
+    /// Bytes of the factor one solve reads (its floor is this over the memory bandwidth); for
+    /// a dense factor the `n (n + 1) / 2` values read twice.
+    pub fn solve_bytes(&self) -> usize {
+        match &self.backend {
+            Backend::Dense { .. } => {
+                let n = self.n_dofs();
+                8 * n * (n + 1)
+            }
+            Backend::Sparse { k_hat, .. } => k_hat.bytes_per_solve(),
+        }
+    }
+
     /// Overwrite `x` with `K̂⁻¹ x` (allocation-free).
     pub fn solve_in_place(&mut self, x: &mut DVector<f64>) {
         match &mut self.backend {
@@ -292,6 +313,16 @@ impl Newmark {
         let state = Kinematics::at_rest(model, load0)?;
         let next = state.clone();
         Ok(Self { core, state, next })
+    }
+}
+
+impl Newmark {
+    /// See [`NewmarkCore::enable_second_core`].
+    pub fn enable_second_core(&mut self) -> bool {
+        self.core.enable_second_core()
+    }
+    pub fn core(&self) -> &NewmarkCore {
+        &self.core
     }
 }
 

@@ -440,6 +440,41 @@ fn parse_header(header: &str) -> std::result::Result<(Layout, Symmetry), String>
     Ok((layout, symmetry))
 }
 
+/// Write the symmetric `a` as `%%MatrixMarket matrix coordinate real symmetric` (its lower
+/// triangle, 1-based, values with 17 significant digits so that they read back bit for bit);
+/// `comment` lines go after the header.
+pub fn write_matrix_market_symmetric(
+    out: &mut impl std::io::Write,
+    a: &CscMatrix,
+    comment: &str,
+) -> std::io::Result<()> {
+    let (cp, ri, vals) = a.lower_triangle();
+    writeln!(out, "%%MatrixMarket matrix coordinate real symmetric")?;
+    for line in comment.lines() {
+        writeln!(out, "% {line}")?;
+    }
+    writeln!(out, "{} {} {}", a.n(), a.n(), vals.len())?;
+    for j in 0..a.n() {
+        for k in cp[j]..cp[j + 1] {
+            writeln!(out, "{} {} {:.16e}", ri[k] + 1, j + 1, vals[k])?;
+        }
+    }
+    Ok(())
+}
+
+/// Write the vector `v` as `%%MatrixMarket matrix array real general` (`n × 1`).
+pub fn write_matrix_market_vector(out: &mut impl std::io::Write, v: &[f64], comment: &str) -> std::io::Result<()> {
+    writeln!(out, "%%MatrixMarket matrix array real general")?;
+    for line in comment.lines() {
+        writeln!(out, "% {line}")?;
+    }
+    writeln!(out, "{} 1", v.len())?;
+    for x in v {
+        writeln!(out, "{x:.16e}")?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

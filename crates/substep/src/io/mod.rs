@@ -15,6 +15,6 @@ pub use config::{GroundMotion, IntegratorDefinition, OutputSettings, Substructur
 pub use limits::Limits;
 pub use matrix_market::{
     parse_matrix_market, parse_matrix_market_sparse, read_matrix_market, read_matrix_market_sparse,
-    read_matrix_market_sparse_with, read_matrix_market_with,
+    read_matrix_market_sparse_with, read_matrix_market_with, write_matrix_market_symmetric, write_matrix_market_vector,
 };
 pub use run::{Reference, Simulation};

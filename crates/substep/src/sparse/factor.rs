@@ -13,14 +13,17 @@
 //! factor's (`len_val` of faer's symbolic analysis).
 
 use super::CscMatrix;
+use super::supernodal::SupernodalSolve;
 use crate::error::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::perm::PermRef;
 use faer::sparse::SparseColMatRef;
 use faer::sparse::SymbolicSparseColMatRef;
+use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
 };
-use faer::{Conj, MatMut, Par, Side};
+use faer::{Par, Side};
 
 /// Which factorisation to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -30,8 +33,30 @@ pub enum FactorKind {
     Auto,
     /// Natural ordering, band storage.
     Banded,
-    /// faer sparse Cholesky with AMD ordering.
+    /// faer's supernodal sparse Cholesky (ordering: [`SparseOrdering`]).
     Sparse,
+}
+
+/// Fill-reducing ordering of the sparse factor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SparseOrdering {
+    /// Both, keeping the one with the smaller factor.
+    #[default]
+    Auto,
+    /// Approximate minimum degree (faer).
+    Amd,
+    /// Nested dissection (METIS `NodeND`).
+    NestedDissection,
+}
+
+impl SparseOrdering {
+    pub fn name(self) -> &'static str {
+        match self {
+            SparseOrdering::Auto => "auto",
+            SparseOrdering::Amd => "AMD",
+            SparseOrdering::NestedDissection => "nested dissection (METIS)",
+        }
+    }
 }
 
 /// A factorised SPD matrix; [`SymmetricFactor::solve_in_place`] never allocates.
@@ -58,6 +83,11 @@ impl SymmetricFactor {
     /// Factorise the symmetric `a` (both triangles stored). `what` names the matrix in errors
     /// (e.g. "effective stiffness K + a0 M + a1 C").
     pub fn new(a: &CscMatrix, kind: FactorKind, what: &str) -> Result<Self> {
+        Self::with_ordering(a, kind, SparseOrdering::Auto, what)
+    }
+
+    /// [`SymmetricFactor::new`] with the ordering of the sparse factor chosen.
+    pub fn with_ordering(a: &CscMatrix, kind: FactorKind, ordering: SparseOrdering, what: &str) -> Result<Self> {
         let n = a.n();
         let not_pd = || Error::numerical(what, "is not positive definite (check K, M, C and dt)");
         let b = a.half_bandwidth();
@@ -70,7 +100,7 @@ impl SymmetricFactor {
             FactorKind::Auto if b <= 2 => true,
             FactorKind::Auto if band_len > BAND_MAX_LEN => false,
             FactorKind::Auto => {
-                let symbolic = FaerCholesky::symbolic(a, what)?;
+                let (symbolic, _) = FaerCholesky::symbolic_with(a, ordering, what)?;
                 band_len <= symbolic.len_val()
             }
         };
@@ -83,7 +113,7 @@ impl SymmetricFactor {
             }
             Inner::Banded(BandCholesky::new(a, b).ok_or_else(not_pd)?)
         } else {
-            Inner::Sparse(Box::new(FaerCholesky::new(a, what)?))
+            Inner::Sparse(Box::new(FaerCholesky::new(a, ordering, what)?))
         };
         Ok(Self { n, inner })
     }
@@ -96,7 +126,7 @@ impl SymmetricFactor {
     pub fn factor_len(&self) -> usize {
         match &self.inner {
             Inner::Banded(b) => b.l.len() + b.inv_d.len(),
-            Inner::Sparse(s) => s.l_values.len(),
+            Inner::Sparse(s) => s.solve.len_val(),
         }
     }
 
@@ -104,7 +134,46 @@ impl SymmetricFactor {
     pub fn describe(&self) -> String {
         match &self.inner {
             Inner::Banded(b) => format!("banded Cholesky (half-bandwidth {})", b.b),
-            Inner::Sparse(_) => "sparse Cholesky (faer, AMD ordering)".to_string(),
+            Inner::Sparse(s) => format!(
+                "supernodal Cholesky ({} ordering, {} supernodes)",
+                s.ordering.name(),
+                s.solve.n_supernodes()
+            ),
+        }
+    }
+
+    /// Bytes of `L` (values and row indices) one solve reads: the forward and the backward
+    /// sweep each read all of it. Over the memory bandwidth this is the floor of a solve.
+    pub fn bytes_per_solve(&self) -> usize {
+        match &self.inner {
+            Inner::Banded(b) => 2 * 8 * (b.l.len() + b.inv_d.len()),
+            Inner::Sparse(s) => s.solve.bytes_per_solve(),
+        }
+    }
+
+    /// Sweep the sparse factor on two cores from now on: a worker thread takes one half of the
+    /// elimination tree (theory §11.4). Opt-in, for a machine with a core to spare; `false`
+    /// when the factor is banded or its tree has no balanced split (then nothing changes).
+    pub fn enable_second_core(&mut self) -> bool {
+        match &mut self.inner {
+            Inner::Banded(_) => false,
+            Inner::Sparse(s) => s.solve.enable_second_core(),
+        }
+    }
+
+    /// Whether solves run on two cores ([`SymmetricFactor::enable_second_core`]).
+    pub fn uses_second_core(&self) -> bool {
+        match &self.inner {
+            Inner::Banded(_) => false,
+            Inner::Sparse(s) => s.solve.uses_second_core(),
+        }
+    }
+
+    /// The ordering of the sparse factor (`None` for the band).
+    pub fn ordering(&self) -> Option<SparseOrdering> {
+        match &self.inner {
+            Inner::Banded(_) => None,
+            Inner::Sparse(s) => Some(s.ordering),
         }
     }
 
@@ -242,69 +311,88 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     t
 }
 
-/// faer's sparse `L Lᵀ` with AMD ordering and the scratch for one right-hand side.
+/// faer's sparse `L Lᵀ` (supernodal, forced) and our streaming single-right-hand-side solve.
 struct FaerCholesky {
-    n: usize,
-    symbolic: SymbolicCholesky<usize>,
-    l_values: Vec<f64>,
-    solve_buf: MemBuffer,
+    solve: SupernodalSolve,
+    ordering: SparseOrdering,
+}
+
+/// The lower triangle of `a` as faer's symbolic CSC pattern and its values.
+fn lower(a: &CscMatrix) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    a.lower_triangle()
 }
 
 impl FaerCholesky {
-    fn symbolic(a: &CscMatrix, what: &str) -> Result<SymbolicCholesky<usize>> {
-        let (cp, ri, _) = a.lower_triangle();
+    fn symbolic_with(
+        a: &CscMatrix,
+        ordering: SparseOrdering,
+        what: &str,
+    ) -> Result<(SymbolicCholesky<usize>, SparseOrdering)> {
+        let (cp, ri, _) = lower(a);
         let n = a.n();
         let sym = SymbolicSparseColMatRef::new_checked(n, n, &cp, None, &ri);
-        factorize_symbolic_cholesky(
-            sym,
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| Error::numerical(what, format!("symbolic sparse Cholesky failed: {e:?}")))
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        let run = |ord: SymmetricOrdering<'_, usize>| {
+            factorize_symbolic_cholesky(sym, Side::Lower, ord, params)
+                .map_err(|e| Error::numerical(what, format!("symbolic sparse Cholesky failed: {e:?}")))
+        };
+        match ordering {
+            SparseOrdering::Amd => Ok((run(SymmetricOrdering::Amd)?, SparseOrdering::Amd)),
+            SparseOrdering::NestedDissection => {
+                let (fwd, inv) = super::ordering::nested_dissection(a)?;
+                let perm = PermRef::new_checked(&fwd, &inv, n);
+                Ok((run(SymmetricOrdering::Custom(perm))?, SparseOrdering::NestedDissection))
+            }
+            SparseOrdering::Auto => {
+                // The smaller factor is the faster solve (it is read once per sweep).
+                let amd = run(SymmetricOrdering::Amd)?;
+                let (fwd, inv) = super::ordering::nested_dissection(a)?;
+                let nd = run(SymmetricOrdering::Custom(PermRef::new_checked(&fwd, &inv, n)))?;
+                if nd.len_val() < amd.len_val() {
+                    Ok((nd, SparseOrdering::NestedDissection))
+                } else {
+                    Ok((amd, SparseOrdering::Amd))
+                }
+            }
+        }
     }
 
-    fn new(a: &CscMatrix, what: &str) -> Result<Self> {
+    fn new(a: &CscMatrix, ordering: SparseOrdering, what: &str) -> Result<Self> {
         let n = a.n();
-        let (cp, ri, vals) = a.lower_triangle();
+        let (symbolic, ordering) = Self::symbolic_with(a, ordering, what)?;
+        let (cp, ri, vals) = lower(a);
         let sym = SymbolicSparseColMatRef::new_checked(n, n, &cp, None, &ri);
-        let symbolic = factorize_symbolic_cholesky(
-            sym,
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| Error::numerical(what, format!("symbolic sparse Cholesky failed: {e:?}")))?;
         let mut l_values = vec![0.0; symbolic.len_val()];
-        let mut fbuf = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()));
-        symbolic
-            .factorize_numeric_llt::<f64>(
-                &mut l_values,
-                SparseColMatRef::new(sym, &vals),
-                Side::Lower,
-                Default::default(),
-                Par::Seq,
-                MemStack::new(&mut fbuf),
-                Default::default(),
-            )
-            .map_err(|_| Error::numerical(what, "is not positive definite (check K, M, C and dt)"))?;
-        let solve_buf = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
-        Ok(Self {
-            n,
-            symbolic,
-            l_values,
-            solve_buf,
-        })
+        {
+            let mut fbuf = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()));
+            symbolic
+                .factorize_numeric_llt::<f64>(
+                    &mut l_values,
+                    SparseColMatRef::new(sym, &vals),
+                    Side::Lower,
+                    Default::default(),
+                    Par::Seq,
+                    MemStack::new(&mut fbuf),
+                    Default::default(),
+                )
+                .map_err(|_| Error::numerical(what, "is not positive definite (check K, M, C and dt)"))?;
+        }
+        let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
+            return Err(Error::numerical(
+                what,
+                "faer chose a simplicial factor although supernodal was forced",
+            ));
+        };
+        let fwd = symbolic.perm().map(|p| p.arrays().0);
+        let solve = SupernodalSolve::new(sn, fwd, l_values)?;
+        Ok(Self { solve, ordering })
     }
 
     fn solve_in_place(&mut self, x: &mut [f64]) {
-        let rhs = MatMut::from_column_major_slice_mut(x, self.n, 1);
-        LltRef::<usize, f64>::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(
-            Conj::No,
-            rhs,
-            Par::Seq,
-            MemStack::new(&mut self.solve_buf),
-        );
+        self.solve.solve_in_place(x);
     }
 }
 

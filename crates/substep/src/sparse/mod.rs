@@ -1,12 +1,15 @@
 //! Sparse linear algebra for large numerical substructures: square CSC matrices
 //! ([`CscMatrix`]), a once-factorised symmetric positive definite solver with allocation-free
-//! solves ([`SymmetricFactor`]: banded Cholesky or faer's sparse Cholesky with AMD ordering),
-//! and the lowest natural frequencies by subspace iteration ([`lowest_frequencies`]).
+//! solves ([`SymmetricFactor`]: banded Cholesky, or faer's supernodal Cholesky under an AMD or
+//! nested-dissection ordering with our streaming solve), and the lowest natural frequencies by
+//! subspace iteration ([`lowest_frequencies`]).
 
 mod csc;
 mod factor;
 mod modes;
+mod ordering;
+mod supernodal;
 
 pub use csc::CscMatrix;
-pub use factor::{FactorKind, SymmetricFactor};
+pub use factor::{FactorKind, SparseOrdering, SymmetricFactor};
 pub use modes::lowest_frequencies;

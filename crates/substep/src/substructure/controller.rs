@@ -122,6 +122,18 @@ impl SubstepController {
     pub fn dt(&self) -> f64 {
         self.core.c.dt
     }
+    /// The factorisation of `K̂` (see [`NewmarkCore::solver`]).
+    pub fn solver(&self) -> String {
+        self.core.solver()
+    }
+    /// Bytes of the factor the predictor solve reads (see [`NewmarkCore::solve_bytes`]).
+    pub fn solve_bytes(&self) -> usize {
+        self.core.solve_bytes()
+    }
+    /// Sweep a sparse `K̂` on two cores from now on (see [`NewmarkCore::enable_second_core`]).
+    pub fn enable_second_core(&mut self) -> bool {
+        self.core.enable_second_core()
+    }
     pub fn substeps(&self) -> usize {
         self.k_sub
     }

@@ -7,8 +7,8 @@ use crate::error::{Error, Result};
 use crate::integrate::Scheme;
 use crate::io::limits::{self, Limits, RunShape};
 use crate::model::{
-    DENSE_MAX_DOFS, DampingSpec, Frame2d, Model, Section, ShearBuilding, SparseModel, Storage, StructuralModel,
-    TmdSystem, frame_2d, sdof, shear_building_sparse, tmd_two_dof,
+    DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, Model, Section, Section3d, ShearBuilding, SparseModel, Storage,
+    StructuralModel, TmdSystem, frame_2d, frame_3d, sdof, shear_building_sparse, tmd_two_dof,
 };
 use crate::sparse::CscMatrix;
 use crate::transfer::Dynamics;
@@ -48,6 +48,16 @@ pub(crate) struct RawFrame {
     pub(crate) density: f64,
     pub(crate) floor_mass_per_bay: f64,
     pub(crate) rigid_diaphragm: bool,
+    /// 2 (plane frame, [`Frame2d`]) or 3 (space frame, [`Frame3d`]).
+    pub(crate) dimensions: usize,
+    // Space frames only (refused with `dimensions = 2`); defaults of [`Frame3d::default`].
+    pub(crate) bays_y: Option<usize>,
+    pub(crate) bay_width_y: Option<f64>,
+    pub(crate) shear_modulus: Option<f64>,
+    pub(crate) column_inertia_weak: Option<f64>,
+    pub(crate) column_torsion: Option<f64>,
+    pub(crate) beam_inertia_weak: Option<f64>,
+    pub(crate) beam_torsion: Option<f64>,
 }
 
 impl Default for RawFrame {
@@ -66,11 +76,102 @@ impl Default for RawFrame {
             density: f.density,
             floor_mass_per_bay: f.floor_mass_per_bay,
             rigid_diaphragm: f.rigid_diaphragm,
+            dimensions: 2,
+            bays_y: None,
+            bay_width_y: None,
+            shear_modulus: None,
+            column_inertia_weak: None,
+            column_torsion: None,
+            beam_inertia_weak: None,
+            beam_torsion: None,
         }
     }
 }
 
+/// The frame a `[structure.frame]` describes.
+pub(crate) enum FrameKind {
+    Plane(Frame2d),
+    Space(Frame3d),
+}
+
 impl RawFrame {
+    /// Check `dimensions` and that space-frame keys come with `dimensions = 3`.
+    pub(crate) fn kind(&self) -> Result<FrameKind> {
+        let space_keys = [
+            ("bays_y", self.bays_y.is_some()),
+            ("bay_width_y", self.bay_width_y.is_some()),
+            ("shear_modulus", self.shear_modulus.is_some()),
+            ("column_inertia_weak", self.column_inertia_weak.is_some()),
+            ("column_torsion", self.column_torsion.is_some()),
+            ("beam_inertia_weak", self.beam_inertia_weak.is_some()),
+            ("beam_torsion", self.beam_torsion.is_some()),
+        ];
+        match self.dimensions {
+            2 => {
+                if let Some((k, _)) = space_keys.iter().find(|(_, set)| *set) {
+                    return Err(Error::invalid(
+                        format!("structure.frame.{k}"),
+                        "is a space-frame key: it needs dimensions = 3",
+                    ));
+                }
+                Ok(FrameKind::Plane(self.to_frame()))
+            }
+            3 => {
+                let d = Frame3d::default();
+                Ok(FrameKind::Space(Frame3d {
+                    bays_x: self.bays,
+                    bays_y: self.bays_y.unwrap_or(d.bays_y),
+                    stories: self.stories,
+                    bay_x: self.bay_width,
+                    bay_y: self.bay_width_y.unwrap_or(self.bay_width),
+                    story_height: self.story_height,
+                    elastic_modulus: self.elastic_modulus,
+                    shear_modulus: self.shear_modulus.unwrap_or(d.shear_modulus),
+                    column: Section3d {
+                        area: self.column_area,
+                        i_strong: self.column_inertia,
+                        i_weak: self.column_inertia_weak.unwrap_or(d.column.i_weak),
+                        torsion: self.column_torsion.unwrap_or(d.column.torsion),
+                    },
+                    beam: Section3d {
+                        area: self.beam_area,
+                        i_strong: self.beam_inertia,
+                        i_weak: self.beam_inertia_weak.unwrap_or(d.beam.i_weak),
+                        torsion: self.beam_torsion.unwrap_or(d.beam.torsion),
+                    },
+                    density: self.density,
+                    floor_mass_per_panel: self.floor_mass_per_bay,
+                    rigid_diaphragm: self.rigid_diaphragm,
+                }))
+            }
+            other => Err(Error::invalid(
+                "structure.frame.dimensions",
+                format!("must be 2 (plane frame) or 3 (space frame), got {other}"),
+            )),
+        }
+    }
+
+    /// DOFs and the nodes per floor of the frame (the run-size estimate).
+    pub(crate) fn size(&self) -> (f64, f64) {
+        let lines = self.bays as f64 + 1.0;
+        if self.dimensions == 3 {
+            let nodes = lines * (self.bays_y.unwrap_or(Frame3d::default().bays_y) as f64 + 1.0);
+            let per_floor = if self.rigid_diaphragm {
+                3.0 + 3.0 * nodes
+            } else {
+                6.0 * nodes
+            };
+            (self.stories as f64 * per_floor, per_floor / 3.0)
+        } else {
+            let per_floor = if self.rigid_diaphragm {
+                1.0 + 2.0 * lines
+            } else {
+                3.0 * lines
+            };
+            (self.stories as f64 * per_floor, lines)
+        }
+    }
+
     pub(crate) fn to_frame(&self) -> Frame2d {
         Frame2d {
             bays: self.bays,
@@ -233,7 +334,10 @@ impl RawStructure {
             };
             SparseModel::new(m.mass, damping, m.stiffness, influence)?.into()
         } else if let Some(f) = &self.frame {
-            let m = frame_2d(&f.to_frame())?;
+            let m = match f.kind()? {
+                FrameKind::Plane(p) => frame_2d(&p)?,
+                FrameKind::Space(s) => frame_3d(&s)?,
+            };
             let damping = match &self.damping {
                 Some(c) => sparse_matrix(c, "structure.damping", base, limits)?,
                 None => m.damping,
@@ -382,13 +486,7 @@ impl RawStructure {
             let asked = format!("a shear building of {} stories", b.stories);
             (n, sparse, "structure.shear_building.stories", asked)
         } else if let Some(f) = &self.frame {
-            let lines = f.bays as f64 + 1.0;
-            let per_floor = if f.rigid_diaphragm {
-                1.0 + 2.0 * lines
-            } else {
-                3.0 * lines
-            };
-            let n = f.stories as f64 * per_floor;
+            let (n, lines) = f.size();
             let sparse = ModelShape {
                 n,
                 bytes: n * limits::FRAME_BYTES_PER_DOF,
