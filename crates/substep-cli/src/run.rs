@@ -1,6 +1,7 @@
 //! `substep run`: load a test definition, step it, record `history.csv`, `substeps.csv`,
 //! `summary.json` and the plots, compare with the monolithic reference, print a summary.
 
+use crate::monitor::live::{Live, Next, STABILITY_GROUPS};
 use crate::output::{
     Decimated, ErrorStats, ErrorTracker, HistoryWriter, Peak, PeakTracker, SubstepWriter, prepare_dir, write_atomic,
 };
@@ -123,6 +124,10 @@ struct Summary {
     #[serde(skip_serializing_if = "Option::is_none")]
     reason: Option<String>,
     /// Sub-steps of the ramp to the safe position after a safety stop (in `substeps.csv`).
+    /// Who or what stopped the run: `operator` (monitor page), `stability` (indicator),
+    /// `safety_limit`, `site` (the experimental side failed), `diverged`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    stopped_by: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     ramp_substeps: Option<usize>,
     /// Wall time of the stepping loop including recording [s].
@@ -150,6 +155,9 @@ struct Summary {
     /// Energy balance, base shear, drifts, absolute accelerations (dense models up to 200 DOFs).
     #[serde(skip_serializing_if = "Option::is_none")]
     engineering: Option<Value>,
+    /// The on-line stability indicator (docs/monitor.md), when it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    stability: Option<Value>,
     outputs: Vec<String>,
 }
 
@@ -826,7 +834,7 @@ impl Progress {
 }
 
 pub fn run(args: &RunArgs) -> Result<()> {
-    let def = match &args.config {
+    let mut def = match &args.config {
         None => TestDefinition::from_toml(DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, Path::new("."))?,
         Some(p) => TestDefinition::from_file(p)?,
     };
@@ -853,6 +861,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
             .map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string());
         return crate::realtime::run_realtime(args, &def, out_dir, name);
     }
+    let config_name = args
+        .config
+        .as_ref()
+        .map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string());
+    let mut live = Live::start(args, &mut def, &config_name, false)?;
     let mut sim = Simulation::new(&def)?;
     let mut reference = Reference::new(&def)?;
     let n = def.model.n_dofs();
@@ -872,7 +885,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
     prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
     let history_path = out_dir.join("history.csv");
-    let groups = extra_groups(&def);
+    let mut groups = extra_groups(&def);
+    let stability_at = groups.len() * coupling.len();
+    if live.has_indicator() {
+        groups.extend(STABILITY_GROUPS);
+    }
+    let mut live_warnings: Vec<String> = Vec::new();
     let mut extra = vec![0.0; groups.len() * coupling.len()];
     let mut history = HistoryWriter::create(&history_path, n, coupling.len(), &groups, reference.is_some())
         .with_context(|| cannot_write(&history_path))?;
@@ -922,6 +940,18 @@ pub fn run(args: &RunArgs) -> Result<()> {
     loop {
         let i = sim.steps_done();
         extra_values(&sim, &groups, &mut extra);
+        let next = live.tick(
+            &mut sim,
+            reference.as_ref(),
+            &coupling,
+            &mut extra[stability_at..],
+            &mut |w| {
+                if !args.quiet {
+                    println!("  warning: {w}");
+                }
+                live_warnings.push(w);
+            },
+        );
         history
             .row(
                 sim.time(),
@@ -944,6 +974,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
             };
             comp_table.push(&[sim.time(), rec.compensation_force[0], first_of("fei"), first_of("te")]);
         }
+        if let Next::Abort(e) = next {
+            failure = Some(e);
+            break;
+        }
         if i == steps {
             break;
         }
@@ -957,8 +991,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
         let t0 = Instant::now();
         let result = match &mut substep_writer {
-            Some(w) => sim.step(&mut Both(w, &mut tracking)),
-            None => sim.step(&mut tracking),
+            Some(w) => sim.step(&mut Both(w, &mut Both(&mut tracking, &mut live.last))),
+            None => sim.step(&mut Both(&mut tracking, &mut live.last)),
         };
         compute += t0.elapsed();
         if let Err(e) = result {
@@ -1015,7 +1049,21 @@ pub fn run(args: &RunArgs) -> Result<()> {
         Some(e) => (Some(done + 1), Some(e.to_string())),
         None => (None, None),
     };
-    let (estimation, phase_lag, warnings) = compensation_summary(&sim);
+    let (estimation, phase_lag, mut warnings) = compensation_summary(&sim);
+    warnings.extend(live_warnings);
+    let stopped_by = match &failure {
+        Some(substep::Error::Stopped { reason, .. }) => Some(
+            live.stopped_by
+                .unwrap_or(if reason.starts_with("safety stop") {
+                    "safety_limit"
+                } else {
+                    "site"
+                })
+                .to_string(),
+        ),
+        Some(substep::Error::Diverged { .. }) => Some("diverged".to_string()),
+        _ => None,
+    };
     let summary = Summary {
         config: match &args.config {
             None => DEFAULT_CONFIG_NAME.to_string(),
@@ -1032,6 +1080,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         steps_done: done,
         stopped_at_step,
         reason,
+        stopped_by,
         ramp_substeps: (ramp_substeps > 0).then_some(ramp_substeps),
         wall_time_s: wall,
         us_per_step: compute.as_secs_f64() * 1e6 / done.max(1) as f64,
@@ -1076,6 +1125,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         warnings,
         input_motion: gm_summary,
         engineering: engineering.as_ref().map(|e| e.summary()),
+        stability: live.summary(),
         outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
     };
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
@@ -1133,6 +1183,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
             .collect();
         println!("  outputs in {}: {}", out_dir.display(), names.join(", "));
     }
+    live.finish(
+        json!({ "completed": summary.completed, "reason": summary.reason, "stopped_by": summary.stopped_by,
+                "steps_done": done, "steps": steps }),
+        &outputs,
+        args.quiet,
+    );
     match failure {
         Some(e) => Err(e.into()),
         None => Ok(()),

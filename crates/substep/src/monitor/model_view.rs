@@ -33,7 +33,7 @@ impl Ewls2 {
     /// collinear excitation).
     fn solve2(&self) -> Option<(f64, f64)> {
         let det = self.s11 * self.s22 - self.s12 * self.s12;
-        if !(det > 1e-9 * self.s11 * self.s22) {
+        if det.is_nan() || det <= 1e-9 * self.s11 * self.s22 {
             return None;
         }
         Some((

@@ -1,0 +1,358 @@
+//! The run loop's side of the monitor and of the stability indicator: a few calls per step
+//! from `substep run` (offline) — feed the indicator, push a frame, obey the controls, pace.
+
+use super::{Monitor, MonitorOptions};
+use crate::RunArgs;
+use anyhow::Result;
+use serde_json::{Value, json};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use substep::io::{Reference, Simulation, TestDefinition};
+use substep::monitor::{StabilityAction, StabilityMonitor, StabilitySettings, StopRequest, copy_into};
+use substep::substructure::{SafetyLimits, SubstepObserver};
+
+/// Ramp time used for operator and stability stops when the config sets no limits \[s\].
+pub const DEFAULT_STOP_RAMP: f64 = 1.0;
+
+/// The last command of each coupling DOF (the step's last sub-step).
+#[derive(Debug, Default)]
+pub struct LastCommand(pub Vec<f64>);
+
+impl SubstepObserver for LastCommand {
+    fn substep(&mut self, _step: usize, _j: usize, command: &[f64], _force: &[f64], _displacement: &[f64]) {
+        self.0.copy_from_slice(command);
+    }
+}
+
+/// History groups written by the indicator (one column per coupling DOF each; `eta` and
+/// `margin` are the whole test's values, repeated).
+pub const STABILITY_GROUPS: [&str; 5] = ["eta", "margin", "k_id", "c_id", "lag_id"];
+
+pub enum Next {
+    Go,
+    /// The run must end here (a stop that cannot ramp).
+    Abort(substep::Error),
+}
+
+pub struct Live {
+    monitor: Option<Monitor>,
+    stability: Option<StabilityMonitor>,
+    action: StabilityAction,
+    pub last: LastCommand,
+    n_c: usize,
+    stop_sent: bool,
+    pub stopped_by: Option<&'static str>,
+    pace: Option<(Instant, f64)>,
+    max_eta: f64,
+    min_margin: f64,
+    linger: Duration,
+    acks: u64,
+}
+
+impl Live {
+    /// Start the monitor (`--monitor`) and the indicator (`--monitor`, or
+    /// `[substructure.limits] stability`). A test without limits gets a ramp-only
+    /// [`SafetyLimits`] so that a stop from the page or the indicator can ramp.
+    pub fn start(args: &RunArgs, def: &mut TestDefinition, config: &str, realtime: bool) -> Result<Self> {
+        let n_c = def.substructure.as_ref().map_or(0, |s| s.coupling_dofs.len());
+        let configured = args.stability.map(|a| StabilitySettings {
+            action: match a {
+                crate::StabilityArg::Warn => StabilityAction::Warn,
+                crate::StabilityArg::Stop => StabilityAction::Stop,
+            },
+            ..StabilitySettings::default()
+        });
+        let settings = match (&configured, &args.monitor) {
+            (Some(s), _) => Some(s.clone()),
+            (None, Some(_)) if n_c > 0 => Some(StabilitySettings::default()),
+            _ => None,
+        };
+        let wants_ramp = args.monitor.is_some() || settings.as_ref().is_some_and(|s| s.action == StabilityAction::Stop);
+        if let Some(sub) = &mut def.substructure
+            && wants_ramp
+            && sub.limits.is_none()
+        {
+            sub.limits = Some(SafetyLimits {
+                ramp_time: DEFAULT_STOP_RAMP,
+                ..SafetyLimits::default()
+            });
+        }
+        let stability = match (&def.substructure, settings) {
+            (Some(sub), Some(s)) if sub.remote.is_none() || !realtime => {
+                Some(StabilityMonitor::new(sub, &def.model, def.integrator.dt, s)?)
+            }
+            _ => None,
+        };
+        let action = stability
+            .as_ref()
+            .map_or(StabilityAction::Warn, |s| s.settings().action);
+        let monitor = match &args.monitor {
+            None => None,
+            Some(addr) => {
+                let addr = addr.parse().map_err(|e| {
+                    substep::Error::invalid("--monitor", format!("'{addr}' is not an address host:port ({e})"))
+                })?;
+                let token = match &args.monitor_token {
+                    Some(t) if t.len() >= 8 => t.clone(),
+                    Some(_) => {
+                        return Err(substep::Error::invalid("--monitor-token", "must be at least 8 characters").into());
+                    }
+                    None => substep::monitor::new_token()?,
+                };
+                let limits = def.substructure.as_ref().and_then(|s| s.limits.as_ref()).map(|l| {
+                    let mut parts = Vec::new();
+                    if let Some(d) = &l.displacement {
+                        parts.push(format!("displacement {d:?} m"));
+                    }
+                    if let Some(v) = &l.velocity {
+                        parts.push(format!("velocity {v:?} m/s"));
+                    }
+                    if let Some(f) = &l.force {
+                        parts.push(format!("force {f:?} N"));
+                    }
+                    parts.push(format!("ramp {} s", l.ramp_time));
+                    parts.join(", ")
+                });
+                let st = stability.as_ref().map(|s| s.settings().clone());
+                let info = json!({
+                    "config": config, "dt": def.integrator.dt, "steps": def.integrator.steps, "n_c": n_c,
+                    "realtime": realtime, "limits": limits,
+                    "energy_threshold": st.as_ref().map(|s| s.energy_threshold),
+                    "margin_threshold": st.as_ref().map(|s| s.margin_threshold),
+                    "action": st.as_ref().map(|s| s.action.name()),
+                });
+                let m = Monitor::start(MonitorOptions {
+                    addr,
+                    public: args.monitor_public,
+                    token: token.clone(),
+                    window: 10.0,
+                    hold_allowed: !realtime,
+                    info,
+                })?;
+                // The operator needs both at start; printed even with --quiet.
+                println!("monitor: {} (controls need the token {token})", m.url);
+                use std::io::Write;
+                let _ = std::io::stdout().flush();
+                Some(m)
+            }
+        };
+        let pace = args.pace.map(|p| (Instant::now(), p));
+        Ok(Self {
+            monitor,
+            stability,
+            action,
+            last: LastCommand(vec![0.0; n_c]),
+            n_c,
+            stop_sent: false,
+            stopped_by: None,
+            pace,
+            max_eta: f64::NAN,
+            min_margin: f64::NAN,
+            linger: Duration::from_secs_f64(args.monitor_linger.max(0.0)),
+            acks: 0,
+        })
+    }
+
+    pub fn has_indicator(&self) -> bool {
+        self.stability.is_some()
+    }
+
+    /// The state after step `sim.steps_done()` is about to be recorded: feed the indicator,
+    /// fill its history columns (`cols`: [`STABILITY_GROUPS`] × n_c), push a frame, then obey
+    /// the controls and the pace. Returns warnings raised now through `warn`.
+    pub fn tick(
+        &mut self,
+        sim: &mut Simulation,
+        reference: Option<&Reference>,
+        coupling: &[usize],
+        cols: &mut [f64],
+        warn: &mut dyn FnMut(String),
+    ) -> Next {
+        let i = sim.steps_done();
+        let mut alarm = None;
+        if let (Some(st), Some(rec)) = (&mut self.stability, sim.coupling()) {
+            let s = sim.state();
+            alarm = st.push(
+                i,
+                s.u.as_slice(),
+                s.v.as_slice(),
+                sim.ground_acceleration(i),
+                rec.coupling_force,
+                &self.last.0,
+                rec.measured_displacement,
+            );
+            let n = self.n_c;
+            if cols.len() == STABILITY_GROUPS.len() * n {
+                cols[..n].fill(st.eta());
+                cols[n..2 * n].fill(st.margin());
+                let id = st.identification();
+                cols[2 * n..3 * n].copy_from_slice(id.stiffness());
+                cols[3 * n..4 * n].copy_from_slice(id.damping());
+                cols[4 * n..].copy_from_slice(id.lag());
+            }
+            self.max_eta = nan_max(self.max_eta, st.eta());
+            self.min_margin = -nan_max(-self.min_margin, -st.margin());
+        }
+        if let Some(a) = alarm {
+            let msg = a.message();
+            if let Some(m) = &self.monitor {
+                m.warn(&msg);
+            }
+            warn(msg.clone());
+            if self.action == StabilityAction::Stop
+                && let Some(m) = &self.monitor
+            {
+                m.controls.request_stop(StopRequest::Stability);
+            } else if self.action == StabilityAction::Stop {
+                self.stopped_by = Some("stability");
+                return self.stop(sim, format!("stability stop: {msg}"));
+            }
+        }
+        let Some(m) = &mut self.monitor else {
+            self.pace(sim);
+            return Next::Go;
+        };
+        if let Some(rec) = sim.coupling() {
+            let st = &self.stability;
+            let s = sim.state();
+            let last = &self.last.0;
+            m.push(|f| {
+                f.step = i as u64;
+                f.time = sim.time();
+                f.n_c = coupling.len().min(substep::monitor::FRAME_DOFS);
+                copy_into(&mut f.command, last);
+                copy_into(&mut f.measured, rec.measured_displacement);
+                copy_into(&mut f.force, rec.coupling_force);
+                copy_into(&mut f.error_force, rec.error_force);
+                for (k, &c) in coupling.iter().take(substep::monitor::FRAME_DOFS).enumerate() {
+                    f.test_u[k] = s.u[c];
+                    f.reference_u[k] = reference.map_or(f64::NAN, |r| r.u()[c]);
+                }
+                if let Some(st) = st {
+                    f.set_indicator(st);
+                }
+            });
+        }
+        let acks = m.controls.acknowledgements();
+        if acks != self.acks {
+            self.acks = acks;
+        }
+        if let Some(who) = m.controls.stop_requested()
+            && !self.stop_sent
+        {
+            let reason = match who {
+                StopRequest::Operator => {
+                    self.stopped_by = Some("operator");
+                    "operator stop from the monitor page (token holder)".to_string()
+                }
+                StopRequest::Stability => {
+                    self.stopped_by = Some("stability");
+                    format!(
+                        "stability stop: {}",
+                        self.stability
+                            .as_ref()
+                            .and_then(|s| s.alarm())
+                            .map_or_else(String::new, |a| a.message())
+                    )
+                }
+            };
+            return self.stop(sim, reason);
+        }
+        // Hold between steps until resumed or stopped (bounded by the operator's presence: a
+        // stop also ends it).
+        let mut held = false;
+        while let Some(m) = &self.monitor
+            && m.controls.held()
+            && m.controls.stop_requested().is_none()
+        {
+            held = true;
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if held && let Some((t0, p)) = &mut self.pace {
+            // Resume the pace from here, not by racing to catch up.
+            *t0 = Instant::now() - Duration::from_secs_f64(sim.time() / *p);
+        }
+        self.pace(sim);
+        Next::Go
+    }
+
+    fn stop(&mut self, sim: &mut Simulation, reason: String) -> Next {
+        self.stop_sent = true;
+        if sim.request_stop(&reason) {
+            Next::Go
+        } else {
+            Next::Abort(substep::Error::Stopped {
+                step: sim.steps_done(),
+                time: sim.time(),
+                reason: format!("{reason} (between steps: this run has no ramp to the safe position)"),
+            })
+        }
+    }
+
+    fn pace(&self, sim: &Simulation) {
+        if let Some((t0, p)) = self.pace
+            && p > 0.0
+        {
+            let due = t0 + Duration::from_secs_f64(sim.time() / p);
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+        }
+    }
+
+    /// `summary.json`'s `stability` object.
+    pub fn summary(&self) -> Option<Value> {
+        let st = self.stability.as_ref()?;
+        let s = st.settings();
+        Some(json!({
+            "action": s.action.name(),
+            "energy_threshold": s.energy_threshold,
+            "margin_threshold": s.margin_threshold,
+            "window_s": s.window,
+            "max_eta": finite(self.max_eta),
+            "min_margin": finite(self.min_margin),
+            "final_eta": finite(st.eta()),
+            "final_margin": finite(st.margin()),
+            "added_energy_j": st.energy().total_added(),
+            "identified": {
+                "stiffness": st.identification().stiffness().iter().map(|&v| finite(v)).collect::<Vec<_>>(),
+                "damping": st.identification().damping().iter().map(|&v| finite(v)).collect::<Vec<_>>(),
+                "lag_s": st.identification().lag().iter().map(|&v| finite(v)).collect::<Vec<_>>(),
+            },
+            "model_view": st.model_view_note().map_or(Value::from("on"), |n| Value::from(format!("off: {n}"))),
+            "alarm": st.alarm().map(|a| json!({
+                "view": a.view.name(), "step": a.step, "time": a.time, "value": a.value,
+                "threshold": a.threshold, "message": a.message(),
+            })),
+        }))
+    }
+
+    /// The run ended: hand the result to the page and keep serving it for `--monitor-linger`.
+    pub fn finish(self, result: Value, outputs: &[PathBuf], quiet: bool) {
+        if let Some(m) = self.monitor {
+            if !quiet && !self.linger.is_zero() {
+                println!(
+                    "monitor: the page shows the final state for {:.0} s more ({})",
+                    self.linger.as_secs_f64(),
+                    m.url
+                );
+            }
+            m.finish(result, outputs, self.linger);
+        }
+    }
+}
+
+fn finite(x: f64) -> Value {
+    if x.is_finite() { json!(x) } else { Value::Null }
+}
+
+fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() {
+        b
+    } else if b.is_nan() {
+        a
+    } else {
+        a.max(b)
+    }
+}
