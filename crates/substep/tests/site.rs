@@ -3,6 +3,10 @@
 //! recorded so far; the OpenFresco server answers a genericClient like OpenSees expects and
 //! (when openseespy is installed) an OpenSees model with a `genericClient` element hosted here
 //! matches the same model with a native element.
+//!
+//! Over 800 lines on purpose: every file under `tests/` is its own test binary that links the
+//! whole library, so related checks share one binary to keep the CI build short; the sections
+//! below are independent and can be read one at a time.
 
 use nalgebra::{DMatrix, DVector, dmatrix};
 use rand::{Rng, RngCore, SeedableRng};

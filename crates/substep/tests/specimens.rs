@@ -1,5 +1,9 @@
 //! Nonlinear virtual specimens (Bouc–Wen, friction, force replay) against independent
 //! references: closed forms, an RK4 reference, and self-consistency under refinement.
+//!
+//! Over 800 lines on purpose: every file under `tests/` is its own test binary that links the
+//! whole library, so related checks share one binary to keep the CI build short; the sections
+//! below are independent and can be read one at a time.
 
 use std::f64::consts::PI;
 use substep::specimen::{

@@ -2,6 +2,10 @@
 //! second order) against closed forms, sensors (noise, low-pass, quantisation) against their
 //! definitions, and the virtual lab (inner steps, sensor placement, state round trip, input
 //! checks).
+//!
+//! Over 800 lines on purpose: every file under `tests/` is its own test binary that links the
+//! whole library, so related checks share one binary to keep the CI build short; the sections
+//! below are independent and can be read one at a time.
 
 use nalgebra::dmatrix;
 use std::f64::consts::PI;

@@ -1,0 +1,166 @@
+//! `[substructure.actuator]` (docs/config.md, section `[substructure.actuator]`): actuator
+//! dynamics, delay, servo-hydraulic plant.
+
+use crate::error::{Error, Result};
+use crate::transfer::lti::{StateSpace, TransferFunction};
+use crate::transfer::servo::Derivative;
+use crate::transfer::{ActuatorSpec, Dynamics, ServoSpec};
+use nalgebra::{DMatrix, DVector};
+use serde::Deserialize;
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub(crate) enum RawActuator {
+    Ideal {
+        #[serde(default)]
+        delay: f64,
+    },
+    Delay {
+        delay: f64,
+    },
+    FirstOrder {
+        time_constant: f64,
+        #[serde(default)]
+        delay: f64,
+    },
+    SecondOrder {
+        frequency: f64,
+        zeta: f64,
+        #[serde(default)]
+        delay: f64,
+    },
+    /// `num / den` in descending powers of s.
+    TransferFunction {
+        num: Vec<f64>,
+        den: Vec<f64>,
+        #[serde(default)]
+        delay: f64,
+    },
+    StateSpace {
+        a: Vec<Vec<f64>>,
+        b: Vec<f64>,
+        c: Vec<f64>,
+        #[serde(default)]
+        d: f64,
+        #[serde(default)]
+        delay: f64,
+    },
+    /// Defaults: the benchmark's nominal plant ([`ServoSpec::benchmark`]).
+    ServoHydraulic {
+        g: Option<f64>,
+        a1_beta0: Option<f64>,
+        beta1: Option<f64>,
+        beta2: Option<f64>,
+        a2: Option<f64>,
+        a3: Option<f64>,
+        /// `"finite_difference"` (default, the benchmark's block) or `"exact"`.
+        csi_derivative: Option<String>,
+        #[serde(default)]
+        delay: f64,
+    },
+}
+
+impl RawActuator {
+    /// Errors name keys as `actuator.KEY` (the caller prefixes the section).
+    pub(crate) fn spec(&self) -> Result<ActuatorSpec> {
+        Ok(match self {
+            RawActuator::Ideal { delay } | RawActuator::Delay { delay } => ActuatorSpec {
+                dynamics: Dynamics::Ideal,
+                delay: *delay,
+            },
+            RawActuator::FirstOrder { time_constant, delay } => ActuatorSpec {
+                dynamics: Dynamics::FirstOrder {
+                    time_constant: *time_constant,
+                },
+                delay: *delay,
+            },
+            RawActuator::SecondOrder { frequency, zeta, delay } => ActuatorSpec {
+                dynamics: Dynamics::SecondOrder {
+                    frequency_hz: *frequency,
+                    zeta: *zeta,
+                },
+                delay: *delay,
+            },
+            RawActuator::TransferFunction { num, den, delay } => {
+                if den.iter().all(|&v| v == 0.0) {
+                    return Err(Error::invalid("actuator.den", "is zero (no transfer function)"));
+                }
+                let tf = TransferFunction::new("actuator", num, den)?;
+                ActuatorSpec {
+                    dynamics: Dynamics::Lti(tf.to_state_space()),
+                    delay: *delay,
+                }
+            }
+            RawActuator::StateSpace { a, b, c, d, delay } => {
+                let n = a.len();
+                if n == 0 {
+                    return Err(Error::invalid("actuator.a", "is empty"));
+                }
+                if let Some(r) = a.iter().position(|row| row.len() != n) {
+                    return Err(Error::invalid(
+                        "actuator.a",
+                        format!(
+                            "must be square: row {} has {} entries, A has {n} rows",
+                            r + 1,
+                            a[r].len()
+                        ),
+                    ));
+                }
+                for (key, v) in [("b", b), ("c", c)] {
+                    if v.len() != n {
+                        return Err(Error::invalid(
+                            format!("actuator.{key}"),
+                            format!("has {} entries, A is {n}x{n}", v.len()),
+                        ));
+                    }
+                }
+                let am = DMatrix::from_fn(n, n, |i, j| a[i][j]);
+                let ss = StateSpace::new(
+                    "actuator",
+                    am,
+                    DVector::from_column_slice(b),
+                    DVector::from_column_slice(c),
+                    *d,
+                )?;
+                ActuatorSpec {
+                    dynamics: Dynamics::Lti(ss),
+                    delay: *delay,
+                }
+            }
+            RawActuator::ServoHydraulic {
+                g,
+                a1_beta0,
+                beta1,
+                beta2,
+                a2,
+                a3,
+                csi_derivative,
+                delay,
+            } => {
+                let base = ServoSpec::benchmark();
+                let derivative = match csi_derivative.as_deref().unwrap_or("finite_difference") {
+                    "finite_difference" => Derivative::FiniteDifference,
+                    "exact" => Derivative::Exact,
+                    other => {
+                        return Err(Error::invalid(
+                            "actuator.csi_derivative",
+                            format!("unknown '{other}' (expected finite_difference or exact)"),
+                        ));
+                    }
+                };
+                ActuatorSpec {
+                    dynamics: Dynamics::ServoHydraulic(ServoSpec {
+                        g: g.unwrap_or(base.g),
+                        a1_beta0: a1_beta0.unwrap_or(base.a1_beta0),
+                        beta1: beta1.unwrap_or(base.beta1),
+                        beta2: beta2.unwrap_or(base.beta2),
+                        a2: a2.unwrap_or(base.a2),
+                        a3: a3.unwrap_or(base.a3),
+                        derivative,
+                    }),
+                    delay: *delay,
+                }
+            }
+        })
+    }
+}

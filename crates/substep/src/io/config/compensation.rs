@@ -1,0 +1,209 @@
+//! `[substructure.error_force]` and `[substructure.phase_lag]` (docs/config.md, sections of the
+//! same names): the compensation methods.
+
+use super::{forbid, one, prefixed};
+use crate::compensate::{ArxPhaseLagSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
+use crate::error::{Error, Result, require_non_negative};
+use crate::substructure::ErrorForceSpec;
+use serde::Deserialize;
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub(crate) enum RawErrorForce {
+    None {},
+    Pid {
+        #[serde(default = "one")]
+        p: f64,
+        #[serde(default)]
+        i: f64,
+        #[serde(default)]
+        d: f64,
+    },
+    PidResidual {
+        #[serde(default = "one")]
+        p: f64,
+    },
+    Arx {
+        #[serde(default = "default_arx_order")]
+        order: usize,
+        #[serde(default = "default_arx_lambda")]
+        forgetting_factor: f64,
+        #[serde(default = "default_arx_p0")]
+        p0: f64,
+    },
+}
+
+pub(crate) fn default_arx_order() -> usize {
+    4
+}
+pub(crate) fn default_arx_lambda() -> f64 {
+    0.98
+}
+pub(crate) fn default_arx_p0() -> f64 {
+    100.0
+}
+
+/// `[substructure.phase_lag]`; which keys apply depends on `kind` (checked in `build`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawPhaseLag {
+    pub(crate) kind: String,
+    pub(crate) order: Option<usize>,
+    pub(crate) lead: Option<f64>,
+    pub(crate) lead_substeps: Option<f64>,
+    pub(crate) k_lag: Option<usize>,
+    pub(crate) n_u: Option<usize>,
+    pub(crate) forgetting_factor: Option<f64>,
+    pub(crate) taps: Option<usize>,
+    pub(crate) guard_factor: Option<f64>,
+    pub(crate) ramp_start: Option<usize>,
+    pub(crate) ramp_steps: Option<usize>,
+    pub(crate) fade_out: Option<[usize; 2]>,
+}
+
+impl RawErrorForce {
+    pub(crate) fn spec(&self) -> ErrorForceSpec {
+        match *self {
+            RawErrorForce::None {} => ErrorForceSpec::None,
+            RawErrorForce::Pid { p, i, d } => ErrorForceSpec::Pid { p, i, d },
+            RawErrorForce::PidResidual { p } => ErrorForceSpec::PidResidual { p },
+            RawErrorForce::Arx {
+                order,
+                forgetting_factor,
+                p0,
+            } => ErrorForceSpec::Arx {
+                order,
+                lambda: forgetting_factor,
+                p0,
+            },
+        }
+    }
+}
+
+/// Default ramp-in of the phase-lag compensation [steps].
+pub(crate) const DEFAULT_RAMP_STEPS: usize = 100;
+
+impl RawPhaseLag {
+    /// `None` for `kind = "none"`. `dt` time step, `k_sub` sub-steps, `delay` the actuator's pure
+    /// delay [s] (the default lead and `k_lag`).
+    pub(crate) fn build(&self, dt: f64, k_sub: usize, delay: f64) -> Result<Option<PhaseLagDefinition>> {
+        let p = "substructure.phase_lag.";
+        let dtau = dt / k_sub as f64;
+        let keys = |names: &[&'static str]| -> Vec<(&'static str, bool)> {
+            names
+                .iter()
+                .map(|&n| {
+                    let present = match n {
+                        "order" => self.order.is_some(),
+                        "lead" => self.lead.is_some(),
+                        "lead_substeps" => self.lead_substeps.is_some(),
+                        "k_lag" => self.k_lag.is_some(),
+                        "n_u" => self.n_u.is_some(),
+                        "forgetting_factor" => self.forgetting_factor.is_some(),
+                        "taps" => self.taps.is_some(),
+                        "guard_factor" => self.guard_factor.is_some(),
+                        "ramp_start" => self.ramp_start.is_some(),
+                        "ramp_steps" => self.ramp_steps.is_some(),
+                        "fade_out" => self.fade_out.is_some(),
+                        _ => false,
+                    };
+                    (n, present)
+                })
+                .collect()
+        };
+        let kind = self.kind.as_str();
+        let unused = format!("is not used with kind = \"{kind}\"");
+        // The lead in sub-steps: `lead` [s] or `lead_substeps`, default the actuator delay.
+        let lead = || -> Result<f64> {
+            match (self.lead, self.lead_substeps) {
+                (Some(_), Some(_)) => Err(Error::invalid(
+                    format!("{p}lead_substeps"),
+                    "give either lead [s] or lead_substeps, not both",
+                )),
+                (Some(l), None) => {
+                    require_non_negative(&format!("{p}lead"), l)?;
+                    Ok(l / dtau)
+                }
+                (None, Some(l)) => {
+                    require_non_negative(&format!("{p}lead_substeps"), l)?;
+                    Ok(l)
+                }
+                (None, None) => Ok(delay / dtau),
+            }
+        };
+        let guard_factor = self.guard_factor.unwrap_or(10.0);
+        let spec = match kind {
+            "none" => {
+                forbid(
+                    p,
+                    &keys(&[
+                        "order",
+                        "lead",
+                        "lead_substeps",
+                        "k_lag",
+                        "n_u",
+                        "forgetting_factor",
+                        "taps",
+                        "guard_factor",
+                        "ramp_start",
+                        "ramp_steps",
+                        "fade_out",
+                    ]),
+                    &unused,
+                )?;
+                return Ok(None);
+            }
+            "polynomial" => {
+                forbid(p, &keys(&["k_lag", "n_u", "forgetting_factor", "taps"]), &unused)?;
+                PhaseLagSpec::Polynomial {
+                    order: self.order.unwrap_or(3),
+                    lead: lead()?,
+                    guard_factor,
+                }
+            }
+            "arx" => {
+                forbid(p, &keys(&["order", "lead", "lead_substeps", "taps"]), &unused)?;
+                let k_lag = self.k_lag.unwrap_or_else(|| ((delay / dtau).round() as usize).max(1));
+                let mut spec = ArxPhaseLagSpec::new(k_lag);
+                if let Some(n) = self.n_u {
+                    spec.n_u = n;
+                }
+                if let Some(l) = self.forgetting_factor {
+                    spec.lambda = l;
+                }
+                spec.guard_factor = guard_factor;
+                PhaseLagSpec::Arx(spec)
+            }
+            "inverse_fir" => {
+                forbid(p, &keys(&["k_lag", "n_u", "guard_factor"]), &unused)?;
+                let mut spec = InverseFirSpec::new(lead()?);
+                if let Some(o) = self.order {
+                    spec.order = o;
+                }
+                if let Some(t) = self.taps {
+                    spec.taps = t;
+                }
+                if let Some(l) = self.forgetting_factor {
+                    spec.lambda = l;
+                }
+                PhaseLagSpec::InverseFir(spec)
+            }
+            other => {
+                return Err(Error::invalid(
+                    format!("{p}kind"),
+                    format!("unknown kind '{other}' (expected none, polynomial, arx or inverse_fir)"),
+                ));
+            }
+        };
+        let mut ramp = Ramp::new(
+            self.ramp_start.unwrap_or(0).saturating_mul(k_sub),
+            self.ramp_steps.unwrap_or(DEFAULT_RAMP_STEPS).saturating_mul(k_sub),
+        );
+        if let Some([begin, steps]) = self.fade_out {
+            ramp = ramp.with_fade_out(begin.saturating_mul(k_sub), steps.saturating_mul(k_sub));
+        }
+        let def = PhaseLagDefinition { spec, ramp };
+        def.validate().map_err(|e| prefixed(e, "substructure."))?;
+        Ok(Some(def))
+    }
+}

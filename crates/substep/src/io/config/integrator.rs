@@ -1,0 +1,70 @@
+//! `[integrator]` (docs/config.md, section `[integrator]`): scheme, time step, duration.
+
+use super::forbid;
+use crate::error::{Error, Result, require_non_negative, require_positive};
+use crate::integrate::{Scheme, check_hilber_alpha};
+use serde::Deserialize;
+
+#[derive(Debug, Clone)]
+pub struct IntegratorDefinition {
+    /// The scheme name as given in the config (e.g. `average_acceleration`).
+    pub name: String,
+    pub scheme: Scheme,
+    /// Time step \[s\].
+    pub dt: f64,
+    /// Number of steps; the run covers `t = 0 ..= steps·dt`.
+    pub steps: usize,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawIntegrator {
+    #[serde(default = "default_scheme")]
+    pub(crate) scheme: String,
+    pub(crate) beta: Option<f64>,
+    pub(crate) gamma: Option<f64>,
+    pub(crate) alpha: Option<f64>,
+    pub(crate) dt: f64,
+    pub(crate) duration: Option<f64>,
+}
+
+pub(crate) fn default_scheme() -> String {
+    "newmark".into()
+}
+
+impl RawIntegrator {
+    /// `(name, scheme, dt, duration)`.
+    pub(crate) fn build(&self) -> Result<(String, Scheme, f64, Option<f64>)> {
+        let dt = require_positive("integrator.dt", self.dt)?;
+        if let Some(d) = self.duration {
+            require_positive("integrator.duration", d)?;
+        }
+        let name = self.scheme.as_str();
+        let is_newmark = name == "newmark";
+        let is_alpha = matches!(name, "hht" | "alpha_os");
+        if !is_newmark {
+            forbid(
+                "integrator.",
+                &[("beta", self.beta.is_some()), ("gamma", self.gamma.is_some())],
+                &format!("only used with scheme = \"newmark\" (scheme \"{name}\" fixes its own parameters)"),
+            )?;
+        }
+        if !is_alpha && self.alpha.is_some() {
+            return Err(Error::invalid(
+                "integrator.alpha",
+                format!("only used with scheme = \"hht\" or \"alpha_os\", not \"{name}\""),
+            ));
+        }
+        let beta = self.beta.unwrap_or(0.25);
+        let gamma = self.gamma.unwrap_or(0.5);
+        if is_newmark {
+            require_non_negative("integrator.beta", beta)?;
+            require_non_negative("integrator.gamma", gamma)?;
+        }
+        let scheme = Scheme::from_name(name, beta, gamma, self.alpha.unwrap_or(-0.1))?;
+        if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha } = scheme {
+            check_hilber_alpha(alpha)?;
+        }
+        Ok((name.to_string(), scheme, dt, self.duration))
+    }
+}

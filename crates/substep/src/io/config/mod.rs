@@ -1,0 +1,518 @@
+//! Test definitions in TOML (the keys are documented in `docs/config.md`).
+//!
+//! [`TestDefinition::from_file`] / [`TestDefinition::from_toml`] read a config into a validated
+//! [`TestDefinition`]: the numerical model, the ground acceleration at the step times, the
+//! integrator, the optional substructure part and the output settings. Parsing happens in two
+//! stages: serde reads the text into `Raw*` structs that mirror the file (unknown keys are
+//! errors), then `build` checks values and relations between keys and produces library types.
+//!
+//! Messages are one line. Syntax and type errors name the file and line
+//! (`test.toml: line 7: unknown field `foo`, expected ...`); validation errors name the file and
+//! the key path (`test.toml: substructure.coupling_dofs: DOF 7 is out of range (the model has
+//! DOFs 1..=3)`). DOF numbers in configs are 1-based; the definition holds them 0-based.
+//!
+//! Relative file paths (matrices, records) are resolved against the config file's directory.
+//! The output directory is left as given (relative to the working directory of the run).
+//!
+//! One file per section of the test definition, each next to the docs/config.md section it
+//! implements: `structure.rs` (`[structure]`), `ground_motion.rs`, `integrator.rs`,
+//! `substructure.rs` (`[substructure]`, `[substructure.controller]`), `specimens.rs`
+//! (`[[substructure.specimen]]`), `actuator.rs`, `sensors.rs`, `compensation.rs`
+//! (`[substructure.error_force]`, `[substructure.phase_lag]`), `remote.rs`, `safety_limits.rs`
+//! (`[substructure.limits]`), `output.rs` (`[output]`); this file holds [`TestDefinition`], the
+//! top-level `RawConfig` with the run-size checks of `[limits]`, and the helpers every section
+//! uses (matrices, DOF numbers, message prefixes).
+//!
+//! To add a specimen kind: add a variant to `RawSpecimen` (`specimens.rs`; its keys are the
+//! variant's fields) and one arm to `RawSpecimen::to_spec`.
+
+mod actuator;
+mod compensation;
+mod ground_motion;
+mod integrator;
+mod output;
+mod remote;
+mod safety_limits;
+mod sensors;
+mod specimens;
+mod structure;
+mod substructure;
+#[cfg(test)]
+mod tests;
+
+use crate::error::{Error, Result};
+use crate::integrate::Scheme;
+use crate::io::limits::{self, Limits, RunShape};
+use crate::io::matrix_market::{read_matrix_market_sparse_with, read_matrix_market_with};
+use crate::model::Model;
+use crate::sparse::CscMatrix;
+use crate::transfer::{ActuatorSpec, Dynamics};
+pub(crate) use actuator::RawActuator;
+pub use ground_motion::GroundMotion;
+use ground_motion::RawGroundMotion;
+pub use integrator::IntegratorDefinition;
+use integrator::RawIntegrator;
+use nalgebra::DMatrix;
+use output::RawOutput;
+pub use output::{OutputSettings, PLOT_FIGURES, PlotOptions};
+pub use remote::{RemoteDefinition, RemoteProtocol};
+pub(crate) use sensors::RawSensors;
+use serde::Deserialize;
+pub(crate) use specimens::RawSpecimen;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use structure::{ModelShape, RawStructure, check_exact_range};
+use substructure::RawSubstructure;
+pub use substructure::SubstructureDefinition;
+
+/// A validated test definition.
+#[derive(Debug, Clone)]
+pub struct TestDefinition {
+    /// Where the definition came from (the config path, or a name for embedded text).
+    pub source: String,
+    /// The numerical substructure (with a `[substructure]`, the specimens are not in it), in
+    /// dense or sparse storage (`[structure] storage`).
+    pub model: Model,
+    pub ground_motion: GroundMotion,
+    pub integrator: IntegratorDefinition,
+    pub substructure: Option<SubstructureDefinition>,
+    pub output: OutputSettings,
+}
+
+impl TestDefinition {
+    /// Read and validate a config file; relative paths in it resolve against its directory.
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let name = path.display().to_string();
+        let text = limits::read_text(path, limits::CONFIG_MAX_BYTES)?;
+        let base = path.parent().unwrap_or(Path::new(""));
+        Self::from_toml(&text, &name, base)
+    }
+
+    /// Parse and validate config text; `name` names it in messages and becomes
+    /// [`TestDefinition::source`], `base_dir` resolves relative paths.
+    pub fn from_toml(text: &str, name: &str, base_dir: &Path) -> Result<Self> {
+        let raw: RawConfig = toml::from_str(text).map_err(|e| toml_error(&e, text, name))?;
+        raw.build(name, base_dir).map_err(|e| match e {
+            Error::InvalidInput { what, reason } => Error::invalid(format!("{name}: {what}"), reason),
+            Error::Numerical { what, reason } => Error::numerical(format!("{name}: {what}"), reason),
+            other => other,
+        })
+    }
+
+    /// Step time `t_i = i·dt` \[s\].
+    pub fn time(&self, step: usize) -> f64 {
+        step as f64 * self.integrator.dt
+    }
+}
+
+/// `FILE: line L: message` from a toml error (its message may span lines; they are joined).
+pub(crate) fn toml_error(e: &toml::de::Error, text: &str, name: &str) -> Error {
+    let message = plain_types(&e.message().split_whitespace().collect::<Vec<_>>().join(" "));
+    match e.span() {
+        Some(span) => {
+            let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
+            Error::file(name, format!("line {line}: {message}"))
+        }
+        None => Error::file(name, message),
+    }
+}
+
+/// Prefix the key path of an input error (`mass` → `structure.sdof.mass`).
+pub(crate) fn prefixed(e: Error, prefix: &str) -> Error {
+    match e {
+        Error::InvalidInput { what, reason } if !what.starts_with(prefix) => {
+            Error::invalid(format!("{prefix}{what}"), reason)
+        }
+        other => other,
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawConfig {
+    pub(crate) structure: RawStructure,
+    pub(crate) ground_motion: RawGroundMotion,
+    pub(crate) integrator: RawIntegrator,
+    pub(crate) substructure: Option<RawSubstructure>,
+    #[serde(default)]
+    pub(crate) output: RawOutput,
+    pub(crate) limits: Option<RawRunLimits>,
+}
+
+/// `[limits]`: what one run may ask of the machine (docs/limits.md).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawRunLimits {
+    pub(crate) max_memory: Option<f64>,
+    pub(crate) max_run_time: Option<f64>,
+    pub(crate) max_output_bytes: Option<f64>,
+    pub(crate) max_file_bytes: Option<f64>,
+}
+
+impl RawRunLimits {
+    pub(crate) fn build(&self) -> Result<Limits> {
+        let d = Limits::default();
+        Ok(Limits {
+            max_memory: limits::limit_value("max_memory", self.max_memory, d.max_memory)?,
+            max_run_time: limits::limit_value("max_run_time", self.max_run_time, d.max_run_time)?,
+            max_output_bytes: limits::limit_value("max_output_bytes", self.max_output_bytes, d.max_output_bytes)?,
+            max_file_bytes: limits::limit_value("max_file_bytes", self.max_file_bytes, d.max_file_bytes)?,
+        })
+    }
+}
+
+pub(crate) fn one() -> f64 {
+    1.0
+}
+
+/// A matrix in a config: an array of rows, a number (1×1), or a path to a `.mtx` file.
+#[derive(Debug, Clone)]
+pub(crate) enum MatrixInput {
+    Rows(Vec<Vec<f64>>),
+    File(String),
+}
+
+impl<'de> Deserialize<'de> for MatrixInput {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = MatrixInput;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a matrix: an array of rows (arrays of numbers), a number, or the path of a .mtx file")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<MatrixInput, E> {
+                Ok(MatrixInput::File(v.to_string()))
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> std::result::Result<MatrixInput, E> {
+                Ok(MatrixInput::Rows(vec![vec![v]]))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> std::result::Result<MatrixInput, E> {
+                self.visit_f64(v as f64)
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> std::result::Result<MatrixInput, E> {
+                self.visit_f64(v as f64)
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> std::result::Result<MatrixInput, A::Error> {
+                let mut rows = Vec::new();
+                while let Some(row) = seq.next_element::<Vec<f64>>()? {
+                    rows.push(row);
+                }
+                Ok(MatrixInput::Rows(rows))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// One number for all, or one per item.
+#[derive(Debug, Clone)]
+pub(crate) struct OneOrMany(Vec<f64>);
+
+impl<'de> Deserialize<'de> for OneOrMany {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = OneOrMany;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a number or an array of numbers")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> std::result::Result<OneOrMany, E> {
+                Ok(OneOrMany(vec![v]))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> std::result::Result<OneOrMany, E> {
+                Ok(OneOrMany(vec![v as f64]))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> std::result::Result<OneOrMany, E> {
+                Ok(OneOrMany(vec![v as f64]))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> std::result::Result<OneOrMany, A::Error> {
+                let mut v = Vec::new();
+                while let Some(x) = seq.next_element::<f64>()? {
+                    v.push(x);
+                }
+                Ok(OneOrMany(v))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// A matrix from its config form; `what` is the key path.
+pub(crate) fn matrix(input: &MatrixInput, what: &str, base: &Path) -> Result<DMatrix<f64>> {
+    matrix_with(input, what, base, &Limits::default())
+}
+
+/// [`matrix`] with a `.mtx` file read within `limits`.
+pub(crate) fn matrix_with(input: &MatrixInput, what: &str, base: &Path, limits: &Limits) -> Result<DMatrix<f64>> {
+    match input {
+        MatrixInput::File(path) => {
+            let resolved = base.join(path);
+            read_matrix_market_with(&resolved, limits).map_err(|e| Error::invalid(what, e.to_string()))
+        }
+        MatrixInput::Rows(rows) => {
+            let n_rows = rows.len();
+            let n_cols = rows.first().map_or(0, Vec::len);
+            if n_rows == 0 || n_cols == 0 {
+                return Err(Error::invalid(what, "matrix is empty"));
+            }
+            for (i, row) in rows.iter().enumerate() {
+                if row.len() != n_cols {
+                    return Err(Error::invalid(
+                        what,
+                        format!("row {} has {} entries but row 1 has {n_cols}", i + 1, row.len()),
+                    ));
+                }
+                if let Some(j) = row.iter().position(|x| !x.is_finite()) {
+                    return Err(Error::invalid(
+                        what,
+                        format!("entry ({}, {}) is not finite ({})", i + 1, j + 1, row[j]),
+                    ));
+                }
+            }
+            Ok(DMatrix::from_fn(n_rows, n_cols, |i, j| rows[i][j]))
+        }
+    }
+}
+
+/// A model matrix in sparse form: `.mtx` files are read without a dense array; inline rows must
+/// be square.
+pub(crate) fn sparse_matrix(input: &MatrixInput, what: &str, base: &Path, limits: &Limits) -> Result<CscMatrix> {
+    match input {
+        MatrixInput::File(path) => {
+            let resolved = base.join(path);
+            read_matrix_market_sparse_with(&resolved, limits).map_err(|e| Error::invalid(what, e.to_string()))
+        }
+        MatrixInput::Rows(_) => {
+            let m = matrix_with(input, what, base, limits)?;
+            if m.nrows() != m.ncols() {
+                return Err(Error::invalid(
+                    what,
+                    format!("is {}x{}, a model matrix must be square", m.nrows(), m.ncols()),
+                ));
+            }
+            Ok(CscMatrix::from_dense(&m))
+        }
+    }
+}
+
+/// 1-based DOF number → 0-based index, with a range check.
+pub(crate) fn dof_index(what: &str, dof: usize, n: usize) -> Result<usize> {
+    if (1..=n).contains(&dof) {
+        Ok(dof - 1)
+    } else {
+        Err(Error::invalid(
+            what,
+            format!("DOF {dof} is out of range (the model has DOFs 1..={n})"),
+        ))
+    }
+}
+
+/// Error if any of the named optional keys is present (`why` explains).
+pub(crate) fn forbid(prefix: &str, keys: &[(&str, bool)], why: &str) -> Result<()> {
+    match keys.iter().find(|(_, present)| *present) {
+        Some((key, _)) => Err(Error::invalid(format!("{prefix}{key}"), why.to_string())),
+        None => Ok(()),
+    }
+}
+
+impl RawConfig {
+    pub(crate) fn build(self, name: &str, base: &Path) -> Result<TestDefinition> {
+        let limits = self
+            .limits
+            .as_ref()
+            .map_or(Ok(Limits::default()), RawRunLimits::build)?;
+        let (name_s, scheme, dt, duration) = self.integrator.build()?;
+        // Only the implicit Newmark schemes (and the sub-step controller) run on sparse storage.
+        let sparse_capable = matches!(scheme, Scheme::Newmark { beta, .. } if beta > 0.0);
+        // Limits first, from the config alone: nothing big is built, read or run before this.
+        let shape = self.structure.shape(sparse_capable, &limits)?;
+        if let Some(length) = self.ground_motion.length_hint(duration) {
+            check_samples(&limits, length, dt)?;
+            if let Some(m) = shape {
+                self.check_run(&limits, m, (length / dt).floor(), dt)?;
+            }
+        }
+        let ground_motion = self.ground_motion.build(dt, duration, base, &limits)?;
+        let steps = ground_motion.accel.len() - 1;
+        if steps == 0 {
+            return Err(Error::invalid(
+                "integrator.duration",
+                format!("the run must last at least one step (dt = {dt} s)"),
+            ));
+        }
+        if let Some(m) = shape {
+            self.check_run(&limits, m, steps as f64, dt)?;
+        }
+        let model = self.structure.build(base, sparse_capable, &limits)?;
+        if shape.is_none() {
+            self.check_run(&limits, ModelShape::of(&model), steps as f64, dt)?;
+        }
+        let substructure = match self.substructure {
+            None => None,
+            Some(s) => Some(s.build(&model, &name_s, scheme, dt, base, &limits)?),
+        };
+        check_exact_range(&self.structure, &model, substructure.as_ref(), scheme, dt)?;
+        Ok(TestDefinition {
+            source: name.to_string(),
+            model,
+            ground_motion,
+            integrator: IntegratorDefinition {
+                name: name_s,
+                scheme,
+                dt,
+                steps,
+            },
+            substructure,
+            output: {
+                let (plots, plot_options) = self.output.plots.build()?;
+                OutputSettings {
+                    dir: self.output.dir.map(PathBuf::from),
+                    plots,
+                    plot_options,
+                }
+            },
+        })
+    }
+}
+
+/// Refuse an excitation whose samples at `dt` would not fit, before they are generated.
+pub(crate) fn check_samples(limits: &Limits, length: f64, dt: f64) -> Result<()> {
+    let steps = (length / dt).floor();
+    let shape = RunShape {
+        steps,
+        ..RunShape::default()
+    };
+    limits.check_memory(
+        "integrator.dt",
+        &format!(
+            "a {} s excitation at dt = {} s ({} steps)",
+            limits::number(length),
+            limits::number(dt),
+            limits::number(steps)
+        ),
+        shape.excitation_bytes(),
+    )
+}
+
+impl RawConfig {
+    /// Memory, computing time and output of the run (model `m`, `steps` steps of `dt`), checked
+    /// against `limits` before anything of that size exists.
+    pub(crate) fn check_run(&self, limits: &Limits, m: ModelShape, steps: f64, dt: f64) -> Result<()> {
+        let mut shape = RunShape {
+            n_dofs: m.n,
+            model_bytes: m.bytes,
+            step_seconds: m.step_seconds,
+            steps,
+            ..RunShape::default()
+        };
+        limits.check_memory(
+            "integrator.dt",
+            &format!(
+                "a {} s excitation at dt = {} s ({} steps)",
+                limits::number(steps * dt),
+                limits::number(dt),
+                limits::number(steps)
+            ),
+            shape.excitation_bytes(),
+        )?;
+        let mut asked = format!("{} steps of a {}-DOF model", limits::number(steps), limits::number(m.n));
+        if let Some(s) = &self.substructure {
+            if s.substeps == 0 || s.coupling_dofs.is_empty() {
+                return Ok(()); // refused with its own message when the substructure is built
+            }
+            let actuator = match s.actuator.as_ref().map(RawActuator::spec) {
+                None => ActuatorSpec::ideal(),
+                Some(Ok(a)) => a,
+                Some(Err(_)) => return Ok(()), // refused with its own message when the lab is built
+            };
+            let inner = match s.inner_steps {
+                Some(k) => k.max(1),
+                None if actuator.dynamics == Dynamics::Ideal && actuator.delay == 0.0 => 1,
+                None => 10,
+            };
+            shape.n_coupling = s.coupling_dofs.len() as f64;
+            shape.substeps = s.substeps as f64;
+            shape.inner_steps = inner as f64;
+            let dt_inner = dt / shape.substeps / shape.inner_steps;
+            if actuator.delay.is_finite() && actuator.delay > 0.0 {
+                shape.delay_samples = crate::transfer::DelayLine::samples(actuator.delay, dt_inner);
+            }
+            if s.phase_lag.as_ref().is_some_and(|p| p.kind != "none") {
+                shape.extra_substep_columns = 2.0;
+            }
+            limits.check_memory(
+                "substructure.actuator.delay",
+                &format!(
+                    "a delay of {} s sampled every {dt_inner:.3e} s (dt / substeps / inner_steps: {:.3e} samples \
+                     per actuator)",
+                    limits::number(actuator.delay),
+                    shape.delay_samples
+                ),
+                shape.delay_bytes(),
+            )?;
+            asked = format!(
+                "{asked} with {} sub-steps of {inner} inner steps on {} coupling DOF(s)",
+                s.substeps,
+                s.coupling_dofs.len()
+            );
+        }
+        limits.check_memory("limits", &format!("the whole run ({asked})"), shape.memory())?;
+        let total = shape.run_time();
+        let inner = RunShape {
+            step_seconds: 0.0,
+            ..shape
+        }
+        .run_time();
+        let key = if steps * m.step_seconds >= 0.5 * total || self.substructure.is_none() {
+            "integrator.dt"
+        } else if shape.inner_steps > shape.substeps && inner >= 0.5 * total {
+            "substructure.inner_steps"
+        } else {
+            "substructure.substeps"
+        };
+        limits.check_run_time(key, &asked, total)?;
+        let key = if shape.substeps_bytes() > shape.history_bytes() {
+            "substructure.substeps"
+        } else {
+            "integrator.dt"
+        };
+        limits.check_output(key, &asked, shape.output_bytes())
+    }
+}
+
+/// serde's Rust type names in a message replaced by what a user types ("expected usize" →
+/// "expected a whole number ≥ 0").
+pub(crate) fn plain_types(message: &str) -> String {
+    let mut m = message.to_string();
+    for (rust, plain) in [
+        ("expected usize", "expected a whole number ≥ 0"),
+        ("expected u64", "expected a whole number ≥ 0"),
+        ("expected u32", "expected a whole number ≥ 0 (at most 4294967295)"),
+        ("expected u16", "expected a whole number 0…65535"),
+        ("expected u8", "expected a whole number 0…255"),
+        ("expected i64", "expected a whole number"),
+        ("expected i32", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected f32", "expected a number"),
+        ("expected a sequence", "expected an array [..]"),
+        ("expected a map", "expected a table"),
+        ("floating point", "the number"),
+        ("invalid type: integer", "invalid value: the whole number"),
+        ("invalid type:", "wrong type:"),
+    ] {
+        m = m.replace(rust, plain);
+    }
+    m
+}
+
+/// `specimen.<key>` from a specimen constructor becomes `<what>.<key>`.
+pub(crate) fn rekey(e: Error, what: &str) -> Error {
+    match e {
+        Error::InvalidInput { what: key, reason } | Error::Numerical { what: key, reason } => {
+            let rest = key.strip_prefix("specimen").unwrap_or(&key);
+            Error::invalid(format!("{what}{rest}"), reason)
+        }
+        other => other,
+    }
+}
