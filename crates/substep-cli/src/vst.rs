@@ -23,6 +23,7 @@ use substep::integrate::Scheme;
 use substep::io::config::{GroundMotion, IntegratorDefinition, OutputSettings, SubstructureDefinition, TestDefinition};
 use substep::io::{Reference, Simulation};
 use substep::model::{DampingSpec, ShearBuilding, StructuralModel, shear_building};
+use substep::monitor::{StabilityMonitor, StabilitySettings};
 use substep::specimen::SpecimenSpec;
 use substep::substructure::{ErrorForceSpec, SubstepObserver};
 use substep::transfer::{ActuatorSpec, Dynamics, SensorSpec};
@@ -260,6 +261,7 @@ fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result<TestDefini
         lab: Default::default(),
         controller: None,
         controller_feedforward: None,
+        delay_ramp: None,
     };
     Ok(TestDefinition {
         source: format!("vst: {}", method.name),
@@ -336,6 +338,10 @@ pub struct RunResult {
     pub estimated: Option<(u64, u64)>,
     /// Guard warnings.
     pub warnings: Vec<String>,
+    /// The on-line stability indicator's alarm, if it raised one (docs/monitor.md).
+    pub stability_alarm: Option<String>,
+    /// Largest energy ratio η of the indicator over the run.
+    pub max_eta: f64,
     pub series: Series,
 }
 
@@ -366,6 +372,7 @@ struct Tracking {
     sum: f64,
     count: usize,
     last: f64,
+    last_command: f64,
 }
 
 impl SubstepObserver for Tracking {
@@ -373,6 +380,7 @@ impl SubstepObserver for Tracking {
         // The displacement sensor is ideal: measured = achieved (y_true).
         let e = command[0] - displacement[0];
         self.last = e;
+        self.last_command = command[0];
         if step as f64 * self.dt > self.from {
             self.sum += e * e;
             self.count += 1;
@@ -416,7 +424,16 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
         sum: 0.0,
         count: 0,
         last: 0.0,
+        last_command: 0.0,
     };
+    // The on-line stability indicator watches every run (it must stay quiet on all of them).
+    let mut stability = StabilityMonitor::new(
+        def.substructure.as_ref().expect("substructured"),
+        &def.model,
+        s.dt,
+        StabilitySettings::default(),
+    )?;
+    let mut max_eta = f64::NAN;
     let mut ser = Series::default();
     let push = |ser: &mut Series, sim: &Simulation, te: f64| {
         let test = sim.substructure_test().expect("substructured");
@@ -441,6 +458,26 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
             break;
         }
         push(&mut ser, &sim, track.last);
+        if let Some(rec) = sim.coupling() {
+            let i = sim.steps_done();
+            let st = sim.state();
+            stability.push(
+                i,
+                st.u.as_slice(),
+                st.v.as_slice(),
+                def.ground_motion.accel[i],
+                rec.coupling_force,
+                &[track.last_command],
+                rec.measured_displacement,
+            );
+            if stability.eta().is_finite() {
+                max_eta = if max_eta.is_nan() {
+                    stability.eta()
+                } else {
+                    max_eta.max(stability.eta())
+                };
+            }
+        }
     }
     let n = ser.t.len();
     let err = |x: &[f64], r: &[f64]| -> (f64, f64) {
@@ -487,6 +524,8 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
         },
         estimated: test.controller.estimation_stats().map(|st| (st.estimated, st.steps)),
         warnings,
+        stability_alarm: stability.alarm().map(|a| a.message()),
+        max_eta,
         series: ser,
     })
 }
@@ -616,6 +655,25 @@ pub fn acceptance(st: &Study) -> Vec<(String, bool)> {
             pct(best_peak.force_peak)
         ),
         both.force_peak < best_peak.force_peak,
+    ));
+    let alarms: Vec<&str> = st
+        .runs
+        .iter()
+        .filter(|r| r.stability_alarm.is_some())
+        .map(|r| r.method.key)
+        .collect();
+    let max_eta = st
+        .runs
+        .iter()
+        .map(|r| r.max_eta)
+        .filter(|e| e.is_finite())
+        .fold(0.0f64, f64::max);
+    out.push((
+        format!(
+            "the on-line stability indicator raises no alarm on any method (largest energy ratio η = {max_eta:.2}; alarms: {})",
+            if alarms.is_empty() { "none".to_string() } else { alarms.join(", ") }
+        ),
+        alarms.is_empty(),
     ));
     out
 }
@@ -967,6 +1025,11 @@ mod tests {
         let st = run_study(&VstSettings::quick(0.010)).unwrap();
         println!("{}", markdown(&st));
         assert!(st.runs.iter().all(|r| r.completed && r.warnings.is_empty()));
+        // The on-line stability indicator raises no alarm on any method of the study.
+        for r in &st.runs {
+            println!("{}: stability indicator max η = {:.3}", r.method.key, r.max_eta);
+            assert!(r.stability_alarm.is_none(), "{}: {:?}", r.method.key, r.stability_alarm);
+        }
         let (none, pl, both, pid) = (st.run("none"), st.run("pl_arx"), st.run("both"), st.run("pid"));
         // 1. Phase-lag identification: ≥ 5× less tracking error than none after ramp-in, and
         //    better than polynomial extrapolation with the lead = the delay (the default). Against

@@ -35,7 +35,7 @@ fn energy_added_by_a_pure_delay_matches_the_closed_form() {
     let mut e = EnergyIndicator::new(1, 2 * per_cycle);
     for i in 0..=cycles * per_cycle {
         let (force, d, x) = delayed_spring(i, dt, a, w, tau, k, c);
-        e.push(&[force], &[d], &[x], 0.0);
+        e.push(&[force], &[d], &[x], 0.0, 0.0);
     }
     let added = PI * a * a * (k * (w * tau).sin() + c * w * (1.0 - (w * tau).cos()));
     let measured = PI * c * w * a * a;
@@ -63,7 +63,7 @@ fn energy_indicator_without_delay_adds_nothing_and_counts_numerical_damping() {
         let (force, d, x) = delayed_spring(i, dt, a, w, 0.0, k, c);
         let t = i as f64 * dt;
         let ed = c_n * a * a * w * w * (t / 2.0 - (2.0 * w * t).sin() / (4.0 * w));
-        e.push(&[force], &[d], &[x], ed);
+        e.push(&[force], &[d], &[x], ed, 0.0);
     }
     assert_eq!(e.total_added(), 0.0);
     assert_eq!(e.eta(), 0.0);

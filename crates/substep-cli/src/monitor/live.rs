@@ -55,13 +55,22 @@ impl Live {
     /// [`SafetyLimits`] so that a stop from the page or the indicator can ramp.
     pub fn start(args: &RunArgs, def: &mut TestDefinition, config: &str, realtime: bool) -> Result<Self> {
         let n_c = def.substructure.as_ref().map_or(0, |s| s.coupling_dofs.len());
-        let configured = args.stability.map(|a| StabilitySettings {
-            action: match a {
-                crate::StabilityArg::Warn => StabilityAction::Warn,
-                crate::StabilityArg::Stop => StabilityAction::Stop,
-            },
-            ..StabilitySettings::default()
-        });
+        let from_config = def
+            .substructure
+            .as_ref()
+            .and_then(|s| s.limits.as_ref())
+            .and_then(|l| l.stability.clone());
+        // The command-line action overrides the config's (keeping its thresholds).
+        let configured = match (args.stability, from_config) {
+            (None, c) => c,
+            (Some(a), c) => Some(StabilitySettings {
+                action: match a {
+                    crate::StabilityArg::Warn => StabilityAction::Warn,
+                    crate::StabilityArg::Stop => StabilityAction::Stop,
+                },
+                ..c.unwrap_or_default()
+            }),
+        };
         let settings = match (&configured, &args.monitor) {
             (Some(s), _) => Some(s.clone()),
             (None, Some(_)) if n_c > 0 => Some(StabilitySettings::default()),

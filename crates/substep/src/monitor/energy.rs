@@ -9,8 +9,12 @@
 //! ΔW_m = r̄ (x_{i+1} − x_i)      work the specimen actually received (measured motion)
 //! ΔW_n = r̄ (d_{i+1} − d_i)      work the numerical side believes it did (its own motion)
 //! ΔE_a = ΔW_m − ΔW_n            energy the transfer system added (tracking error × force)
-//! ΔD   = ΔE_D + ΔW_m            dissipation: numerical damping + what the specimen absorbed
+//! ΔD   = ΔE_D + ΔW_m − ΔS       dissipation: numerical damping + what the specimen absorbed
 //! ```
+//!
+//! `S` is an estimate of the energy stored in the specimen (the caller's, e.g. `½ k̂ x²` with
+//! the identified stiffness): without it a window that does not span whole cycles counts the
+//! change of stored energy as dissipation, which can even be negative.
 //!
 //! Over a sliding window of `W` steps the indicator is `η = Σ ΔE_a / Σ ΔD`: the fraction of the
 //! system's dissipation that the transfer system cancels. `η ≥ 1` means the hybrid system is
@@ -26,6 +30,7 @@ pub struct EnergyIndicator {
     d: Vec<f64>,
     x: Vec<f64>,
     damping_energy: f64,
+    stored: f64,
     started: bool,
     /// Per-step increments of the last `window` steps (ring).
     added: Vec<f64>,
@@ -36,6 +41,7 @@ pub struct EnergyIndicator {
     sum_dissipated: f64,
     /// Largest windowed dissipation seen: the scale below which a window counts as quiet.
     max_dissipated: f64,
+    steps: usize,
     total_added: f64,
     total_measured: f64,
     total_numerical: f64,
@@ -43,8 +49,8 @@ pub struct EnergyIndicator {
 }
 
 /// A window whose dissipation is below this share of the largest one seen is "quiet": the
-/// ratio of two noise-sized numbers says nothing, and `η` keeps its last value.
-const QUIET: f64 = 1e-3;
+/// ratio of two noise-sized numbers says nothing, and `η` is unknown (NaN) there.
+const QUIET: f64 = 0.05;
 
 impl EnergyIndicator {
     /// `n_c` coupling DOFs, a sliding window of `window ≥ 1` steps.
@@ -56,6 +62,7 @@ impl EnergyIndicator {
             d: vec![0.0; n_c],
             x: vec![0.0; n_c],
             damping_energy: 0.0,
+            stored: 0.0,
             started: false,
             added: vec![0.0; window],
             dissipated: vec![0.0; window],
@@ -64,6 +71,7 @@ impl EnergyIndicator {
             sum_added: 0.0,
             sum_dissipated: 0.0,
             max_dissipated: 0.0,
+            steps: 0,
             total_added: 0.0,
             total_measured: 0.0,
             total_numerical: 0.0,
@@ -78,8 +86,10 @@ impl EnergyIndicator {
     /// Add the state at the end of a step: `force` on the numerical substructure (N, the
     /// sign convention of the records: the specimen's restoring force is `−force`), `command`
     /// and `measured` displacement (m) per coupling DOF, and the cumulative damping energy of
-    /// the numerical substructure `E_D` (J; 0 if unknown). The first call sets the start.
-    pub fn push(&mut self, force: &[f64], command: &[f64], measured: &[f64], damping_energy: f64) {
+    /// the numerical substructure `E_D` and the energy stored in the specimen `S` (J; 0 if
+    /// unknown). The first call sets the start; `η` is known after two windows (the first
+    /// holds the start-up transient).
+    pub fn push(&mut self, force: &[f64], command: &[f64], measured: &[f64], damping_energy: f64, stored: f64) {
         if !self.started {
             for k in 0..self.n_c {
                 self.r[k] = -force[k];
@@ -87,6 +97,7 @@ impl EnergyIndicator {
                 self.x[k] = measured[k];
             }
             self.damping_energy = damping_energy;
+            self.stored = stored;
             self.started = true;
             return;
         }
@@ -103,7 +114,9 @@ impl EnergyIndicator {
         let de = damping_energy - self.damping_energy;
         self.damping_energy = damping_energy;
         let added = dwm - dwn;
-        let dissipated = de + dwm;
+        let dissipated = de + dwm - (stored - self.stored);
+        self.stored = stored;
+        self.steps += 1;
         self.total_added += added;
         self.total_measured += dwm;
         self.total_numerical += dwn;
@@ -128,15 +141,17 @@ impl EnergyIndicator {
             self.sum_added = self.added.iter().sum();
             self.sum_dissipated = self.dissipated.iter().sum();
         }
-        if self.filled < w {
+        if self.steps < 2 * w {
             return;
         }
         self.max_dissipated = self.max_dissipated.max(self.sum_dissipated);
         if self.sum_dissipated > QUIET * self.max_dissipated && self.sum_dissipated > 0.0 {
             self.eta = self.sum_added / self.sum_dissipated;
-        } else if self.max_dissipated > 0.0 && self.sum_added > QUIET * self.max_dissipated {
-            // Energy comes in while nothing is dissipated: no damping is left at all.
-            self.eta = f64::INFINITY;
+        } else {
+            // A window in which the specimen gave back more stored energy than the estimate
+            // `S` accounts for (a mass-carrying specimen passing resonance) has no meaningful
+            // ratio: unknown, not alarming.
+            self.eta = f64::NAN;
         }
     }
 

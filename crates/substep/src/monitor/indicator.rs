@@ -3,7 +3,6 @@
 
 use super::energy::EnergyIndicator;
 use super::model_view::{Identification, ModelView};
-use crate::analysis::energy::EnergyBalance;
 use crate::error::{Error, Result, require_positive};
 use crate::io::SubstructureDefinition;
 use crate::model::Model;
@@ -139,8 +138,7 @@ pub struct StabilityMonitor {
     ident: Identification,
     view: Option<ModelView>,
     view_note: Option<String>,
-    balance: Option<EnergyBalance>,
-    f_full: Vec<f64>,
+    damping: DampingWork,
     steps: usize,
     rho: f64,
     last_probe: Vec<f64>,
@@ -149,8 +147,69 @@ pub struct StabilityMonitor {
     alarm: Option<Alarm>,
 }
 
-/// Largest model whose damping energy is integrated for the energy view (dense products).
-pub const ENERGY_BALANCE_MAX_DOFS: usize = 200;
+/// The damping work of the numerical substructure `E_D = Σ Δuᵀ C v̄` (trapezoidal, as
+/// [`crate::analysis::energy`]), on dense or sparse `C`; allocation-free per step.
+struct DampingWork {
+    c: DampingMatrix,
+    u: Vec<f64>,
+    v: Vec<f64>,
+    cv: Vec<f64>,
+    work: f64,
+    started: bool,
+}
+
+enum DampingMatrix {
+    Dense(nalgebra::DMatrix<f64>),
+    Sparse(crate::sparse::CscMatrix),
+}
+
+impl DampingWork {
+    fn new(model: &Model) -> Self {
+        let n = model.n_dofs();
+        let c = match (model.as_dense(), model.as_sparse()) {
+            (Some(d), _) => DampingMatrix::Dense(d.damping.clone()),
+            (None, Some(s)) => DampingMatrix::Sparse(s.damping.clone()),
+            (None, None) => DampingMatrix::Dense(nalgebra::DMatrix::zeros(n, n)),
+        };
+        Self {
+            c,
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            cv: vec![0.0; n],
+            work: 0.0,
+            started: false,
+        }
+    }
+
+    fn push(&mut self, u: &[f64], v: &[f64]) -> f64 {
+        if u.len() != self.u.len() || v.len() != self.v.len() {
+            return self.work;
+        }
+        if self.started {
+            for (m, &x) in self.v.iter_mut().zip(v) {
+                *m = 0.5 * (*m + x);
+            }
+            match &self.c {
+                DampingMatrix::Dense(c) => {
+                    let vm = nalgebra::DVectorView::from_slice(&self.v, self.v.len());
+                    let mut out = nalgebra::DVectorViewMut::from_slice(&mut self.cv, self.u.len());
+                    out.gemv(1.0, c, &vm, 0.0);
+                }
+                DampingMatrix::Sparse(c) => c.sym_mul_add(1.0, &self.v, 0.0, &mut self.cv),
+            }
+            self.work += self
+                .cv
+                .iter()
+                .zip(u.iter().zip(&self.u))
+                .map(|(f, (a, b))| f * (a - b))
+                .sum::<f64>();
+        }
+        self.u.copy_from_slice(u);
+        self.v.copy_from_slice(v);
+        self.started = true;
+        self.work
+    }
+}
 
 impl StabilityMonitor {
     /// For the test `sub` on `model` with time step `dt`.
@@ -158,8 +217,7 @@ impl StabilityMonitor {
         settings.validate()?;
         let n_c = sub.coupling_dofs.len();
         let window = ((settings.window / dt).round() as usize).max(2);
-        let dense = model.as_dense().filter(|m| m.n_dofs() <= ENERGY_BALANCE_MAX_DOFS);
-        let (view, view_note) = match dense.map(|m| ModelView::new(sub, m, dt)) {
+        let (view, view_note) = match model.as_dense().map(|m| ModelView::new(sub, m, dt)) {
             Some(Ok(v)) => (Some(v), None),
             Some(Err(e)) => (None, Some(e.to_string())),
             None => (
@@ -177,8 +235,7 @@ impl StabilityMonitor {
             ident: Identification::new(n_c, dt, window),
             view,
             view_note,
-            balance: dense.map(EnergyBalance::new),
-            f_full: vec![0.0; model.n_dofs()],
+            damping: DampingWork::new(model),
             steps: 0,
             rho: f64::NAN,
             last_probe: vec![f64::NAN; 3 * n_c],
@@ -207,29 +264,30 @@ impl StabilityMonitor {
         command: &[f64],
         measured: &[f64],
     ) -> Option<Alarm> {
-        let mut damping = 0.0;
-        if let Some(b) = &mut self.balance {
-            self.f_full.iter_mut().for_each(|f| *f = 0.0);
-            for (k, &dof) in self.coupling.iter().enumerate() {
-                self.f_full[dof] += force[k];
-            }
-            if b.push(u, v, ag, &self.f_full).is_ok() {
-                damping = b.terms().damping;
-            }
-        }
-        self.energy.push(force, command, measured, damping);
+        let _ = ag;
+        let damping = self.damping.push(u, v);
         self.ident.push(force, command, measured);
+        let stored: f64 = self
+            .ident
+            .stiffness()
+            .iter()
+            .zip(measured)
+            .map(|(&k, &x)| if k > 0.0 { 0.5 * k * x * x } else { 0.0 })
+            .sum();
+        self.energy.push(force, command, measured, damping, stored);
         self.steps += 1;
-        if self.steps.is_multiple_of(self.settings.refresh) {
-            self.refresh_model();
-        }
-        let time = step as f64 * self.dt;
         let eta = self.energy.eta();
+        if !self.steps.is_multiple_of(self.settings.refresh) {
+            return None;
+        }
+        // Both views are judged at the refresh points: `persistence` refreshes in a row.
+        self.refresh_model();
         self.over_energy = if eta > self.settings.energy_threshold {
             self.over_energy + 1
         } else {
             0
         };
+        let time = step as f64 * self.dt;
         if self.alarm.is_some() {
             return None;
         }

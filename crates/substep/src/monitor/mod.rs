@@ -15,9 +15,7 @@ pub mod energy;
 mod indicator;
 pub mod model_view;
 
-pub use indicator::{
-    Alarm, ENERGY_BALANCE_MAX_DOFS, IndicatorView, StabilityAction, StabilityMonitor, StabilitySettings,
-};
+pub use indicator::{Alarm, IndicatorView, StabilityAction, StabilityMonitor, StabilitySettings};
 
 use crate::realtime::{OwnedConsumer, OwnedProducer, owned_ring};
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};

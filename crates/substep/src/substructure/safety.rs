@@ -31,6 +31,9 @@ pub struct SafetyLimits {
     pub force: Option<Vec<f64>>,
     /// Duration of the ramp to the safe position after a stop \[s\].
     pub ramp_time: f64,
+    /// `stability = "warn" | "stop"` and the thresholds of the on-line stability indicator
+    /// ([`crate::monitor`]); the driver runs the indicator and, for "stop", asks for the ramp.
+    pub stability: Option<crate::monitor::StabilitySettings>,
 }
 
 impl SafetyLimits {
