@@ -47,6 +47,8 @@ pub struct Live {
     min_margin: f64,
     linger: Duration,
     acks: u64,
+    late_steps: u64,
+    hold_substeps: u64,
 }
 
 impl Live {
@@ -73,7 +75,9 @@ impl Live {
         };
         let settings = match (&configured, &args.monitor) {
             (Some(s), _) => Some(s.clone()),
-            (None, Some(_)) if n_c > 0 => Some(StabilitySettings::default()),
+            // Offline, the page shows the indicator by default; a real-time run gets it only
+            // when asked for (its writer thread shares the cores with the real-time threads).
+            (None, Some(_)) if n_c > 0 && !realtime => Some(StabilitySettings::default()),
             _ => None,
         };
         let wants_ramp = args.monitor.is_some() || settings.as_ref().is_some_and(|s| s.action == StabilityAction::Stop);
@@ -136,6 +140,7 @@ impl Live {
                     token: token.clone(),
                     window: 10.0,
                     hold_allowed: !realtime,
+                    stop_allowed: !realtime,
                     info,
                 })?;
                 // The operator needs both at start; printed even with --quiet.
@@ -159,6 +164,8 @@ impl Live {
             min_margin: f64::NAN,
             linger: Duration::from_secs_f64(args.monitor_linger.max(0.0)),
             acks: 0,
+            late_steps: 0,
+            hold_substeps: 0,
         })
     }
 
@@ -308,6 +315,62 @@ impl Live {
                 std::thread::sleep(due - now);
             }
         }
+    }
+
+    /// A real-time run's step record (on the writer thread, never the real-time one): feed the
+    /// indicator and push a frame. Returns the alarm message if this record raised it.
+    pub fn record_realtime(
+        &mut self,
+        r: &substep::realtime::StepRecordOwned,
+        ag: f64,
+        coupling: &[usize],
+    ) -> Option<String> {
+        let mut msg = None;
+        if let Some(st) = &mut self.stability
+            && r.u.len() == r.v.len()
+        {
+            if let Some(a) = st.push(
+                r.step,
+                &r.u,
+                &r.v,
+                ag,
+                &r.coupling_force,
+                &r.command,
+                &r.measured_displacement,
+            ) {
+                msg = Some(a.message());
+            }
+            self.max_eta = nan_max(self.max_eta, st.eta());
+            self.min_margin = -nan_max(-self.min_margin, -st.margin());
+        }
+        if r.holds > 0 {
+            self.late_steps += 1;
+            self.hold_substeps += r.holds as u64;
+        }
+        if let Some(m) = &mut self.monitor {
+            if let Some(w) = &msg {
+                m.warn(w);
+            }
+            let (st, late, holds) = (&self.stability, self.late_steps, self.hold_substeps);
+            m.push(|f| {
+                f.step = r.step as u64;
+                f.time = r.time;
+                f.n_c = coupling.len().min(substep::monitor::FRAME_DOFS);
+                copy_into(&mut f.command, &r.command);
+                copy_into(&mut f.measured, &r.measured_displacement);
+                copy_into(&mut f.force, &r.coupling_force);
+                copy_into(&mut f.error_force, &r.error_force);
+                for (k, &c) in coupling.iter().take(substep::monitor::FRAME_DOFS).enumerate() {
+                    f.test_u[k] = r.dofs.iter().position(|&d| d == c).map_or(f64::NAN, |i| r.u[i]);
+                }
+                f.late_steps = late;
+                f.hold_substeps = holds;
+                if let Some(st) = st {
+                    f.set_indicator(st);
+                }
+            });
+        }
+        msg
     }
 
     /// `summary.json`'s `stability` object.

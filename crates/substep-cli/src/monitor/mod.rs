@@ -40,6 +40,8 @@ pub struct MonitorOptions {
     pub window: f64,
     /// Whether the test can hold between steps (offline runs).
     pub hold_allowed: bool,
+    /// Whether a stop from the page reaches the test (not yet in real-time runs).
+    pub stop_allowed: bool,
     pub info: Value,
 }
 
@@ -60,6 +62,7 @@ struct Shared {
     token: String,
     window: f64,
     hold_allowed: bool,
+    stop_allowed: bool,
     info: Value,
     controls: Arc<Controls>,
     dropped: std::sync::atomic::AtomicU64,
@@ -106,6 +109,7 @@ impl Monitor {
             token: opts.token,
             window: opts.window,
             hold_allowed: opts.hold_allowed,
+            stop_allowed: opts.stop_allowed,
             info: opts.info,
             controls: controls.clone(),
             dropped: Default::default(),
@@ -395,7 +399,14 @@ fn control(stream: &mut TcpStream, shared: &Shared, body: &[u8]) -> std::io::Res
         return json_response(stream, 409, &json!({ "error": "the run has already ended" }));
     }
     match v["action"].as_str().unwrap_or("") {
-        "stop" => c.request_stop(StopRequest::Operator),
+        "stop" if shared.stop_allowed => c.request_stop(StopRequest::Operator),
+        "stop" => {
+            return json_response(
+                stream,
+                409,
+                &json!({ "error": "a stop from the page is not wired into real-time runs yet: use the safety limits or Ctrl-C" }),
+            );
+        }
         "hold" if shared.hold_allowed => c.set_hold(true),
         "hold" => {
             return json_response(
