@@ -4,14 +4,13 @@
 
 use crate::plots::{Curve, line_chart};
 use anyhow::{Context, Result};
-use rayon::prelude::*;
 use serde_json::{Map, Value, json};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use substep::benchmark::rths::{
-    Algorithm, BenchmarkConfig, Case, ControllerKind, ControllerSpec, GroundRecord, PUBLISHED_SAMPLE, RthsInput,
-    RthsResult, SubstepSpec, Transfer, run, run_perturbed,
+    Algorithm, BenchmarkConfig, Case, ControllerKind, ControllerSpec, GroundRecord, MAX_PERTURBED, PUBLISHED_SAMPLE,
+    RthsInput, RthsResult, RthsRow, SubstepSpec, Transfer, perturbed_stats, run, run_study,
 };
 use substep::transfer::servo::ServoParams;
 
@@ -67,9 +66,6 @@ pub struct RthsArgs {
     #[arg(long)]
     pub no_plots: bool,
 }
-
-/// Most perturbed runs per case.
-const MAX_PERTURBED: usize = 10_000;
 
 pub fn benchmark(args: &BenchmarkArgs) -> Result<()> {
     match &args.which {
@@ -180,14 +176,6 @@ fn setup(args: &RthsArgs) -> Result<Setup> {
     })
 }
 
-/// One row of results: a case (and k_sub), its nominal run and the perturbed runs.
-struct Row {
-    case: u8,
-    k_sub: Option<usize>,
-    nominal: RthsResult,
-    perturbed: Vec<(ServoParams, RthsResult)>,
-}
-
 fn j_json(r: &RthsResult, obj: &mut Map<String, Value>) {
     for i in 0..9 {
         obj.insert(format!("J{}", i + 1), r.criteria.map_or(Value::Null, |c| json!(c.j[i])));
@@ -203,26 +191,6 @@ fn j_json(r: &RthsResult, obj: &mut Map<String, Value>) {
     }
 }
 
-/// Mean and max of each J over the stable runs.
-fn stats(runs: &[(ServoParams, RthsResult)]) -> ([f64; 9], [f64; 9], usize, usize) {
-    let ok: Vec<[f64; 9]> = runs
-        .iter()
-        .filter(|(_, r)| r.stable)
-        .filter_map(|(_, r)| r.criteria.map(|c| c.j))
-        .collect();
-    let mut mean = [f64::NAN; 9];
-    let mut max = [f64::NAN; 9];
-    if !ok.is_empty() {
-        for i in 0..9 {
-            mean[i] = ok.iter().map(|j| j[i]).sum::<f64>() / ok.len() as f64;
-            max[i] = ok.iter().map(|j| j[i]).fold(f64::MIN, f64::max);
-        }
-    }
-    let stable = runs.iter().filter(|(_, r)| r.stable).count();
-    let under = runs.iter().filter(|(_, r)| r.stable && !r.capacity_exceeded).count();
-    (mean, max, stable, under)
-}
-
 fn num_or_null(v: f64) -> Value {
     if v.is_finite() {
         json!((v * 100.0).round() / 100.0)
@@ -231,7 +199,7 @@ fn num_or_null(v: f64) -> Value {
     }
 }
 
-fn row_json(row: &Row) -> Value {
+fn row_json(row: &RthsRow) -> Value {
     let mut obj = Map::new();
     obj.insert("case".into(), json!(row.case));
     if let Some(k) = row.k_sub {
@@ -254,7 +222,7 @@ fn row_json(row: &Row) -> Value {
                 Value::Object(o)
             })
             .collect();
-        let (mean, max, stable, under) = stats(&row.perturbed);
+        let st = perturbed_stats(&row.perturbed);
         let named = |v: &[f64; 9]| -> Value {
             Value::Object((0..9).map(|i| (format!("J{}", i + 1), num_or_null(v[i]))).collect())
         };
@@ -262,11 +230,11 @@ fn row_json(row: &Row) -> Value {
             "perturbed".into(),
             json!({
                 "n": row.perturbed.len(),
-                "stable": stable,
-                "under_capacity": under,
-                "mean": named(&mean),
-                "max": named(&max),
-                "max_force": row.perturbed.iter().map(|(_, r)| r.max_force).fold(0.0, f64::max),
+                "stable": st.stable,
+                "under_capacity": st.under_capacity,
+                "mean": named(&st.mean),
+                "max": named(&st.max),
+                "max_force": st.max_force,
                 "runs": runs,
             }),
         );
@@ -281,16 +249,7 @@ fn fmt_j(j: Option<[f64; 9]>) -> String {
     }
 }
 
-/// The published row applies to the sample controller on the nominal benchmark only.
-fn shows_published(setup: &Setup, args: &RthsArgs) -> bool {
-    setup.kind == ControllerKind::Sample
-        && args.record == "elcentro"
-        && (setup.base.intensity - 0.4).abs() < 1e-12
-        && matches!(setup.base.algorithm, Algorithm::Benchmark)
-        && matches!(setup.base.transfer, Transfer::Plant { .. })
-}
-
-fn table(setup: &Setup, rows: &[Row], args: &RthsArgs) -> String {
+fn table(setup: &Setup, rows: &[RthsRow]) -> String {
     let mut s = String::new();
     let alg = match &setup.base.algorithm {
         Algorithm::Benchmark => "benchmark loop (RK4 at 1/4096 s)".to_string(),
@@ -322,7 +281,7 @@ fn table(setup: &Setup, rows: &[Row], args: &RthsArgs) -> String {
             if r.stable { "yes" } else { "no" },
             if r.capacity_exceeded { "exceeded" } else { "ok" }
         );
-        if shows_published(setup, args) {
+        if setup.base.is_published_setting() {
             let _ = writeln!(
                 s,
                 "{:>10} {}",
@@ -331,14 +290,16 @@ fn table(setup: &Setup, rows: &[Row], args: &RthsArgs) -> String {
             );
         }
         if !row.perturbed.is_empty() {
-            let (mean, max, stable, under) = stats(&row.perturbed);
-            let _ = writeln!(s, "{:>10} {}", "pert. mean", fmt_j(Some(mean)));
+            let st = perturbed_stats(&row.perturbed);
+            let _ = writeln!(s, "{:>10} {}", "pert. mean", fmt_j(Some(st.mean)));
             let _ = writeln!(
                 s,
-                "{:>10} {}  {:>9.1}  {stable}/{n} stable, {under}/{n} under 8900 N",
+                "{:>10} {}  {:>9.1}  {}/{n} stable, {}/{n} under 8900 N",
                 "pert. max",
-                fmt_j(Some(max)),
-                row.perturbed.iter().map(|(_, r)| r.max_force).fold(0.0, f64::max),
+                fmt_j(Some(st.max)),
+                st.max_force,
+                st.stable,
+                st.under_capacity,
                 n = row.perturbed.len()
             );
         }
@@ -347,7 +308,7 @@ fn table(setup: &Setup, rows: &[Row], args: &RthsArgs) -> String {
     s
 }
 
-fn markdown(setup: &Setup, rows: &[Row], args: &RthsArgs, command: &str, plots: &[PathBuf]) -> String {
+fn markdown(setup: &Setup, rows: &[RthsRow], command: &str, plots: &[PathBuf]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# RTHS benchmark results\n\nCommand: `{command}`\n");
     let _ = writeln!(
@@ -364,7 +325,7 @@ fn markdown(setup: &Setup, rows: &[Row], args: &RthsArgs, command: &str, plots: 
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let cells = |j: Option<[f64; 9]>| match j {
         Some(j) => j.iter().map(|v| format!("{v:.2}")).collect::<Vec<_>>().join(" | "),
-        None => vec!["–"; 9].join(" | "),
+        None => ["–"; 9].join(" | "),
     };
     for row in rows {
         let r = &row.nominal;
@@ -378,7 +339,7 @@ fn markdown(setup: &Setup, rows: &[Row], args: &RthsArgs, command: &str, plots: 
             if r.stable { "yes" } else { "no" },
             if r.capacity_exceeded { "exceeded" } else { "ok" }
         );
-        if shows_published(setup, args) {
+        if setup.base.is_published_setting() {
             let _ = writeln!(
                 s,
                 "| {} published | | {} | | | |",
@@ -387,20 +348,22 @@ fn markdown(setup: &Setup, rows: &[Row], args: &RthsArgs, command: &str, plots: 
             );
         }
         if !row.perturbed.is_empty() {
-            let (mean, max, stable, under) = stats(&row.perturbed);
+            let st = perturbed_stats(&row.perturbed);
             let n = row.perturbed.len();
             let _ = writeln!(
                 s,
-                "| {} perturbed mean | | {} | | {stable}/{n} | |",
+                "| {} perturbed mean | | {} | | {}/{n} | |",
                 row.case,
-                cells(Some(mean))
+                cells(Some(st.mean)),
+                st.stable
             );
             let _ = writeln!(
                 s,
-                "| {} perturbed max | | {} | {:.1} | | {under}/{n} under 8900 N |",
+                "| {} perturbed max | | {} | {:.1} | | {}/{n} under 8900 N |",
                 row.case,
-                cells(Some(max)),
-                row.perturbed.iter().map(|(_, r)| r.max_force).fold(0.0, f64::max)
+                cells(Some(st.max)),
+                st.max_force,
+                st.under_capacity
             );
         }
     }
@@ -522,32 +485,7 @@ fn out(text: &str) {
 pub fn rths(args: &RthsArgs) -> Result<()> {
     let setup = setup(args)?;
     let t0 = std::time::Instant::now();
-    let jobs: Vec<(Case, Option<usize>)> = setup
-        .cases
-        .iter()
-        .flat_map(|c| setup.k_subs.iter().map(move |k| (*c, *k)))
-        .collect();
-    let rows: Vec<Row> = jobs
-        .par_iter()
-        .map(|&(case, k_sub)| -> Result<Row> {
-            let mut input = setup.base.clone();
-            input.case = case;
-            if let (Some(k), Algorithm::Substep(spec)) = (k_sub, &mut input.algorithm) {
-                spec.k_sub = k;
-            }
-            let nominal = run(&input)?;
-            let perturbed = match args.perturbed {
-                Some(n) => run_perturbed(&input, n, args.seed)?,
-                None => Vec::new(),
-            };
-            Ok(Row {
-                case: case.number,
-                k_sub,
-                nominal,
-                perturbed,
-            })
-        })
-        .collect::<Result<_>>()?;
+    let rows = run_study(&setup.base, &setup.cases, &setup.k_subs, args.perturbed, args.seed)?;
     let elapsed = t0.elapsed().as_secs_f64();
     if args.json {
         let mut obj = Map::new();
@@ -580,22 +518,19 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
         out(&format!("{}\n", serde_json::to_string_pretty(&Value::Object(obj))?));
         return Ok(());
     }
-    out(&table(&setup, &rows, args));
+    out(&table(&setup, &rows));
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let files = if args.no_plots {
         Vec::new()
     } else {
-        let mut base = setup.base.clone();
-        if let (Some(Some(k)), Algorithm::Substep(spec)) = (setup.k_subs.first(), &mut base.algorithm) {
-            spec.k_sub = *k;
-        }
+        let base = setup.base.with_k_sub(setup.k_subs.first().copied().flatten());
         plots(&base, &setup.cases, &args.out)?
     };
     let command = std::iter::once("substep".to_string())
         .chain(std::env::args().skip(1))
         .collect::<Vec<_>>()
         .join(" ");
-    let md = markdown(&setup, &rows, args, &command, &files);
+    let md = markdown(&setup, &rows, &command, &files);
     let path = args.out.join("benchmark.md");
     std::fs::write(&path, md).with_context(|| format!("cannot write {}", path.display()))?;
     out(&format!(

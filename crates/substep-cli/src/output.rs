@@ -1,18 +1,18 @@
 //! Output files of `substep run`: `history.csv` and `substeps.csv` (written row by row through
-//! a `BufWriter`), the statistics that go into `summary.json`, and a decimating recorder that
-//! keeps the series for the plots bounded in memory.
+//! a `BufWriter`; the rows and the summary's statistics come from [`substep::run`]), and a
+//! decimating recorder that keeps the series for the plots bounded in memory.
 //!
 //! The output directory: [`prepare_dir`] creates it and removes the files an earlier run wrote
 //! there ([`OWNED_OUTPUTS`], nothing else), so no file in it can be mistaken for this run's;
 //! small files (`summary.json`, `realtime.json`, plots) are replaced atomically
 //! ([`write_atomic`]), so a run killed at any moment leaves either the old or the new file.
 
-use serde::Serialize;
 use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use substep::substructure::{StepRecord, SubstepObserver};
+use substep::run::StepRow;
+use substep::substructure::SubstepObserver;
 
 /// Every file `substep run` (offline or `--realtime`) writes into its output directory. A run
 /// removes these (and their temporary files) before it writes anything; other files in the
@@ -120,16 +120,7 @@ pub fn prepare_dir(dir: &Path) -> substep::Result<()> {
 }
 
 /// A number for CSV: shortest round-trip form, exponent notation for very small or large values.
-pub fn num(out: &mut String, x: f64) {
-    let a = x.abs();
-    if x == 0.0 {
-        out.push('0'); // also for -0.0
-    } else if (1e-4..1e7).contains(&a) || !x.is_finite() {
-        let _ = write!(out, "{x}");
-    } else {
-        let _ = write!(out, "{x:e}");
-    }
-}
+pub use substep::run::push_number as num;
 
 fn header_group(out: &mut String, prefix: &str, n: usize) {
     for k in 1..=n {
@@ -151,54 +142,23 @@ pub struct HistoryWriter {
 }
 
 impl HistoryWriter {
-    /// Columns `t, u1..un, v1..vn, a1..an`, then for substructured runs (`n_c > 0`)
-    /// `fc, fe, fu, dm` per coupling DOF, the groups named in `extra` (each one column per
-    /// coupling DOF; their values are passed to [`row`](Self::row)) and, with a reference,
-    /// `uref1..urefn`.
-    pub fn create(path: &Path, n: usize, n_c: usize, extra: &[&str], reference: bool) -> io::Result<Self> {
+    /// A file with the header `columns` ([`substep::run::Layout::history_columns`]).
+    pub fn create(path: &Path, columns: &[String]) -> io::Result<Self> {
         let mut w = BufWriter::new(File::create(path)?);
-        let mut line = String::from("t");
-        for p in ["u", "v", "a"] {
-            header_group(&mut line, p, n);
-        }
-        for p in ["fc", "fe", "fu", "dm"] {
-            header_group(&mut line, p, n_c);
-        }
-        for p in extra {
-            header_group(&mut line, p, n_c);
-        }
-        if reference {
-            header_group(&mut line, "uref", n);
-        }
+        let mut line = columns.join(",");
         line.push('\n');
         w.write_all(line.as_bytes())?;
         Ok(Self { w, line })
     }
 
-    pub fn row(
-        &mut self,
-        t: f64,
-        kin: &substep::integrate::Kinematics,
-        coupling: Option<&StepRecord>,
-        extra: &[f64],
-        reference: Option<&[f64]>,
-    ) -> io::Result<()> {
+    pub fn row(&mut self, row: &StepRow<'_>) -> io::Result<()> {
         let line = &mut self.line;
         line.clear();
-        // Rounded to 1 ns: `i·Δt` without float noise (19.99, not 19.990000000000002).
-        num(line, crate::engineering::substep_time(t));
-        row_group(line, kin.u.as_slice());
-        row_group(line, kin.v.as_slice());
-        row_group(line, kin.a.as_slice());
-        if let Some(c) = coupling {
-            row_group(line, c.coupling_force);
-            row_group(line, c.error_force);
-            row_group(line, c.compensation_force);
-            row_group(line, c.measured_displacement);
-        }
-        row_group(line, extra);
-        if let Some(r) = reference {
-            row_group(line, r);
+        for (i, x) in row.history_values().enumerate() {
+            if i > 0 {
+                line.push(',');
+            }
+            num(line, x);
         }
         line.push('\n');
         self.w.write_all(line.as_bytes())
@@ -284,7 +244,7 @@ impl SubstepWriter {
         let _ = write!(line, "{step},{j},");
         num(
             line,
-            crate::engineering::substep_time(step.saturating_sub(1) as f64 * self.dt + j as f64 * self.dtau),
+            substep::run::round_time(step.saturating_sub(1) as f64 * self.dt + j as f64 * self.dtau),
         );
         row_group(line, command);
         row_group(line, force);
@@ -336,87 +296,6 @@ impl SubstepObserver for SubstepWriter {
     fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
         self.ramp_rows += 1;
         self.write_row(step, j, s, command, force, displacement);
-    }
-}
-
-/// A peak `max |x|` and the time it occurred.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
-pub struct Peak {
-    pub max_abs: f64,
-    pub t: f64,
-}
-
-/// Peaks of one vector quantity, per component.
-#[derive(Debug, Clone)]
-pub struct PeakTracker(pub Vec<Peak>);
-
-impl PeakTracker {
-    pub fn new(n: usize) -> Self {
-        Self(vec![Peak::default(); n])
-    }
-    pub fn update(&mut self, x: &[f64], t: f64) {
-        for (p, &v) in self.0.iter_mut().zip(x) {
-            if v.abs() > p.max_abs {
-                *p = Peak { max_abs: v.abs(), t };
-            }
-        }
-    }
-    /// Index and value of the largest peak.
-    pub fn largest(&self) -> (usize, Peak) {
-        self.0
-            .iter()
-            .copied()
-            .enumerate()
-            .fold((0, Peak::default()), |best, (k, p)| {
-                if p.max_abs > best.1.max_abs { (k, p) } else { best }
-            })
-    }
-}
-
-/// Errors of a quantity against its reference, per component.
-#[derive(Debug, Clone)]
-pub struct ErrorTracker {
-    sum_sq: Vec<f64>,
-    max_err: Vec<f64>,
-    max_ref: Vec<f64>,
-    count: usize,
-}
-
-/// RMS and peak error normalised by the reference peak.
-#[derive(Debug, Clone, Copy, Serialize)]
-pub struct ErrorStats {
-    pub rms_error: f64,
-    pub peak_error: f64,
-    pub reference_peak: f64,
-}
-
-impl ErrorTracker {
-    pub fn new(n: usize) -> Self {
-        Self {
-            sum_sq: vec![0.0; n],
-            max_err: vec![0.0; n],
-            max_ref: vec![0.0; n],
-            count: 0,
-        }
-    }
-    pub fn update(&mut self, x: &[f64], reference: &[f64]) {
-        for k in 0..self.sum_sq.len() {
-            let e = x[k] - reference[k];
-            self.sum_sq[k] += e * e;
-            self.max_err[k] = self.max_err[k].max(e.abs());
-            self.max_ref[k] = self.max_ref[k].max(reference[k].abs());
-        }
-        self.count += 1;
-    }
-    /// Normalised errors of component `k` (NaN if the reference is identically zero).
-    pub fn stats(&self, k: usize) -> ErrorStats {
-        let peak = self.max_ref[k];
-        let norm = if peak > 0.0 { peak } else { f64::NAN };
-        ErrorStats {
-            rms_error: (self.sum_sq[k] / self.count.max(1) as f64).sqrt() / norm,
-            peak_error: self.max_err[k] / norm,
-            reference_peak: peak,
-        }
     }
 }
 

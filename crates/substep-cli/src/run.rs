@@ -1,323 +1,27 @@
-//! `substep run`: load a test definition, step it, record `history.csv`, `substeps.csv`,
-//! `summary.json` and the plots, compare with the monolithic reference, print a summary.
+//! `substep run`: load a test definition, run it ([`substep::run`]: the step loop, the
+//! reference and the summary), stream `history.csv`, `substeps.csv` and `response.csv` to the
+//! output directory, draw the plots, write `summary.json` and print a summary.
 
-use crate::monitor::live::{Live, Next, STABILITY_GROUPS};
-use crate::output::{
-    Decimated, ErrorStats, ErrorTracker, HistoryWriter, Peak, PeakTracker, SubstepWriter, prepare_dir, write_atomic,
-};
+use crate::engineering::{ResponseWriter, ground_motion_outputs};
+use crate::monitor::live::{Live, LiveObserver};
+use crate::output::{Decimated, HistoryWriter, SubstepWriter, prepare_dir, write_atomic};
 use crate::plots::{Curve, Figure, Panel, line_chart, output_path};
 use crate::{DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, RunArgs};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use serde::Serialize;
-use serde_json::{Value, json};
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
-use substep::analysis::tracking::{ErrorAccumulator, TrackingMetrics};
-use substep::compensate::{PhaseLagDefinition, PhaseLagSpec};
-use substep::io::{Reference, Simulation, SubstructureDefinition, TestDefinition};
-use substep::specimen::SpecimenSpec;
+use substep::io::TestDefinition;
+use substep::run::{Layout, Run, RunObserver, RunSummary, StepRow, largest};
 use substep::substructure::ErrorForceSpec;
 use substep::substructure::SubstepObserver;
-use substep::transfer::Dynamics;
-
-/// Two sub-step observers fed in turn (the `substeps.csv` writer and the tracking metrics).
-struct Both<'a, A, B>(&'a mut A, &'a mut B);
-
-impl<A: SubstepObserver, B: SubstepObserver> SubstepObserver for Both<'_, A, B> {
-    fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
-        self.0.substep(step, j, command, force, displacement);
-        self.1.substep(step, j, command, force, displacement);
-    }
-    fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
-        self.0.phase_lag(tracking_error, correction);
-        self.1.phase_lag(tracking_error, correction);
-    }
-    #[allow(clippy::too_many_arguments)]
-    fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
-        self.0.ramp(step, j, s, command, force, displacement);
-        self.1.ramp(step, j, s, command, force, displacement);
-    }
-}
 
 /// Rows kept for the plots (decimated beyond that).
 const PLOT_ROWS: usize = 20_000;
 /// Curves per displacement / acceleration chart.
 const MAX_CURVES: usize = 4;
-
-#[derive(Debug, Serialize)]
-struct DofPeaks {
-    dof: usize,
-    u: Peak,
-    v: Peak,
-    a: Peak,
-}
-
-#[derive(Debug, Serialize)]
-struct CouplingPeaks {
-    dof: usize,
-    force: Peak,
-    error_force: Peak,
-}
-
-#[derive(Debug, Serialize)]
-struct DofError {
-    dof: usize,
-    #[serde(flatten)]
-    displacement: ErrorStats,
-    /// J-style `std(u − u_ref) / std(u_ref)` (the benchmark's J4/J6 normalisation).
-    nrms_error: f64,
-}
-
-#[derive(Debug, Serialize)]
-struct CouplingError {
-    dof: usize,
-    displacement: ErrorStats,
-    /// J-style `std(u − u_ref) / std(u_ref)` of the coupling DOF's displacement.
-    displacement_nrms_error: f64,
-    force: ErrorStats,
-}
-
-/// How well the measured displacement of a coupling DOF follows the command `d^{(j)}`, over
-/// all sub-steps (the benchmark's J1–J3 for any test).
-#[derive(Debug, Serialize)]
-struct TrackingSummary {
-    dof: usize,
-    /// Cross-correlation lag of the measured displacement behind the command [s]; null when
-    /// the command does not move. Equal to `max_delay_s` means "at least that".
-    delay_s: Option<f64>,
-    max_delay_s: f64,
-    /// `std(x_m − d) / std(d)`.
-    nrms_error: f64,
-    /// `max|x_m − d| / max|d|`.
-    peak_error: f64,
-}
-
-#[derive(Debug, Serialize)]
-struct ReferenceSummary {
-    /// `exact` (first-order hold) or `newmark`.
-    scheme: &'static str,
-    n_dofs: usize,
-    /// Largest normalised peak error over the numerical DOFs' displacements.
-    max_displacement_error: f64,
-    /// Largest normalised peak error over the coupling forces.
-    max_force_error: f64,
-    dofs: Vec<DofError>,
-    coupling: Vec<CouplingError>,
-}
-
-#[derive(Debug, Serialize)]
-struct Summary {
-    config: String,
-    scheme: String,
-    dt: f64,
-    steps: usize,
-    duration: f64,
-    n_dofs: usize,
-    ground_motion: String,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    substructure: Option<Value>,
-    completed: bool,
-    steps_done: usize,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    stopped_at_step: Option<usize>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    reason: Option<String>,
-    /// Sub-steps of the ramp to the safe position after a safety stop (in `substeps.csv`).
-    /// Who or what stopped the run: `operator` (monitor page), `stability` (indicator),
-    /// `safety_limit`, `site` (the experimental side failed), `diverged`.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    stopped_by: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    ramp_substeps: Option<usize>,
-    /// Wall time of the stepping loop including recording [s].
-    wall_time_s: f64,
-    /// Compute time of the simulation steps alone per step [µs].
-    us_per_step: f64,
-    peaks: Vec<DofPeaks>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    coupling_peaks: Option<Vec<CouplingPeaks>>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    tracking: Option<Vec<TrackingSummary>>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    reference: Option<ReferenceSummary>,
-    /// Error-force compensation by estimation: how the steps were closed.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    estimation: Option<Value>,
-    /// Phase-lag compensation: kind and guard trips.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    phase_lag: Option<Value>,
-    /// Warnings of the run (e.g. a phase-lag compensator disabled by its guard).
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    warnings: Vec<String>,
-    /// PGA and response-spectrum peak of the input.
-    input_motion: Value,
-    /// Energy balance, base shear, drifts, absolute accelerations (dense models up to 200 DOFs).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    engineering: Option<Value>,
-    /// The on-line stability indicator (docs/monitor.md), when it ran.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    stability: Option<Value>,
-    outputs: Vec<String>,
-}
-
-fn substructure_json(s: &SubstructureDefinition) -> Value {
-    let a = &s.actuator;
-    let mut actuator = match &a.dynamics {
-        Dynamics::Ideal => json!({ "kind": "ideal", "delay": a.delay }),
-        Dynamics::FirstOrder { time_constant } => {
-            json!({ "kind": "first_order", "time_constant": time_constant, "delay": a.delay })
-        }
-        Dynamics::SecondOrder { frequency_hz, zeta } => {
-            json!({ "kind": "second_order", "frequency": frequency_hz, "zeta": zeta, "delay": a.delay })
-        }
-        Dynamics::Lti(ss) => json!({
-            "kind": "lti",
-            "a": ss.a.row_iter().map(|r| r.iter().copied().collect::<Vec<f64>>()).collect::<Vec<_>>(),
-            "b": ss.b.as_slice(),
-            "c": ss.c.as_slice(),
-            "d": ss.d,
-            "delay": a.delay,
-        }),
-        Dynamics::ServoHydraulic(p) => json!({
-            "kind": "servo_hydraulic",
-            "g": p.g,
-            "a1_beta0": p.a1_beta0,
-            "beta1": p.beta1,
-            "beta2": p.beta2,
-            "a2": p.a2,
-            "a3": p.a3,
-            "csi_derivative": match p.derivative {
-                substep::transfer::servo::Derivative::Exact => "exact",
-                substep::transfer::servo::Derivative::FiniteDifference => "finite_difference",
-            },
-            "delay": a.delay,
-        }),
-    };
-    if let Some(c) = &s.lab.command_converter {
-        actuator["da_converter"] = json!({ "range": c.range(), "quantum": c.quantum() });
-    }
-    let error_force = match s.error_force {
-        ErrorForceSpec::None => json!({ "kind": "none" }),
-        ErrorForceSpec::Pid { p, i, d } => json!({ "kind": "pid", "p": p, "i": i, "d": d }),
-        ErrorForceSpec::PidResidual { p } => json!({ "kind": "pid_residual", "p": p }),
-        ErrorForceSpec::Arx { order, lambda, p0 } => {
-            json!({ "kind": "arx", "order": order, "forgetting_factor": lambda, "p0": p0 })
-        }
-    };
-    let specimens: Vec<Value> = s
-        .specimens
-        .iter()
-        .map(|sp| {
-            let dofs: Vec<usize> = sp.dofs().iter().map(|d| d + 1).collect();
-            match sp {
-                SpecimenSpec::LinearSdof {
-                    mass,
-                    stiffness,
-                    damping,
-                    ..
-                } => {
-                    json!({ "kind": sp.kind(), "dofs": dofs, "mass": mass, "stiffness": stiffness, "damping": damping })
-                }
-                SpecimenSpec::LumpedSdof {
-                    mass,
-                    stiffness,
-                    damping,
-                    ..
-                } => {
-                    json!({ "kind": sp.kind(), "dofs": dofs, "mass": mass, "stiffness": stiffness, "damping": damping })
-                }
-                _ => json!({ "kind": sp.kind(), "dofs": dofs }),
-            }
-        })
-        .collect();
-    let f = &s.force_sensors[0];
-    let d = &s.displacement_sensors[0];
-    json!({
-        "coupling_dofs": s.coupling_dofs.iter().map(|c| c + 1).collect::<Vec<_>>(),
-        "substeps": s.substeps,
-        "inner_steps": s.inner_steps,
-        "specimens": specimens,
-        "actuator": actuator,
-        "sensors": {
-            "force_noise": f.noise_std, "displacement_noise": d.noise_std,
-            "adc_bits": f.adc_bits.or(d.adc_bits), "lowpass_hz": f.lowpass_hz,
-            "force_quantum": f.converter().map(|c| c.quantum()),
-            "displacement_quantum": d.converter().map(|c| c.quantum()),
-            "generator": match f.generator {
-                substep::transfer::NoiseGenerator::ChaCha => "chacha",
-                substep::transfer::NoiseGenerator::Benchmark => "benchmark",
-            },
-        },
-        "force": if s.lab.force_from_motion { "from_motion" } else { "model" },
-        "controller": s.controller.as_ref().map(|c| json!({
-            "num": c.num(), "den": c.den(),
-            "feedforward": s.controller_feedforward.as_ref().map(|f| json!({ "num": f.num(), "den": f.den() })),
-        })),
-        "error_force": error_force,
-        "phase_lag": s.phase_lag.as_ref().map(phase_lag_json),
-    })
-}
-
-// --- Phase-lag compensation, estimation and ideal error force: records and summary ---
-
-fn phase_lag_json(p: &PhaseLagDefinition) -> Value {
-    let ramp = json!({
-        "start_substep": p.ramp.start, "ramp_substeps": p.ramp.ramp_in,
-        "fade_out": p.ramp.fade_out.map(|(b, l)| [b, l]),
-    });
-    match p.spec {
-        PhaseLagSpec::Polynomial {
-            order,
-            lead,
-            guard_factor,
-        } => {
-            json!({ "kind": "polynomial", "order": order, "lead_substeps": lead, "guard_factor": guard_factor, "ramp": ramp })
-        }
-        PhaseLagSpec::Arx(a) => json!({
-            "kind": "arx", "n_u": a.n_u, "k_lag": a.k_lag, "forgetting_factor": a.lambda,
-            "guard_factor": a.guard_factor, "ramp": ramp,
-        }),
-        PhaseLagSpec::InverseFir(f) => json!({
-            "kind": "inverse_fir", "lead_substeps": f.lead, "taps": f.taps, "order": f.order,
-            "forgetting_factor": f.lambda, "ramp": ramp,
-        }),
-    }
-}
-
-/// Extra `history.csv` groups: `fei` (ideal error force) for every virtual (local) substructured
-/// run — a remote site reports no noise-free force —, `te`, `du`
-/// (tracking error and correction of the last sub-step) with phase-lag compensation.
-fn extra_groups(def: &TestDefinition) -> Vec<&'static str> {
-    match &def.substructure {
-        None => Vec::new(),
-        Some(s) if s.remote.is_some() && s.phase_lag.is_some() => vec!["te", "du"],
-        Some(s) if s.remote.is_some() => Vec::new(),
-        Some(s) if s.phase_lag.is_some() => vec!["fei", "te", "du"],
-        Some(_) => vec!["fei"],
-    }
-}
-
-/// Fill the extra columns (group-major, one value per coupling DOF) for the current step.
-fn extra_values(sim: &Simulation, groups: &[&str], out: &mut [f64]) {
-    let Some(test) = sim.substructure_test() else { return };
-    let n_c = test.controller.n_coupling();
-    for (g, name) in groups.iter().enumerate() {
-        let cols = &mut out[g * n_c..(g + 1) * n_c];
-        let src = match *name {
-            "fei" if sim.steps_done() > 0 => test.controller.ideal_error_force(),
-            "te" => test.site.phase_lag().map(|p| p.tracking_error()),
-            "du" => test.site.phase_lag().map(|p| p.correction()),
-            _ => None,
-        };
-        match src {
-            Some(v) => cols.copy_from_slice(v),
-            None => cols
-                .iter_mut()
-                .for_each(|c| *c = if sim.steps_done() == 0 { 0.0 } else { f64::NAN }),
-        }
-    }
-}
 
 /// `compensation_force.png` (with error-force compensation: f_u and its ideal value, DOF of the
 /// first coupling) and `tracking_error.png` (with phase-lag compensation).
@@ -369,44 +73,6 @@ fn compensation_charts(def: &TestDefinition, table: &Decimated, dir: &Path) -> R
     Ok(out)
 }
 
-/// Estimation counts and phase-lag trips of a finished (or stopped) run, and the warnings.
-fn compensation_summary(sim: &Simulation) -> (Option<Value>, Option<Value>, Vec<String>) {
-    let mut warnings = Vec::new();
-    let Some(test) = sim.substructure_test() else {
-        return (None, None, warnings);
-    };
-    let estimation = test.controller.estimation_stats().map(|s| {
-        if s.guard_fallbacks() > 0 {
-            warnings.push(format!(
-                "error-force estimation fell back to the plain algorithm in {} step(s) after its warm-up \
-                 ({} ill-conditioned, {} implausible predictions)",
-                s.guard_fallbacks(),
-                s.ill_conditioned,
-                s.implausible
-            ));
-        }
-        json!({
-            "steps": s.steps, "estimated": s.estimated, "fallbacks": s.fallbacks(),
-            "warm_up": s.warm_up, "ill_conditioned": s.ill_conditioned, "implausible": s.implausible,
-        })
-    });
-    let phase_lag = test.site.phase_lag().map(|p| {
-        let trips: Vec<Value> = p
-            .trips()
-            .into_iter()
-            .map(|(i, t)| {
-                let dof = test.controller.coupling_dofs()[i] + 1;
-                warnings.push(format!(
-                    "phase-lag compensator of coupling DOF {dof} disabled by its guard: {t}"
-                ));
-                json!({ "dof": dof, "reason": t.to_string() })
-            })
-            .collect();
-        json!({ "kinds": p.kinds(), "disabled": trips })
-    });
-    (estimation, phase_lag, warnings)
-}
-
 /// DOFs (0-based) shown in the displacement and acceleration charts: coupling DOFs, the last
 /// DOF (roof), DOF 1; at most [`MAX_CURVES`].
 fn plotted_dofs(n: usize, coupling: &[usize]) -> Vec<usize> {
@@ -430,27 +96,17 @@ fn percent(ratio: f64) -> String {
     }
 }
 
-/// What is gathered between steps for `summary.json` and the plots: peaks, errors against the
-/// reference, and a decimated table `t, u(sel), a(sel), [fc, fe, dm, uref] per coupling DOF`.
-struct Recorder {
+/// The series kept for the plots: a decimated table `t, u(sel), a(sel), [fc, fe, dm, uref] per
+/// coupling DOF`.
+struct PlotRecorder {
     /// Plotted DOFs (0-based) and coupling DOFs (0-based).
     sel: Vec<usize>,
     coupling: Vec<usize>,
     table: Decimated,
     row: Vec<f64>,
-    /// Measured coupling force of the current step (zero for monolithic runs).
-    force: Vec<f64>,
-    peak_u: PeakTracker,
-    peak_v: PeakTracker,
-    peak_a: PeakTracker,
-    peak_fc: PeakTracker,
-    peak_fe: PeakTracker,
-    err_u: ErrorTracker,
-    err_f: ErrorTracker,
-    nrms_u: Vec<ErrorAccumulator>,
 }
 
-impl Recorder {
+impl PlotRecorder {
     fn new(n: usize, coupling: &[usize]) -> Self {
         let sel = plotted_dofs(n, coupling);
         let n_c = coupling.len();
@@ -460,15 +116,6 @@ impl Recorder {
             coupling: coupling.to_vec(),
             table: Decimated::new(width, PLOT_ROWS),
             row: vec![0.0; width],
-            force: vec![0.0; n_c],
-            peak_u: PeakTracker::new(n),
-            peak_v: PeakTracker::new(n),
-            peak_a: PeakTracker::new(n),
-            peak_fc: PeakTracker::new(n_c),
-            peak_fe: PeakTracker::new(n_c),
-            err_u: ErrorTracker::new(n),
-            err_f: ErrorTracker::new(n_c),
-            nrms_u: vec![ErrorAccumulator::new(); n],
         }
     }
 
@@ -483,68 +130,23 @@ impl Recorder {
         1 + 2 * self.sel.len() + 4 * k + j
     }
 
-    fn record(&mut self, sim: &Simulation, reference: Option<&Reference>) {
-        let t = sim.time();
-        let s = sim.state();
-        self.peak_u.update(s.u.as_slice(), t);
-        self.peak_v.update(s.v.as_slice(), t);
-        self.peak_a.update(s.a.as_slice(), t);
-        self.row[0] = t;
+    fn record(&mut self, r: &StepRow<'_>) {
+        self.row[0] = r.t;
         for k in 0..self.sel.len() {
             let (cu, ca) = (self.col_u(k), self.col_a(k));
-            self.row[cu] = s.u[self.sel[k]];
-            self.row[ca] = s.a[self.sel[k]];
+            self.row[cu] = r.u[self.sel[k]];
+            self.row[ca] = r.a[self.sel[k]];
         }
-        if let Some(rec) = sim.coupling() {
-            self.peak_fc.update(rec.coupling_force, t);
-            self.peak_fe.update(rec.error_force, t);
-            self.force.copy_from_slice(rec.coupling_force);
+        if let Some(rec) = &r.coupling {
             for k in 0..self.coupling.len() {
                 let c = self.col_coupling(k, 0);
                 self.row[c] = rec.coupling_force[k];
                 self.row[c + 1] = rec.error_force[k];
                 self.row[c + 2] = rec.measured_displacement[k];
-                self.row[c + 3] = reference.map_or(f64::NAN, |r| r.u()[self.coupling[k]]);
+                self.row[c + 3] = r.reference.map_or(f64::NAN, |u| u[self.coupling[k]]);
             }
-        }
-        if let Some(r) = reference {
-            self.err_u.update(s.u.as_slice(), r.u());
-            for (acc, (&u, &u_ref)) in self.nrms_u.iter_mut().zip(s.u.iter().zip(r.u())) {
-                acc.push(u, u_ref);
-            }
-            self.err_f.update(&self.force, r.coupling_force());
         }
         self.table.push(&self.row);
-    }
-
-    fn reference_summary(&self, r: &Reference) -> ReferenceSummary {
-        let dofs: Vec<DofError> = (0..self.peak_u.0.len())
-            .map(|k| DofError {
-                dof: k + 1,
-                displacement: self.err_u.stats(k),
-                nrms_error: self.nrms_u[k].nrms(),
-            })
-            .collect();
-        let coupling: Vec<CouplingError> = self
-            .coupling
-            .iter()
-            .enumerate()
-            .map(|(k, &c)| CouplingError {
-                dof: c + 1,
-                displacement: self.err_u.stats(c),
-                displacement_nrms_error: self.nrms_u[c].nrms(),
-                force: self.err_f.stats(k),
-            })
-            .collect();
-        let max = |it: &mut dyn Iterator<Item = f64>| it.filter(|x| x.is_finite()).fold(0.0, f64::max);
-        ReferenceSummary {
-            scheme: r.scheme(),
-            n_dofs: r.n_dofs(),
-            max_displacement_error: max(&mut dofs.iter().map(|d| d.displacement.peak_error)),
-            max_force_error: max(&mut coupling.iter().map(|c| c.force.peak_error)),
-            dofs,
-            coupling,
-        }
     }
 
     /// The figures of the run (`reference`: the reference's scheme name, if there is one;
@@ -718,32 +320,36 @@ impl Recorder {
         }
         charts
     }
+}
 
-    fn print(&self) {
-        let show = |name: &str, unit: &str, p: &PeakTracker| {
-            let (k, peak) = p.largest();
-            println!(
-                "  peak {name} = {} {unit} (DOF {}, t = {:.3} s)",
-                fixed(peak.max_abs),
-                k + 1,
-                peak.t
-            );
-        };
-        show("relative displacement |u|", "m", &self.peak_u);
-        show("relative velocity |u̇|", "m/s", &self.peak_v);
-        show("relative acceleration |ü|", "m/s²", &self.peak_a);
-        if !self.coupling.is_empty() {
-            let (k, p) = self.peak_fc.largest();
-            let (ke, pe) = self.peak_fe.largest();
-            println!(
-                "  peak coupling force |f_c| = {} N (DOF {}, t = {:.3} s), peak |error force| = {} N (DOF {})",
-                fixed(p.max_abs),
-                self.coupling[k] + 1,
-                p.t,
-                fixed(pe.max_abs),
-                self.coupling[ke] + 1
-            );
-        }
+/// The peaks of the summary on stdout.
+fn print_peaks(s: &RunSummary) {
+    let show = |name: &str, unit: &str, (k, peak): (usize, substep::run::Peak)| {
+        println!(
+            "  peak {name} = {} {unit} (DOF {}, t = {:.3} s)",
+            fixed(peak.max_abs),
+            k + 1,
+            peak.t
+        );
+    };
+    show("relative displacement |u|", "m", largest(s.peaks.iter().map(|p| p.u)));
+    show("relative velocity |u̇|", "m/s", largest(s.peaks.iter().map(|p| p.v)));
+    show(
+        "relative acceleration |ü|",
+        "m/s²",
+        largest(s.peaks.iter().map(|p| p.a)),
+    );
+    if let Some(c) = s.coupling_peaks.as_ref().filter(|c| !c.is_empty()) {
+        let (k, p) = largest(c.iter().map(|p| p.force));
+        let (ke, pe) = largest(c.iter().map(|p| p.error_force));
+        println!(
+            "  peak coupling force |f_c| = {} N (DOF {}, t = {:.3} s), peak |error force| = {} N (DOF {})",
+            fixed(p.max_abs),
+            c[k].dof,
+            p.t,
+            fixed(pe.max_abs),
+            c[ke].dof
+        );
     }
 }
 
@@ -833,6 +439,134 @@ impl Progress {
     }
 }
 
+/// The CLI's observer of a run: streams the rows to `history.csv`, `substeps.csv` and
+/// `response.csv`, keeps the decimated series for the plots, shows the progress and flushes
+/// the files every ~0.5 s (a killed run leaves the rows up to then). A write error stops the
+/// run; it is kept in `error`.
+struct CliObserver {
+    history: HistoryWriter,
+    history_path: PathBuf,
+    substeps: Option<SubstepWriter>,
+    substeps_path: PathBuf,
+    response: Option<ResponseWriter>,
+    plot: PlotRecorder,
+    /// t, f_u, its ideal value and the tracking error of the first coupling DOF.
+    comp_table: Decimated,
+    /// Columns of the first coupling DOF's `fei` and `te` in the extra groups.
+    fei: Option<usize>,
+    te: Option<usize>,
+    steps: usize,
+    progress: Progress,
+    last_flush: Instant,
+    error: Option<anyhow::Error>,
+}
+
+fn cannot_write(p: &Path) -> String {
+    format!("cannot write {}", p.display())
+}
+
+impl CliObserver {
+    fn create(def: &TestDefinition, layout: &Layout, dir: &Path, progress: bool) -> Result<Self> {
+        let history_path = dir.join("history.csv");
+        let history = HistoryWriter::create(&history_path, &layout.history_columns())
+            .with_context(|| cannot_write(&history_path))?;
+        let substeps_path = dir.join("substeps.csv");
+        let substeps = match layout.substeps {
+            Some(k_sub) => Some(
+                SubstepWriter::create(
+                    &substeps_path,
+                    layout.coupling_dofs.len(),
+                    layout.dt,
+                    k_sub,
+                    layout.phase_lag,
+                    layout.ramp_column,
+                )
+                .with_context(|| cannot_write(&substeps_path))?,
+            ),
+            None => None,
+        };
+        let response = match &layout.response_columns {
+            Some(columns) => Some(ResponseWriter::create(columns, dir)?),
+            None => None,
+        };
+        let n_c = layout.coupling_dofs.len();
+        let first_of = |name: &str| layout.extra_groups.iter().position(|g| *g == name).map(|g| g * n_c);
+        let steps = def.integrator.steps;
+        Ok(Self {
+            history,
+            history_path,
+            substeps,
+            substeps_path,
+            response,
+            plot: PlotRecorder::new(layout.n_dofs, &layout.coupling_dofs),
+            comp_table: Decimated::new(4, PLOT_ROWS),
+            fei: first_of("fei"),
+            te: first_of("te"),
+            steps,
+            progress: Progress::new(steps, progress),
+            last_flush: Instant::now(),
+            error: None,
+        })
+    }
+
+    fn write(&mut self, row: &StepRow<'_>) -> Result<()> {
+        self.history
+            .row(row)
+            .with_context(|| cannot_write(&self.history_path))?;
+        if let (Some(w), Some(e)) = (&mut self.response, &row.engineering) {
+            w.record(e)?;
+        }
+        self.plot.record(row);
+        if let Some(rec) = &row.coupling {
+            let first = |c: Option<usize>| c.map_or(f64::NAN, |c| row.extra[c]);
+            self.comp_table
+                .push(&[row.t, rec.compensation_force[0], first(self.fei), first(self.te)]);
+        }
+        if row.step == self.steps {
+            return Ok(());
+        }
+        self.progress.update(row.step);
+        if self.last_flush.elapsed() > Duration::from_millis(500) {
+            self.history.flush().with_context(|| cannot_write(&self.history_path))?;
+            if let Some(w) = &mut self.substeps {
+                w.flush().with_context(|| cannot_write(&self.substeps_path))?;
+            }
+            self.last_flush = Instant::now();
+        }
+        Ok(())
+    }
+}
+
+impl SubstepObserver for CliObserver {
+    fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        if let Some(w) = &mut self.substeps {
+            w.substep(step, j, command, force, displacement);
+        }
+    }
+    fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
+        if let Some(w) = &mut self.substeps {
+            w.phase_lag(tracking_error, correction);
+        }
+    }
+    fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        if let Some(w) = &mut self.substeps {
+            w.ramp(step, j, s, command, force, displacement);
+        }
+    }
+}
+
+impl RunObserver for CliObserver {
+    fn step(&mut self, row: &StepRow<'_>) -> ControlFlow<()> {
+        match self.write(row) {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                self.error = Some(e);
+                ControlFlow::Break(())
+            }
+        }
+    }
+}
+
 pub fn run(args: &RunArgs) -> Result<()> {
     let mut def = match &args.config {
         None => TestDefinition::from_toml(DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, Path::new("."))?,
@@ -861,172 +595,83 @@ pub fn run(args: &RunArgs) -> Result<()> {
             .map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string());
         return crate::realtime::run_realtime(args, &def, out_dir, name);
     }
-    let config_name = args
-        .config
-        .as_ref()
-        .map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string());
+    let config_name = def.source.clone();
     let mut live = Live::start(args, &mut def, &config_name, false)?;
-    let mut sim = Simulation::new(&def)?;
-    let mut reference = Reference::new(&def)?;
-    let n = def.model.n_dofs();
+    let def = def;
+    let mut run = Run::new(&def)?;
+    let layout = run.layout().clone();
     let steps = def.integrator.steps;
-    let coupling: Vec<usize> = def
-        .substructure
-        .as_ref()
-        .map_or_else(Vec::new, |s| s.coupling_dofs.clone());
     if !args.quiet {
         print_header(args, &def);
     }
 
     // Everything above is validation; from here on outputs are written.
-    let cannot_write = |p: &Path| format!("cannot write {}", p.display());
     // No output of an earlier run survives into this one (a stopped run must not leave an old
     // `completed: true`, nor substeps.csv or plots it did not write).
     prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
-    let history_path = out_dir.join("history.csv");
-    let mut groups = extra_groups(&def);
-    let stability_at = groups.len() * coupling.len();
-    if live.has_indicator() {
-        groups.extend(STABILITY_GROUPS);
-    }
-    let mut live_warnings: Vec<String> = Vec::new();
-    let mut extra = vec![0.0; groups.len() * coupling.len()];
-    let mut history = HistoryWriter::create(&history_path, n, coupling.len(), &groups, reference.is_some())
-        .with_context(|| cannot_write(&history_path))?;
-    let substeps_path = out_dir.join("substeps.csv");
-    let mut substep_writer = match &def.substructure {
-        Some(s) => Some(
-            SubstepWriter::create(
-                &substeps_path,
-                coupling.len(),
-                def.integrator.dt,
-                s.substeps,
-                s.phase_lag.is_some(),
-                s.limits.is_some(),
-            )
-            .with_context(|| cannot_write(&substeps_path))?,
-        ),
-        None => None,
-    };
-    let mut outputs = vec![history_path.clone()];
-    if substep_writer.is_some() {
-        outputs.push(substeps_path.clone());
-    }
-
     // Until the run ends, summary.json says it is in progress: a killed process leaves a
     // summary that does not claim completion, and history rows flushed up to the last ~0.5 s.
     let running = serde_json::json!({
         "completed": false,
         "status": "running (a run that was killed leaves this summary; history.csv holds the steps flushed so far)",
-        "config": args.config.as_ref().map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string()),
+        "config": def.source,
     });
+    let mut observer = CliObserver::create(&def, &layout, &out_dir, !args.quiet)?;
     write_atomic(&summary_path, (running.to_string() + "\n").as_bytes())
         .with_context(|| cannot_write(&summary_path))?;
-    let mut last_flush = Instant::now();
-
-    let mut recorder = Recorder::new(n, &coupling);
-    let mut engineering = crate::engineering::Engineering::create(&def, &out_dir)?;
-    let substep_length = def
-        .substructure
-        .as_ref()
-        .map_or(def.integrator.dt, |s| def.integrator.dt / s.substeps as f64);
-    let mut tracking = TrackingMetrics::new(coupling.len(), substep_length);
-    // t, f_u, its ideal value and the tracking error of the first coupling DOF.
-    let mut comp_table = Decimated::new(4, PLOT_ROWS);
-    let mut progress = Progress::new(steps, !args.quiet);
-    let mut compute = Duration::ZERO;
-    let mut failure: Option<substep::Error> = None;
-    loop {
-        let i = sim.steps_done();
-        extra_values(&sim, &groups, &mut extra);
-        let next = live.tick(
-            &mut sim,
-            reference.as_ref(),
-            &coupling,
-            &mut extra[stability_at..],
-            &mut |w| {
-                if !args.quiet {
-                    println!("  warning: {w}");
-                }
-                live_warnings.push(w);
-            },
-        );
-        history
-            .row(
-                sim.time(),
-                sim.state(),
-                sim.coupling().as_ref(),
-                &extra,
-                reference.as_ref().map(|r| r.u()),
-            )
-            .with_context(|| cannot_write(&history_path))?;
-        recorder.record(&sim, reference.as_ref());
-        if let Some(e) = &mut engineering {
-            e.record(&sim)?;
-        }
-        if let Some(rec) = sim.coupling() {
-            let first_of = |name: &str| {
-                groups
-                    .iter()
-                    .position(|g| *g == name)
-                    .map_or(f64::NAN, |g| extra[g * coupling.len()])
-            };
-            comp_table.push(&[sim.time(), rec.compensation_force[0], first_of("fei"), first_of("te")]);
-        }
-        if let Next::Abort(e) = next {
-            failure = Some(e);
-            break;
-        }
-        if i == steps {
-            break;
-        }
-        progress.update(i);
-        if last_flush.elapsed() > Duration::from_millis(500) {
-            history.flush().with_context(|| cannot_write(&history_path))?;
-            if let Some(w) = &mut substep_writer {
-                w.flush().with_context(|| cannot_write(&substeps_path))?;
-            }
-            last_flush = Instant::now();
-        }
-        let t0 = Instant::now();
-        let result = match &mut substep_writer {
-            Some(w) => sim.step(&mut Both(w, &mut Both(&mut tracking, &mut live.last))),
-            None => sim.step(&mut Both(&mut tracking, &mut live.last)),
-        };
-        compute += t0.elapsed();
-        if let Err(e) = result {
-            failure = Some(e);
-            break;
-        }
-        if let Some(r) = &mut reference {
-            r.step(sim.ground_acceleration(i + 1));
-        }
+    let mut watched = LiveObserver {
+        inner: &mut observer,
+        live: &mut live,
+        warnings: Vec::new(),
+        quiet: args.quiet,
+    };
+    let mut summary = run.execute(&mut watched, &AtomicBool::new(false));
+    let live_warnings = std::mem::take(&mut watched.warnings);
+    summary.warnings.extend(live_warnings);
+    if let Some(e) = observer.error.take() {
+        return Err(e);
     }
+    let CliObserver {
+        history,
+        history_path,
+        substeps,
+        substeps_path,
+        response,
+        plot,
+        comp_table,
+        progress,
+        ..
+    } = observer;
     progress.bar.finish_and_clear();
-    let wall = progress.started.elapsed().as_secs_f64();
     history.finish().with_context(|| cannot_write(&history_path))?;
-    let ramp_substeps = substep_writer.as_ref().map_or(0, SubstepWriter::ramp_rows);
-    if let Some(w) = substep_writer {
+    let mut outputs = vec![history_path];
+    if let Some(w) = substeps {
         w.finish().with_context(|| cannot_write(&substeps_path))?;
+        outputs.push(substeps_path);
     }
-    let done = sim.steps_done();
+    let done = summary.steps_done;
 
     let plot_opts = &def.output.plot_options;
     let plotting = def.output.plots && !args.no_plots;
-    if let Some(e) = &mut engineering {
-        outputs.push(e.finish()?);
+    let mut response = response;
+    if let Some(w) = &mut response {
+        outputs.push(w.finish()?);
     }
-    let (gm_files, gm_figures, gm_summary) = crate::engineering::ground_motion_outputs(&def, &out_dir)?;
+    let (gm_files, gm_figures) = match run.input_motion() {
+        Some(motion) => ground_motion_outputs(&def, motion, &out_dir)?,
+        None => (Vec::new(), Vec::new()),
+    };
     outputs.extend(gm_files);
-    if plotting && recorder.table.rows() > 1 {
-        let mut figures: Vec<(&str, Figure)> = recorder
-            .charts(reference.as_ref().map(|r| r.scheme()), plot_opts.window)
+    if plotting && plot.table.rows() > 1 {
+        let scheme = summary.reference.as_ref().map(|r| r.scheme);
+        let mut figures: Vec<(&str, Figure)> = plot
+            .charts(scheme, plot_opts.window)
             .into_iter()
             .map(|c| (c.file, c.figure))
             .collect();
-        if let Some(e) = &engineering {
-            figures.extend(e.figures());
+        if let (Some(w), Some(e)) = (&response, &summary.engineering) {
+            figures.extend(w.figures(e));
         }
         figures.extend(gm_figures);
         for (file, fig) in figures {
@@ -1041,110 +686,50 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
     }
     outputs.push(summary_path.clone());
-
-    let (stopped_at_step, reason) = match &failure {
-        Some(substep::Error::Diverged { step, reason, .. } | substep::Error::Stopped { step, reason, .. }) => {
-            (Some(*step), Some(reason.clone()))
-        }
-        Some(e) => (Some(done + 1), Some(e.to_string())),
-        None => (None, None),
-    };
-    let (estimation, phase_lag, mut warnings) = compensation_summary(&sim);
-    warnings.extend(live_warnings);
-    let stopped_by = match &failure {
-        Some(substep::Error::Stopped { reason, .. }) => Some(
-            live.stopped_by
-                .unwrap_or(if reason.starts_with("safety stop") {
+    summary.outputs = outputs.iter().map(|p| p.display().to_string()).collect();
+    // The monitor's additions: who stopped the run, the stability indicator.
+    let mut json: serde_json::Value = serde_json::from_str(&summary.to_json()).context("summary.json")?;
+    if let Some(obj) = json.as_object_mut() {
+        let stopped_by = match &summary.failure {
+            Some(substep::Error::Stopped { reason, .. }) => {
+                Some(live.stopped_by.unwrap_or(if reason.starts_with("safety stop") {
                     "safety_limit"
                 } else {
                     "site"
-                })
-                .to_string(),
-        ),
-        Some(substep::Error::Diverged { .. }) => Some("diverged".to_string()),
-        _ => None,
-    };
-    let summary = Summary {
-        config: match &args.config {
-            None => DEFAULT_CONFIG_NAME.to_string(),
-            Some(p) => p.display().to_string(),
-        },
-        scheme: def.integrator.name.clone(),
-        dt: def.integrator.dt,
-        steps,
-        duration: def.time(steps),
-        n_dofs: n,
-        ground_motion: def.ground_motion.description.clone(),
-        substructure: def.substructure.as_ref().map(substructure_json),
-        completed: failure.is_none(),
-        steps_done: done,
-        stopped_at_step,
-        reason,
-        stopped_by,
-        ramp_substeps: (ramp_substeps > 0).then_some(ramp_substeps),
-        wall_time_s: wall,
-        us_per_step: compute.as_secs_f64() * 1e6 / done.max(1) as f64,
-        peaks: (0..n)
-            .map(|k| DofPeaks {
-                dof: k + 1,
-                u: recorder.peak_u.0[k],
-                v: recorder.peak_v.0[k],
-                a: recorder.peak_a.0[k],
-            })
-            .collect(),
-        coupling_peaks: def.substructure.as_ref().map(|_| {
-            coupling
-                .iter()
-                .enumerate()
-                .map(|(k, &c)| CouplingPeaks {
-                    dof: c + 1,
-                    force: recorder.peak_fc.0[k],
-                    error_force: recorder.peak_fe.0[k],
-                })
-                .collect()
-        }),
-        tracking: def.substructure.as_ref().map(|_| {
-            coupling
-                .iter()
-                .enumerate()
-                .map(|(k, &c)| {
-                    let t = tracking.result(k);
-                    TrackingSummary {
-                        dof: c + 1,
-                        delay_s: t.delay,
-                        max_delay_s: t.max_delay,
-                        nrms_error: t.nrms,
-                        peak_error: t.peak,
-                    }
-                })
-                .collect()
-        }),
-        reference: reference.as_ref().map(|r| recorder.reference_summary(r)),
-        estimation,
-        phase_lag,
-        warnings,
-        input_motion: gm_summary,
-        engineering: engineering.as_ref().map(|e| e.summary()),
-        stability: live.summary(),
-        outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
-    };
-    let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
-    write_atomic(&summary_path, (json + "\n").as_bytes()).with_context(|| cannot_write(&summary_path))?;
+                }))
+            }
+            Some(substep::Error::Diverged { .. }) => Some("diverged"),
+            _ => None,
+        };
+        if let Some(s) = stopped_by {
+            obj.insert("stopped_by".into(), s.into());
+        }
+        if let Some(s) = live.summary() {
+            obj.insert("stability".into(), s);
+        }
+    }
+    let final_state = serde_json::json!({
+        "completed": json["completed"], "reason": json["reason"], "stopped_by": json["stopped_by"],
+        "steps_done": json["steps_done"], "steps": json["steps"],
+    });
+    let text = serde_json::to_string_pretty(&json).expect("summary serialises") + "\n";
+    write_atomic(&summary_path, text.as_bytes()).with_context(|| cannot_write(&summary_path))?;
 
+    let failure = summary.failure.take();
     if !args.quiet {
         match &failure {
             None => println!(
-                "  completed {done} steps in {wall:.3} s wall time ({:.2} µs per step of computation)",
-                summary.us_per_step
+                "  completed {done} steps in {:.3} s wall time ({:.2} µs per step of computation)",
+                summary.wall_time_s, summary.us_per_step
             ),
             Some(e) => println!("  STOPPED after {done} of {steps} steps: {e}"),
         }
-        if ramp_substeps > 0 {
+        if let Some(ramp_substeps) = summary.ramp_substeps {
             println!(
                 "  the {ramp_substeps} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)"
             );
         }
-        recorder.print();
+        print_peaks(&summary);
         if let Some(e) = &summary.estimation {
             println!(
                 "  error-force estimation: {} of {} steps closed with the estimate",
@@ -1169,8 +754,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 "    (largest |test − reference| over the run and all DOFs, relative to that DOF's peak |reference|)"
             );
         }
-        if let Some(e) = &engineering {
-            for line in e.lines() {
+        if let Some(e) = &summary.engineering {
+            for line in crate::engineering::lines(e) {
                 println!("{line}");
             }
         }
@@ -1183,12 +768,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
             .collect();
         println!("  outputs in {}: {}", out_dir.display(), names.join(", "));
     }
-    live.finish(
-        json!({ "completed": summary.completed, "reason": summary.reason, "stopped_by": summary.stopped_by,
-                "steps_done": done, "steps": steps }),
-        &outputs,
-        args.quiet,
-    );
+    live.finish(final_state, &outputs, args.quiet);
     match failure {
         Some(e) => Err(e.into()),
         None => Ok(()),

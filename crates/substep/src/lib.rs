@@ -20,6 +20,7 @@ pub mod io;
 pub mod model;
 pub mod monitor;
 pub mod realtime;
+pub mod run;
 
 pub use error::{Error, Result};
 pub mod analysis;
@@ -30,5 +31,6 @@ pub mod linalg;
 pub mod site;
 pub mod sparse;
 pub mod specimen;
+pub mod study;
 pub mod substructure;
 pub mod transfer;

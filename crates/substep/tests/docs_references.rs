@@ -72,12 +72,11 @@ fn section_anchors(text: &str) -> BTreeSet<String> {
     let mut out = BTreeSet::new();
     for (i, _) in text.match_indices("id=\"s") {
         let rest = &text[i + 5..];
-        if let Some(end) = rest.find('"') {
-            if let Some((sec, n)) = parse_section(&rest[..end]) {
-                if n == end {
-                    out.insert(sec);
-                }
-            }
+        if let Some(end) = rest.find('"')
+            && let Some((sec, n)) = parse_section(&rest[..end])
+            && n == end
+        {
+            out.insert(sec);
         }
     }
     out

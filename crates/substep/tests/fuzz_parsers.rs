@@ -562,7 +562,7 @@ fn ground_motion_records() {
     let old_at2 = at2.replace("NPTS=    7, DT=   .0050 SEC", "    7   .0050   NPTS, DT");
     let nonuniform = "t, a\n0.0, 0.0\n0.01, 0.5\n0.015, -0.25\n0.03, 0.0\n".to_string();
     let column = "# a_g [m/s^2]\n0.0\n0.1 0.2 -0.3\n1e-3\n".to_string();
-    let seeds = vec![short_csv, nonuniform, at2, old_at2, column];
+    let seeds = [short_csv, nonuniform, at2, old_at2, column];
     let mix = fuzz("two_column", &seeds[..2], Duration::from_secs(2), |text| {
         parse_two_column(text, "fuzz.csv")
     });

@@ -142,8 +142,8 @@ fn substep_with_ideal_transfer_approaches_the_exact_reference() {
     // Δt = h with P = 1 error-force compensation: within 0.05 % of the exact solution (the
     // benchmark's own loop: 1.76 %).
     let j = substep_ideal(1.0 / 4096.0, 1, ErrorForceSpec::Pid { p: 1.0, i: 0.0, d: 0.0 });
-    for i in 3..9 {
-        assert!(j[i] < 0.05, "J{}: {}", i + 1, j[i]);
+    for (i, ji) in j.iter().enumerate().skip(3) {
+        assert!(*ji < 0.05, "J{}: {ji}", i + 1);
     }
     // Without compensation at Δt = 4h the error falls as k_sub grows to one sub-step per sample.
     let j6: Vec<f64> = [1, 2, 4]

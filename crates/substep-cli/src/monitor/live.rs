@@ -5,10 +5,12 @@ use super::{Monitor, MonitorOptions};
 use crate::RunArgs;
 use anyhow::Result;
 use serde_json::{Value, json};
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use substep::io::{Reference, Simulation, TestDefinition};
+use substep::io::TestDefinition;
 use substep::monitor::{StabilityAction, StabilityMonitor, StabilitySettings, StopRequest, copy_into};
+use substep::run::{Layout, RunObserver, StepRow};
 use substep::substructure::{SafetyLimits, SubstepObserver};
 
 /// Ramp time used for operator and stability stops when the config sets no limits \[s\].
@@ -24,14 +26,48 @@ impl SubstepObserver for LastCommand {
     }
 }
 
-/// History groups written by the indicator (one column per coupling DOF each; `eta` and
-/// `margin` are the whole test's values, repeated).
-pub const STABILITY_GROUPS: [&str; 5] = ["eta", "margin", "k_id", "c_id", "lag_id"];
+/// A front end's observer with the monitor around it: every row and sub-step reach `inner`
+/// unchanged; the last command, the indicator, the frames and the stop request are taken on
+/// the way.
+pub struct LiveObserver<'a, O> {
+    pub inner: &'a mut O,
+    pub live: &'a mut Live,
+    pub warnings: Vec<String>,
+    pub quiet: bool,
+}
 
-pub enum Next {
-    Go,
-    /// The run must end here (a stop that cannot ramp).
-    Abort(substep::Error),
+impl<O: SubstepObserver> SubstepObserver for LiveObserver<'_, O> {
+    fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.live.last.substep(step, j, command, force, displacement);
+        self.inner.substep(step, j, command, force, displacement);
+    }
+    fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
+        self.inner.phase_lag(tracking_error, correction);
+    }
+    #[allow(clippy::too_many_arguments)]
+    fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.inner.ramp(step, j, s, command, force, displacement);
+    }
+}
+
+impl<O: RunObserver> RunObserver for LiveObserver<'_, O> {
+    fn start(&mut self, layout: &Layout) {
+        self.inner.start(layout);
+    }
+    fn step(&mut self, row: &StepRow<'_>) -> ControlFlow<()> {
+        let quiet = self.quiet;
+        let warnings = &mut self.warnings;
+        self.live.tick(row, &mut |w| {
+            if !quiet {
+                println!("  warning: {w}");
+            }
+            warnings.push(w);
+        });
+        self.inner.step(row)
+    }
+    fn stop_request(&mut self) -> Option<String> {
+        self.live.take_stop()
+    }
 }
 
 pub struct Live {
@@ -39,14 +75,14 @@ pub struct Live {
     stability: Option<StabilityMonitor>,
     action: StabilityAction,
     pub last: LastCommand,
-    n_c: usize,
     stop_sent: bool,
+    pending: Option<String>,
+    coupling: Vec<usize>,
     pub stopped_by: Option<&'static str>,
     pace: Option<(Instant, f64)>,
     max_eta: f64,
     min_margin: f64,
     linger: Duration,
-    acks: u64,
     late_steps: u64,
     hold_substeps: u64,
 }
@@ -156,56 +192,38 @@ impl Live {
             stability,
             action,
             last: LastCommand(vec![0.0; n_c]),
-            n_c,
             stop_sent: false,
+            pending: None,
+            coupling: def
+                .substructure
+                .as_ref()
+                .map_or_else(Vec::new, |s| s.coupling_dofs.clone()),
             stopped_by: None,
             pace,
             max_eta: f64::NAN,
             min_margin: f64::NAN,
             linger: Duration::from_secs_f64(args.monitor_linger.max(0.0)),
-            acks: 0,
             late_steps: 0,
             hold_substeps: 0,
         })
     }
 
-    pub fn has_indicator(&self) -> bool {
-        self.stability.is_some()
-    }
-
-    /// The state after step `sim.steps_done()` is about to be recorded: feed the indicator,
-    /// fill its history columns (`cols`: [`STABILITY_GROUPS`] × n_c), push a frame, then obey
-    /// the controls and the pace. Returns warnings raised now through `warn`.
-    pub fn tick(
-        &mut self,
-        sim: &mut Simulation,
-        reference: Option<&Reference>,
-        coupling: &[usize],
-        cols: &mut [f64],
-        warn: &mut dyn FnMut(String),
-    ) -> Next {
-        let i = sim.steps_done();
+    /// The row of step `row.step` (the run API's [`StepRow`]): feed the indicator, push a
+    /// frame, then obey the controls and the pace. A stop to ask for is kept for
+    /// [`RunObserver::stop_request`]; warnings go to `warn`.
+    pub fn tick(&mut self, row: &StepRow<'_>, warn: &mut dyn FnMut(String)) {
+        let i = row.step;
         let mut alarm = None;
-        if let (Some(st), Some(rec)) = (&mut self.stability, sim.coupling()) {
-            let s = sim.state();
+        if let (Some(st), Some(rec)) = (&mut self.stability, &row.coupling) {
             alarm = st.push(
                 i,
-                s.u.as_slice(),
-                s.v.as_slice(),
-                sim.ground_acceleration(i),
+                row.u,
+                row.v,
+                0.0,
                 rec.coupling_force,
                 &self.last.0,
                 rec.measured_displacement,
             );
-            let n = self.n_c;
-            if cols.len() == STABILITY_GROUPS.len() * n {
-                cols[..n].fill(st.eta());
-                cols[n..2 * n].fill(st.margin());
-                let id = st.identification();
-                cols[2 * n..3 * n].copy_from_slice(id.stiffness());
-                cols[3 * n..4 * n].copy_from_slice(id.damping());
-                cols[4 * n..].copy_from_slice(id.lag());
-            }
             self.max_eta = nan_max(self.max_eta, st.eta());
             self.min_margin = -nan_max(-self.min_margin, -st.margin());
         }
@@ -215,67 +233,52 @@ impl Live {
                 m.warn(&msg);
             }
             warn(msg.clone());
-            if self.action == StabilityAction::Stop
-                && let Some(m) = &self.monitor
-            {
-                m.controls.request_stop(StopRequest::Stability);
-            } else if self.action == StabilityAction::Stop {
+            if self.action == StabilityAction::Stop && !self.stop_sent {
                 self.stopped_by = Some("stability");
-                return self.stop(sim, format!("stability stop: {msg}"));
+                self.stop_sent = true;
+                self.pending = Some(format!("stability stop: {msg}"));
             }
         }
-        let Some(m) = &mut self.monitor else {
-            self.pace(sim);
-            return Next::Go;
-        };
-        if let Some(rec) = sim.coupling() {
-            let st = &self.stability;
-            let s = sim.state();
-            let last = &self.last.0;
-            m.push(|f| {
-                f.step = i as u64;
-                f.time = sim.time();
-                f.n_c = coupling.len().min(substep::monitor::FRAME_DOFS);
-                copy_into(&mut f.command, last);
-                copy_into(&mut f.measured, rec.measured_displacement);
-                copy_into(&mut f.force, rec.coupling_force);
-                copy_into(&mut f.error_force, rec.error_force);
-                for (k, &c) in coupling.iter().take(substep::monitor::FRAME_DOFS).enumerate() {
-                    f.test_u[k] = s.u[c];
-                    f.reference_u[k] = reference.map_or(f64::NAN, |r| r.u()[c]);
-                }
-                if let Some(st) = st {
-                    f.set_indicator(st);
-                }
-            });
+        let t = row.t;
+        if let Some(m) = &mut self.monitor {
+            if let Some(rec) = &row.coupling {
+                let st = &self.stability;
+                let last = &self.last.0;
+                let coupling = &self.coupling;
+                m.push(|f| {
+                    f.step = i as u64;
+                    f.time = t;
+                    f.n_c = coupling.len().min(substep::monitor::FRAME_DOFS);
+                    copy_into(&mut f.command, last);
+                    copy_into(&mut f.measured, rec.measured_displacement);
+                    copy_into(&mut f.force, rec.coupling_force);
+                    copy_into(&mut f.error_force, rec.error_force);
+                    for (k, &c) in coupling.iter().take(substep::monitor::FRAME_DOFS).enumerate() {
+                        f.test_u[k] = row.u[c];
+                        f.reference_u[k] = row.reference.map_or(f64::NAN, |r| r[c]);
+                    }
+                    if let Some(st) = st {
+                        f.set_indicator(st);
+                    }
+                });
+            }
+            if let Some(who) = m.controls.stop_requested()
+                && !self.stop_sent
+            {
+                self.stop_sent = true;
+                self.pending = Some(match who {
+                    StopRequest::Operator => {
+                        self.stopped_by = Some("operator");
+                        "operator stop from the monitor page (token holder)".to_string()
+                    }
+                    StopRequest::Stability => {
+                        self.stopped_by = Some("stability");
+                        "stability stop".to_string()
+                    }
+                });
+            }
         }
-        let acks = m.controls.acknowledgements();
-        if acks != self.acks {
-            self.acks = acks;
-        }
-        if let Some(who) = m.controls.stop_requested()
-            && !self.stop_sent
-        {
-            let reason = match who {
-                StopRequest::Operator => {
-                    self.stopped_by = Some("operator");
-                    "operator stop from the monitor page (token holder)".to_string()
-                }
-                StopRequest::Stability => {
-                    self.stopped_by = Some("stability");
-                    format!(
-                        "stability stop: {}",
-                        self.stability
-                            .as_ref()
-                            .and_then(|s| s.alarm())
-                            .map_or_else(String::new, |a| a.message())
-                    )
-                }
-            };
-            return self.stop(sim, reason);
-        }
-        // Hold between steps until resumed or stopped (bounded by the operator's presence: a
-        // stop also ends it).
+        // Hold between steps until resumed or stopped.
         let mut held = false;
         while let Some(m) = &self.monitor
             && m.controls.held()
@@ -286,30 +289,21 @@ impl Live {
         }
         if held && let Some((t0, p)) = &mut self.pace {
             // Resume the pace from here, not by racing to catch up.
-            *t0 = Instant::now() - Duration::from_secs_f64(sim.time() / *p);
+            *t0 = Instant::now() - Duration::from_secs_f64(t / *p);
         }
-        self.pace(sim);
-        Next::Go
+        self.pace(t);
     }
 
-    fn stop(&mut self, sim: &mut Simulation, reason: String) -> Next {
-        self.stop_sent = true;
-        if sim.request_stop(&reason) {
-            Next::Go
-        } else {
-            Next::Abort(substep::Error::Stopped {
-                step: sim.steps_done(),
-                time: sim.time(),
-                reason: format!("{reason} (between steps: this run has no ramp to the safe position)"),
-            })
-        }
+    /// The stop to hand to the run loop, once.
+    pub fn take_stop(&mut self) -> Option<String> {
+        self.pending.take()
     }
 
-    fn pace(&self, sim: &Simulation) {
+    fn pace(&self, t: f64) {
         if let Some((t0, p)) = self.pace
             && p > 0.0
         {
-            let due = t0 + Duration::from_secs_f64(sim.time() / p);
+            let due = t0 + Duration::from_secs_f64(t / p);
             let now = Instant::now();
             if due > now {
                 std::thread::sleep(due - now);

@@ -90,6 +90,8 @@ impl EnergyBalance {
     /// `ag` and the coupling force `fc` on every DOF (zeros for a monolithic run). The first
     /// call sets the initial state; its `E_K + E_S` counts as energy put in
     /// ([`Self::initial`]), so a free vibration from a displaced state balances too.
+    // Several arrays of one length walked together: the index form reads like the formula.
+    #[allow(clippy::needless_range_loop)]
     pub fn push(&mut self, u: &[f64], v: &[f64], ag: f64, fc: &[f64]) -> Result<()> {
         let n = self.u.len();
         if u.len() != n || v.len() != n || fc.len() != n {

@@ -39,6 +39,8 @@ pub fn std_dev(x: &[f64]) -> f64 {
 }
 
 /// `std(x − r) / std(r)`.
+// NaN-safe checks: `!(x > 0.0)` also refuses NaN, which `x <= 0.0` would let through.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 pub fn nrms_error(x: &[f64], r: &[f64]) -> Result<f64> {
     check(x, r)?;
     let sr = std_dev(r);
@@ -52,6 +54,8 @@ pub fn nrms_error(x: &[f64], r: &[f64]) -> Result<f64> {
 }
 
 /// `max|x − r| / max|r|`.
+// NaN-safe checks: `!(x > 0.0)` also refuses NaN, which `x <= 0.0` would let through.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 pub fn peak_error(x: &[f64], r: &[f64]) -> Result<f64> {
     check(x, r)?;
     let pr = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));

@@ -5,6 +5,7 @@
 //! disagree. On top of it: spectral radius and stability class, stability maps over parameter
 //! grids, and the discrete frequency response with amplitude and period errors.
 
+pub mod accuracy;
 pub mod amplification;
 pub mod energy;
 pub mod frequency;
@@ -15,6 +16,7 @@ pub mod stability;
 pub mod storey;
 pub mod tmd_case;
 pub mod tracking;
+pub mod verification;
 pub mod verify;
 
 pub use amplification::{FrequencyResponse, Stability, StepMap};

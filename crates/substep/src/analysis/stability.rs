@@ -1,7 +1,8 @@
 //! Stability maps: `ρ` over a grid of `Ω` and one other parameter, for several `k_sub`.
 
-use super::{AnalysisCase, Parameter};
+use super::{AnalysisCase, Parameter, Stability};
 use crate::error::{Error, Result};
+use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 /// One grid point of a map.
@@ -114,4 +115,93 @@ pub fn critical_omega(row: &[(f64, f64)], tol: f64) -> Option<f64> {
         prev = Some((w, rho));
     }
     None
+}
+
+/// The map of one `k_sub` with its stability limits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KSubMap {
+    pub k_sub: usize,
+    /// `ρ[(iv, iw)]` at `(values[iv], omegas[iw])`.
+    pub rho: DMatrix<f64>,
+    /// Per value (row): the critical `Ω` of [`critical_omega`], `None` if the row is stable.
+    pub critical: Vec<Option<f64>>,
+    /// Share of the grid that is stable or limited (`Stability::classify` with the study's
+    /// tolerance).
+    pub stable_share: f64,
+}
+
+/// A stability map over `k_subs × values × omegas` with its limits ([`stability_study`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StabilityStudy {
+    /// The y axis: the varied parameter and its values.
+    pub param: Parameter,
+    pub values: Vec<f64>,
+    /// The x axis, `Ω = ωΔt`.
+    pub omegas: Vec<f64>,
+    /// Band around `ρ = 1` taken as limited stability.
+    pub tol: f64,
+    /// Every grid point, ordered by `k_sub`, then value, then `Ω` (as [`stability_map`]).
+    pub points: Vec<MapPoint>,
+    /// One map per `k_sub`, in the order given.
+    pub maps: Vec<KSubMap>,
+}
+
+/// [`stability_map`] on the grid, then per `k_sub` the `ρ` matrix, the critical `Ω` of each row
+/// (band `tol`) and the stable share. `progress` as for [`stability_map`].
+///
+/// ```
+/// use substep::analysis::stability::{linear_grid, stability_study};
+/// use substep::analysis::{AnalysisCase, Parameter};
+/// let omegas = linear_grid("Omega", 0.1, 3.0, 8).unwrap();
+/// let values = linear_grid("zeta_s", 0.0, 0.5, 3).unwrap();
+/// let s = stability_study(&AnalysisCase::typical_tmd(), &[1, 2], &omegas, Parameter::ZetaS, &values, 1e-9, &|_| {})
+///     .unwrap();
+/// assert_eq!(s.maps.len(), 2);
+/// assert_eq!(s.maps[0].rho.shape(), (3, 8));
+/// assert!(s.maps.iter().all(|m| (0.0..=1.0).contains(&m.stable_share)));
+/// ```
+pub fn stability_study(
+    base: &AnalysisCase,
+    k_subs: &[usize],
+    omegas: &[f64],
+    param: Parameter,
+    values: &[f64],
+    tol: f64,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<StabilityStudy> {
+    let points = stability_map(base, k_subs, omegas, param, values, progress)?;
+    let (nv, nw) = (values.len(), omegas.len());
+    let maps = k_subs
+        .iter()
+        .enumerate()
+        .map(|(ik, &k)| {
+            // `stability_map` keeps the order k_sub, value, Ω.
+            let block = &points[ik * nv * nw..(ik + 1) * nv * nw];
+            let rho = DMatrix::from_fn(nv, nw, |iv, iw| block[iv * nw + iw].rho);
+            let critical = (0..nv)
+                .map(|iv| {
+                    let row: Vec<(f64, f64)> = omegas.iter().copied().zip(rho.row(iv).iter().copied()).collect();
+                    critical_omega(&row, tol)
+                })
+                .collect();
+            let stable = block
+                .iter()
+                .filter(|p| Stability::classify(p.rho, tol) != Stability::Unstable)
+                .count();
+            KSubMap {
+                k_sub: k,
+                rho,
+                critical,
+                stable_share: stable as f64 / (nw * nv) as f64,
+            }
+        })
+        .collect();
+    Ok(StabilityStudy {
+        param,
+        values: values.to_vec(),
+        omegas: omegas.to_vec(),
+        tol,
+        points,
+        maps,
+    })
 }

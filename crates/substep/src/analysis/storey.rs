@@ -65,6 +65,8 @@ impl StoreyResponse {
     }
 
     /// Update every quantity from one state (`u`, `u̇`, `ü` relative, `a_g` [m/s²]).
+    // Several arrays of one length walked together: the index form reads like the formula.
+    #[allow(clippy::needless_range_loop)]
     pub fn update(&mut self, u: &[f64], v: &[f64], a: &[f64], ag: f64) -> Result<()> {
         let n = self.model.n_dofs();
         if u.len() != n || v.len() != n || a.len() != n {

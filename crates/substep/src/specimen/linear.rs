@@ -77,6 +77,8 @@ impl LinearSpecimen {
         Self::build("linear_mdof", n_coupling, mass, damping, stiffness, influence)
     }
 
+    // NaN-safe checks: `!(x > 0.0)` also refuses NaN, which `x <= 0.0` would let through.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn build(
         kind: &'static str,
         n_c: usize,

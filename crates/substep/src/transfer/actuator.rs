@@ -206,6 +206,8 @@ impl ActuatorSpec {
         self.build_linear(dt_inner, a, b)
     }
 
+    // NaN-safe checks: `!(x > 0.0)` also refuses NaN, which `x <= 0.0` would let through.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn build_linear(&self, dt_inner: f64, a: DMatrix<f64>, b: DMatrix<f64>) -> Result<Actuator> {
         let n = a.nrows();
         if self.delay > 0.0 {

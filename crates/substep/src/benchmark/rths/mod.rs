@@ -53,6 +53,7 @@ mod config;
 mod controller;
 mod perturb;
 mod run;
+mod study;
 
 pub use case::{Case, ELCENTRO_CSV, GroundRecord, MAX_DURATION, Specimen, numerical_matrices};
 pub use config::{BenchmarkConfig, CONFIG_KEYS};
@@ -62,6 +63,7 @@ pub use run::{
     Algorithm, Criteria, DIVERGENCE_LIMIT, FORCE_CAPACITY, MAX_LAG, NOISE_POWER_F, NOISE_POWER_X, RthsInput,
     RthsResult, RunHistory, SAMPLE_TIME, SubstepSpec, Transfer, UNSTABLE_TRACKING_PERCENT, reference, run,
 };
+pub use study::{MAX_PERTURBED, PerturbedStats, RthsRow, perturbed_stats, run_study};
 
 /// Published results (Silva et al. 2020, table 3): the sample controller, El Centro at 0.4,
 /// nominal plant; rows cases 1–4, columns J1 \[ms\], J2…J9 [%].

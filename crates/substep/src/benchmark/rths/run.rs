@@ -467,7 +467,7 @@ pub fn run(input: &RthsInput) -> Result<RthsResult> {
         capacity_exceeded: max_force >= FORCE_CAPACITY,
         diverged_at,
         guard_trip: controller.guard_trip(),
-        history: input.keep_history.then(|| RunHistory {
+        history: input.keep_history.then_some(RunHistory {
             h,
             desired,
             measured,
@@ -537,7 +537,7 @@ fn run_substep(
                 // Force at the end of sub-step s − 1: the latest sample at or before s·Δτ.
                 let m = (s * per_step) / k_sub;
                 sc.feedback(&[-f_meas[m]]);
-                if s % k_sub == 0 {
+                if s.is_multiple_of(k_sub) {
                     sc.finish_step();
                     steps_done += 1;
                     let u = &sc.state().u;
@@ -549,7 +549,7 @@ fn run_substep(
                     }
                 }
             }
-            if s % k_sub == 0 {
+            if s.is_multiple_of(k_sub) {
                 load_at((s / k_sub + 1) * per_step, &mut load);
                 sc.begin_step(&load);
             }

@@ -51,7 +51,7 @@ impl PlotOptions {
     }
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawOutput {
     pub(crate) dir: Option<String>,
@@ -138,14 +138,5 @@ impl RawPlots {
                 figures: t.figures.clone(),
             },
         ))
-    }
-}
-
-impl Default for RawOutput {
-    fn default() -> Self {
-        Self {
-            dir: None,
-            plots: RawPlots::default(),
-        }
     }
 }

@@ -455,6 +455,8 @@ impl RawStructure {
 /// on 50 kg, or a mass of 1e-300 kg): every DOF of the exact scheme or of the exact reference at
 /// `dt`, specimen internal DOFs and actuator dynamics at the inner step, with the key of the
 /// term that dominates.
+// NaN-safe checks: `!(x > 0.0)` also refuses NaN, which `x <= 0.0` would let through.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 pub(crate) fn check_exact_range(
     raw: &RawStructure,
     model: &Model,

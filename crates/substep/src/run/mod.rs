@@ -1,0 +1,569 @@
+//! Running a [`TestDefinition`] to the end and recording it: the step loop with the monolithic
+//! reference alongside, the per-step rows a front end stores ([`StepRow`]: what `history.csv`
+//! and `response.csv` hold), every sub-step (through [`SubstepObserver`]), and the summary
+//! ([`RunSummary`], serialised as `summary.json`: peaks, errors against the reference, tracking
+//! metrics, compensation statistics, energy balance).
+//!
+//! Front ends differ only in their [`RunObserver`]: the CLI streams rows to CSV files (so a
+//! 10⁵-DOF run never holds its history in memory), [`HistoryTable`] collects them in memory
+//! (the Python package). The loop does no I/O itself; the observer decides, and can stop a run
+//! between steps, as can the `cancel` flag (e.g. set by a Ctrl-C handler).
+//!
+//! ```no_run
+//! use std::sync::atomic::AtomicBool;
+//! use substep::io::TestDefinition;
+//! use substep::run::{HistoryTable, execute};
+//! let def = TestDefinition::from_file("examples/default.toml")?;
+//! let mut table = HistoryTable::default();
+//! let summary = execute(&def, &mut table, &AtomicBool::new(false))?;
+//! println!("{} steps, u1 at the end = {}", summary.steps_done, table.history.column("u1").unwrap().last().unwrap());
+//! # Ok::<(), substep::Error>(())
+//! ```
+
+mod engineering;
+mod stats;
+mod summary;
+mod table;
+
+pub use engineering::{
+    EnergySummary, EngineeringRecorder, EngineeringRow, EngineeringSummary, InputMotion, InputMotionSummary,
+    MAX_DOFS as ENGINEERING_MAX_DOFS, PeakAt, SPECTRUM_ZETA, SpectrumPeak, StoreyPeak,
+};
+pub use stats::{ErrorStats, ErrorTracker, Peak, PeakTracker, largest};
+pub use summary::{CouplingError, CouplingPeaks, DofError, DofPeaks, ReferenceSummary, RunSummary, TrackingSummary};
+pub use table::{HistoryTable, Table, push_number};
+
+use crate::analysis::tracking::{ErrorAccumulator, TrackingMetrics};
+use crate::error::{Error, Result};
+use crate::io::{Reference, Simulation, TestDefinition};
+use crate::substructure::{StepRecord, SubstepObserver};
+use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// A time rounded to 1 ns, as the CSV files hold it: `i·Δt` without float noise (`19.99`, not
+/// `19.990000000000002`).
+pub fn round_time(t: f64) -> f64 {
+    (t * 1e9).round() / 1e9
+}
+
+/// What a run records: the columns of its history, sub-step and engineering rows.
+#[derive(Debug, Clone)]
+pub struct Layout {
+    pub n_dofs: usize,
+    /// Coupling DOFs (0-based; empty for a monolithic run).
+    pub coupling_dofs: Vec<usize>,
+    /// Extra history groups, one column per coupling DOF each: `fei` (ideal error force), `te`,
+    /// `du` (tracking error and correction of the last sub-step, with phase-lag compensation).
+    pub extra_groups: Vec<&'static str>,
+    /// The history has the reference's displacements `uref1..urefn`.
+    pub reference: bool,
+    pub dt: f64,
+    /// `k_sub` of a substructured run, `None` for a monolithic one (no sub-step rows).
+    pub substeps: Option<usize>,
+    /// Sub-step rows carry `te`, `du` (phase-lag compensation).
+    pub phase_lag: bool,
+    /// Sub-step rows end with a `ramp` column (runs with safety limits).
+    pub ramp_column: bool,
+    /// Columns of the engineering rows (`response.csv`), when they are recorded.
+    pub response_columns: Option<Vec<String>>,
+}
+
+fn group(names: &mut Vec<String>, prefix: &str, n: usize) {
+    names.extend((1..=n).map(|k| format!("{prefix}{k}")));
+}
+
+impl Layout {
+    /// The columns of `history.csv`: `t, u1..un, v1..vn, a1..an`, for substructured runs `fc,
+    /// fe, fu, dm` and the extra groups per coupling DOF, with a reference `uref1..urefn`.
+    pub fn history_columns(&self) -> Vec<String> {
+        let n_c = self.coupling_dofs.len();
+        let mut c = vec!["t".to_string()];
+        for p in ["u", "v", "a"] {
+            group(&mut c, p, self.n_dofs);
+        }
+        for p in ["fc", "fe", "fu", "dm"] {
+            group(&mut c, p, n_c);
+        }
+        for p in &self.extra_groups {
+            group(&mut c, p, n_c);
+        }
+        if self.reference {
+            group(&mut c, "uref", self.n_dofs);
+        }
+        c
+    }
+
+    /// The columns of `substeps.csv` (`None` for a monolithic run): `step, substep, t, cmd..,
+    /// fm.., dm..`, with phase-lag compensation `te.., du..`, with safety limits `ramp`.
+    pub fn substep_columns(&self) -> Option<Vec<String>> {
+        self.substeps?;
+        let n_c = self.coupling_dofs.len();
+        let mut c: Vec<String> = ["step", "substep", "t"].iter().map(|s| s.to_string()).collect();
+        for p in ["cmd", "fm", "dm"] {
+            group(&mut c, p, n_c);
+        }
+        if self.phase_lag {
+            for p in ["te", "du"] {
+                group(&mut c, p, n_c);
+            }
+        }
+        if self.ramp_column {
+            c.push("ramp".into());
+        }
+        Some(c)
+    }
+}
+
+/// The state after one step (step 0: the initial state), borrowed from the run.
+pub struct StepRow<'a> {
+    pub step: usize,
+    /// `step · Δt` \[s\] (not rounded).
+    pub t: f64,
+    pub u: &'a [f64],
+    pub v: &'a [f64],
+    pub a: &'a [f64],
+    /// Coupling data of a substructured run.
+    pub coupling: Option<StepRecord<'a>>,
+    /// The extra groups of [`Layout::extra_groups`], group-major.
+    pub extra: &'a [f64],
+    /// Displacements of the reference, when there is one.
+    pub reference: Option<&'a [f64]>,
+    /// The engineering row, when it is recorded.
+    pub engineering: Option<EngineeringRow<'a>>,
+}
+
+impl StepRow<'_> {
+    /// The values in the order of [`Layout::history_columns`] (time rounded by [`round_time`]).
+    pub fn history_values(&self) -> impl Iterator<Item = f64> + '_ {
+        let c = self.coupling.as_ref();
+        std::iter::once(round_time(self.t))
+            .chain(self.u.iter().copied())
+            .chain(self.v.iter().copied())
+            .chain(self.a.iter().copied())
+            .chain(c.into_iter().flat_map(|c| {
+                c.coupling_force
+                    .iter()
+                    .chain(c.error_force)
+                    .chain(c.compensation_force)
+                    .chain(c.measured_displacement)
+                    .copied()
+            }))
+            .chain(self.extra.iter().copied())
+            .chain(self.reference.into_iter().flatten().copied())
+    }
+}
+
+/// What a front end does with a run: it sees every step's row (from step 0) and, as a
+/// [`SubstepObserver`], every sub-step. Returning `ControlFlow::Break` from [`step`](Self::step)
+/// stops the run before the next step (the summary then says it was cancelled).
+pub trait RunObserver: SubstepObserver {
+    /// Before the first row: the columns of the run.
+    fn start(&mut self, _layout: &Layout) {}
+    fn step(&mut self, row: &StepRow<'_>) -> ControlFlow<()>;
+    /// A controlled stop the front end asks for after [`step`](Self::step) (an operator on the
+    /// monitor page, the stability indicator): the loop hands `reason` to the test's safety
+    /// ramp ([`Simulation::request_stop`]), so the next step ramps the actuators to the safe
+    /// position and the run ends `Stopped` with `reason`. Default: never.
+    fn stop_request(&mut self) -> Option<String> {
+        None
+    }
+}
+
+/// Two sub-step observers fed in turn (the front end's and the tracking metrics).
+struct Both<'a, A: ?Sized, B>(&'a mut A, &'a mut B);
+
+impl<A: SubstepObserver + ?Sized, B: SubstepObserver> SubstepObserver for Both<'_, A, B> {
+    fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.0.substep(step, j, command, force, displacement);
+        self.1.substep(step, j, command, force, displacement);
+    }
+    fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
+        self.0.phase_lag(tracking_error, correction);
+        self.1.phase_lag(tracking_error, correction);
+    }
+    #[allow(clippy::too_many_arguments)]
+    fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.0.ramp(step, j, s, command, force, displacement);
+        self.1.ramp(step, j, s, command, force, displacement);
+    }
+}
+
+/// What the loop itself gathers from the sub-steps: the tracking metrics and the ramp
+/// sub-steps after a safety stop.
+struct SubstepMetrics {
+    tracking: TrackingMetrics,
+    ramp: usize,
+}
+
+impl SubstepObserver for SubstepMetrics {
+    fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.tracking.substep(step, j, command, force, displacement);
+    }
+    fn ramp(&mut self, _step: usize, _j: usize, _s: usize, _command: &[f64], _force: &[f64], _displacement: &[f64]) {
+        self.ramp += 1;
+    }
+}
+
+/// Extra history groups: `fei` (ideal error force) for every virtual (local) substructured run
+/// — a remote site reports no noise-free force —, `te`, `du` (tracking error and correction of
+/// the last sub-step) with phase-lag compensation.
+fn extra_groups(def: &TestDefinition) -> Vec<&'static str> {
+    match &def.substructure {
+        None => Vec::new(),
+        Some(s) if s.remote.is_some() && s.phase_lag.is_some() => vec!["te", "du"],
+        Some(s) if s.remote.is_some() => Vec::new(),
+        Some(s) if s.phase_lag.is_some() => vec!["fei", "te", "du"],
+        Some(_) => vec!["fei"],
+    }
+}
+
+/// Fill the extra columns (group-major, one value per coupling DOF) for the current step.
+fn extra_values(sim: &Simulation, groups: &[&str], out: &mut [f64]) {
+    let Some(test) = sim.substructure_test() else { return };
+    let n_c = test.controller.n_coupling();
+    for (g, name) in groups.iter().enumerate() {
+        let cols = &mut out[g * n_c..(g + 1) * n_c];
+        let src = match *name {
+            "fei" if sim.steps_done() > 0 => test.controller.ideal_error_force(),
+            "te" => test.site.phase_lag().map(|p| p.tracking_error()),
+            "du" => test.site.phase_lag().map(|p| p.correction()),
+            _ => None,
+        };
+        match src {
+            Some(v) => cols.copy_from_slice(v),
+            None => cols
+                .iter_mut()
+                .for_each(|c| *c = if sim.steps_done() == 0 { 0.0 } else { f64::NAN }),
+        }
+    }
+}
+
+/// Peaks and errors against the reference, gathered between steps for the summary.
+struct SummaryRecorder {
+    coupling: Vec<usize>,
+    /// Measured coupling force of the current step.
+    force: Vec<f64>,
+    peak_u: PeakTracker,
+    peak_v: PeakTracker,
+    peak_a: PeakTracker,
+    peak_fc: PeakTracker,
+    peak_fe: PeakTracker,
+    err_u: ErrorTracker,
+    err_f: ErrorTracker,
+    nrms_u: Vec<ErrorAccumulator>,
+}
+
+impl SummaryRecorder {
+    fn new(n: usize, coupling: &[usize]) -> Self {
+        let n_c = coupling.len();
+        Self {
+            coupling: coupling.to_vec(),
+            force: vec![0.0; n_c],
+            peak_u: PeakTracker::new(n),
+            peak_v: PeakTracker::new(n),
+            peak_a: PeakTracker::new(n),
+            peak_fc: PeakTracker::new(n_c),
+            peak_fe: PeakTracker::new(n_c),
+            err_u: ErrorTracker::new(n),
+            err_f: ErrorTracker::new(n_c),
+            nrms_u: vec![ErrorAccumulator::new(); n],
+        }
+    }
+
+    fn record(&mut self, sim: &Simulation, reference: Option<&Reference>) {
+        let t = sim.time();
+        let s = sim.state();
+        self.peak_u.update(s.u.as_slice(), t);
+        self.peak_v.update(s.v.as_slice(), t);
+        self.peak_a.update(s.a.as_slice(), t);
+        if let Some(rec) = sim.coupling() {
+            self.peak_fc.update(rec.coupling_force, t);
+            self.peak_fe.update(rec.error_force, t);
+            self.force.copy_from_slice(rec.coupling_force);
+        }
+        if let Some(r) = reference {
+            self.err_u.update(s.u.as_slice(), r.u());
+            for (acc, (&u, &u_ref)) in self.nrms_u.iter_mut().zip(s.u.iter().zip(r.u())) {
+                acc.push(u, u_ref);
+            }
+            self.err_f.update(&self.force, r.coupling_force());
+        }
+    }
+
+    fn reference_summary(&self, r: &Reference) -> ReferenceSummary {
+        let dofs: Vec<DofError> = (0..self.peak_u.0.len())
+            .map(|k| DofError {
+                dof: k + 1,
+                displacement: self.err_u.stats(k),
+                nrms_error: self.nrms_u[k].nrms(),
+            })
+            .collect();
+        let coupling: Vec<CouplingError> = self
+            .coupling
+            .iter()
+            .enumerate()
+            .map(|(k, &c)| CouplingError {
+                dof: c + 1,
+                displacement: self.err_u.stats(c),
+                displacement_nrms_error: self.nrms_u[c].nrms(),
+                force: self.err_f.stats(k),
+            })
+            .collect();
+        let max = |it: &mut dyn Iterator<Item = f64>| it.filter(|x| x.is_finite()).fold(0.0, f64::max);
+        ReferenceSummary {
+            scheme: r.scheme(),
+            n_dofs: r.n_dofs(),
+            max_displacement_error: max(&mut dofs.iter().map(|d| d.displacement.peak_error)),
+            max_force_error: max(&mut coupling.iter().map(|c| c.force.peak_error)),
+            dofs,
+            coupling,
+        }
+    }
+}
+
+/// A validated run, ready to execute: the simulation, its reference and the engineering
+/// recorder are built (all input errors are reported here, before a front end writes anything).
+pub struct Run<'d> {
+    def: &'d TestDefinition,
+    sim: Simulation,
+    reference: Option<Reference>,
+    engineering: Option<EngineeringRecorder>,
+    /// Computed after the loop (a long record's Fourier amplitude takes a while; a remote site
+    /// should not wait for it between connecting and the first step).
+    input_motion: Option<InputMotion>,
+    layout: Layout,
+}
+
+impl<'d> Run<'d> {
+    pub fn new(def: &'d TestDefinition) -> Result<Self> {
+        let sim = Simulation::new(def)?;
+        let reference = Reference::new(def)?;
+        let engineering = EngineeringRecorder::new(def);
+        let sub = def.substructure.as_ref();
+        let layout = Layout {
+            n_dofs: def.model.n_dofs(),
+            coupling_dofs: sub.map_or_else(Vec::new, |s| s.coupling_dofs.clone()),
+            extra_groups: extra_groups(def),
+            reference: reference.is_some(),
+            dt: def.integrator.dt,
+            substeps: sub.map(|s| s.substeps),
+            phase_lag: sub.is_some_and(|s| s.phase_lag.is_some()),
+            ramp_column: sub.is_some_and(|s| s.limits.is_some()),
+            response_columns: engineering.as_ref().map(EngineeringRecorder::columns),
+        };
+        Ok(Self {
+            def,
+            sim,
+            reference,
+            engineering,
+            input_motion: None,
+            layout,
+        })
+    }
+
+    pub fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    /// The input motion's Fourier amplitude and response spectrum (after [`Self::execute`]).
+    pub fn input_motion(&self) -> Option<&InputMotion> {
+        self.input_motion.as_ref()
+    }
+
+    /// Step the test to its end (or until it diverges, stops, the observer breaks or `cancel`
+    /// is set), feeding `observer`. A run that did not complete says why in the summary
+    /// (`completed`, `stopped_at_step`, `reason`) and in [`RunSummary::failure`]. A run executes
+    /// once; calling it again steps nothing.
+    pub fn execute<O: RunObserver + ?Sized>(&mut self, observer: &mut O, cancel: &AtomicBool) -> RunSummary {
+        let Run {
+            def,
+            sim,
+            reference,
+            engineering,
+            input_motion,
+            layout,
+        } = self;
+        let def: &TestDefinition = def;
+        observer.start(layout);
+        let n = layout.n_dofs;
+        let steps = def.integrator.steps;
+        let coupling = &layout.coupling_dofs;
+        let groups = &layout.extra_groups;
+        let mut extra = vec![0.0; groups.len() * coupling.len()];
+        let mut recorder = SummaryRecorder::new(n, coupling);
+        let substep_length = def
+            .substructure
+            .as_ref()
+            .map_or(def.integrator.dt, |s| def.integrator.dt / s.substeps as f64);
+        let mut metrics = SubstepMetrics {
+            tracking: TrackingMetrics::new(coupling.len(), substep_length),
+            ramp: 0,
+        };
+        let started = Instant::now();
+        let mut compute = Duration::ZERO;
+        let mut failure: Option<Error> = None;
+        let mut cancelled = false;
+        loop {
+            let i = sim.steps_done();
+            extra_values(sim, groups, &mut extra);
+            if let Some(e) = engineering
+                && let Err(err) = e.record(sim)
+            {
+                failure = Some(err);
+                break;
+            }
+            let s = sim.state();
+            let flow = observer.step(&StepRow {
+                step: i,
+                t: sim.time(),
+                u: s.u.as_slice(),
+                v: s.v.as_slice(),
+                a: s.a.as_slice(),
+                coupling: sim.coupling(),
+                extra: &extra,
+                reference: reference.as_ref().map(|r| r.u()),
+                engineering: engineering.as_ref().map(|e| e.row(sim.time())),
+            });
+            recorder.record(sim, reference.as_ref());
+            if let Some(reason) = observer.stop_request()
+                && !sim.request_stop(&reason)
+            {
+                failure = Some(Error::Stopped {
+                    step: i + 1,
+                    time: def.time(i + 1),
+                    reason: format!("{reason} (between steps: this run has no ramp to the safe position)"),
+                });
+                break;
+            }
+            if i == steps {
+                break;
+            }
+            if flow.is_break() || cancel.load(Ordering::Relaxed) {
+                cancelled = true;
+                failure = Some(Error::Stopped {
+                    step: i + 1,
+                    time: def.time(i + 1),
+                    reason: "cancelled before this step (interrupted by the caller)".into(),
+                });
+                break;
+            }
+            let t0 = Instant::now();
+            let result = sim.step(&mut Both(observer, &mut metrics));
+            compute += t0.elapsed();
+            if let Err(e) = result {
+                failure = Some(e);
+                break;
+            }
+            if let Some(r) = reference {
+                r.step(sim.ground_acceleration(i + 1));
+            }
+        }
+        let wall = started.elapsed().as_secs_f64();
+        // A cancelled run returns at once: the input motion's spectrum of a long record takes
+        // seconds, which an interrupted caller should not wait for.
+        let motion = if cancelled {
+            Ok(None)
+        } else {
+            InputMotion::new(def).map(Some)
+        };
+        let motion_summary = match motion {
+            Ok(Some(m)) => {
+                let s = m.summary.clone();
+                *input_motion = Some(m);
+                s
+            }
+            other => {
+                if let Err(e) = other {
+                    failure.get_or_insert(e);
+                }
+                InputMotionSummary {
+                    pga_g: f64::NAN,
+                    pga_m_s2: f64::NAN,
+                    spectrum_damping: SPECTRUM_ZETA,
+                    spectrum_peak: None,
+                }
+            }
+        };
+        let done = sim.steps_done();
+        let (stopped_at_step, reason) = match &failure {
+            Some(Error::Diverged { step, reason, .. } | Error::Stopped { step, reason, .. }) => {
+                (Some(*step), Some(reason.clone()))
+            }
+            Some(e) => (Some(done + 1), Some(e.to_string())),
+            None => (None, None),
+        };
+        let (estimation, phase_lag, warnings) = summary::compensation_summary(sim);
+        let sub = def.substructure.as_ref();
+        RunSummary {
+            config: def.source.clone(),
+            scheme: def.integrator.name.clone(),
+            dt: def.integrator.dt,
+            steps,
+            duration: def.time(steps),
+            n_dofs: n,
+            ground_motion: def.ground_motion.description.clone(),
+            substructure: sub.map(summary::substructure_json),
+            completed: failure.is_none(),
+            steps_done: done,
+            stopped_at_step,
+            reason,
+            ramp_substeps: (metrics.ramp > 0).then_some(metrics.ramp),
+            wall_time_s: wall,
+            us_per_step: compute.as_secs_f64() * 1e6 / done.max(1) as f64,
+            peaks: (0..n)
+                .map(|k| DofPeaks {
+                    dof: k + 1,
+                    u: recorder.peak_u.0[k],
+                    v: recorder.peak_v.0[k],
+                    a: recorder.peak_a.0[k],
+                })
+                .collect(),
+            coupling_peaks: sub.map(|_| {
+                coupling
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &c)| CouplingPeaks {
+                        dof: c + 1,
+                        force: recorder.peak_fc.0[k],
+                        error_force: recorder.peak_fe.0[k],
+                    })
+                    .collect()
+            }),
+            tracking: sub.map(|_| {
+                coupling
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &c)| {
+                        let t = metrics.tracking.result(k);
+                        TrackingSummary {
+                            dof: c + 1,
+                            delay_s: t.delay,
+                            max_delay_s: t.max_delay,
+                            nrms_error: t.nrms,
+                            peak_error: t.peak,
+                        }
+                    })
+                    .collect()
+            }),
+            reference: reference.as_ref().map(|r| recorder.reference_summary(r)),
+            estimation,
+            phase_lag,
+            warnings,
+            input_motion: motion_summary,
+            engineering: engineering.as_ref().map(EngineeringRecorder::summary),
+            outputs: Vec::new(),
+            failure,
+        }
+    }
+}
+
+/// Validate `def` and run it to the end, feeding `observer` (see [`Run::execute`]). `Err` only
+/// for input errors, before the first step; a run that diverged or stopped returns its summary.
+pub fn execute<O: RunObserver + ?Sized>(
+    def: &TestDefinition,
+    observer: &mut O,
+    cancel: &AtomicBool,
+) -> Result<RunSummary> {
+    Ok(Run::new(def)?.execute(observer, cancel))
+}

@@ -1,0 +1,61 @@
+//! The VST study (`substep::study::vst`): the acceptance lines on the shortened study,
+//! and the method list.
+
+use substep::study::vst::{ORDERS, VstSettings, acceptance, methods, run_study};
+
+/// The acceptance lines on the shortened study (12 s sweep, 10 ms delay, 1 % noise).
+#[test]
+fn quick_study_meets_the_acceptance_lines() {
+    let st = run_study(&VstSettings::quick(0.010)).unwrap();
+    assert!(st.runs.iter().all(|r| r.completed && r.warnings.is_empty()));
+    let (none, pl, both, pid) = (st.run("none"), st.run("pl_arx"), st.run("both"), st.run("pid"));
+    // 1. Phase-lag identification: ≥ 5× less tracking error than none after ramp-in, and
+    //    better than polynomial extrapolation with the lead = the delay (the default). Against
+    //    a polynomial whose lead is tuned to the actuator's total lag it tracks worse but gives
+    //    the smaller coupling-force error (see docs/vst.md).
+    assert!(none.tracking_rms > 5.0 * pl.tracking_rms);
+    assert!(pl.tracking_rms < st.run("poly_delay").tracking_rms);
+    assert!(pl.force_rms < st.run("poly_lag").force_rms);
+    // 2. Error-force estimation: lower residual error force than PID P = 1, and closer to its
+    //    ideal value, for every order.
+    for r in st.runs.iter().filter(|r| r.method.series) {
+        assert!(
+            r.e_rms < 0.9 * pid.e_rms,
+            "{}: {} vs {}",
+            r.method.name,
+            r.e_rms,
+            pid.e_rms
+        );
+        assert!(r.diff_rms < pid.diff_rms, "{}", r.method.name);
+        assert!(r.diff_rms < 1.2 * st.sigma, "{}", r.method.name);
+        // The force the step is closed with is closer to the true force than f^(k−1).
+        assert!(r.equilibrium_rms < 0.8 * pid.equilibrium_rms, "{}", r.method.name);
+        let (est, steps) = r.estimated.unwrap();
+        assert!(est as f64 > 0.9 * steps as f64, "{}", r.method.name);
+    }
+    // 3. Both compensations: the coupling force matches the reference better than every
+    //    single method, in RMS and in peak error.
+    for r in st
+        .runs
+        .iter()
+        .filter(|r| !r.method.series && !matches!(r.method.key, "both" | "pid_pl_arx"))
+    {
+        assert!(both.force_rms < r.force_rms, "{}", r.method.key);
+        assert!(both.force_peak < r.force_peak, "{}", r.method.key);
+    }
+    let checks = acceptance(&st);
+    assert_eq!(checks.iter().filter(|(_, ok)| !ok).count(), 1, "{checks:?}");
+}
+
+#[test]
+fn methods_are_distinct_and_complete() {
+    let m = methods(&VstSettings::quick(0.010));
+    let mut keys: Vec<&str> = m.iter().map(|m| m.key).collect();
+    keys.sort();
+    keys.dedup();
+    assert_eq!(keys.len(), m.len());
+    for key in ["none", "ef_arx", "pl_arx", "both", "pid", "poly_delay", "inverse_fir"] {
+        assert!(keys.contains(&key), "{key}");
+    }
+    assert_eq!(m.iter().filter(|m| m.series).count(), ORDERS.len());
+}

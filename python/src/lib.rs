@@ -1,0 +1,195 @@
+//! `substep._substep`: the compiled part of the `substep` Python package. Thin over the library:
+//! a run is `substep::run::execute` with the in-memory `HistoryTable`; the analyses and the RTHS
+//! benchmark call the library functions the CLI calls. The Python layer (`substep/__init__.py`)
+//! wraps the arrays in a `Result`.
+//!
+//! Long calls release the GIL; a run looks at Python's signals every [`SIGNAL_CHECK`] so that
+//! Ctrl-C interrupts it (it stops between two steps and raises `KeyboardInterrupt`).
+
+mod analyze;
+mod benchmark;
+
+use numpy::PyArray2;
+use numpy::PyReadonlyArray2;
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::ops::ControlFlow;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+use substep::io::TestDefinition;
+use substep::run::{HistoryTable, Layout, RunObserver, StepRow, Table};
+use substep::substructure::SubstepObserver;
+
+create_exception!(
+    _substep,
+    ConfigError,
+    PyException,
+    "Bad input: a config, file or parameter that cannot be used (the CLI's exit code 2). The message is the CLI's one-line error."
+);
+create_exception!(
+    _substep,
+    RunError,
+    PyException,
+    "A run that diverged or stopped (the CLI's exit code 1). `args[0]` is the CLI's one-line error; the attribute `result` holds the steps done (a `substep.Result`)."
+);
+
+/// How often a running test looks at Python's signals (Ctrl-C).
+const SIGNAL_CHECK: Duration = Duration::from_millis(100);
+
+/// The library's error as the Python exception the CLI's exit code corresponds to.
+pub(crate) fn to_py(e: &substep::Error) -> PyErr {
+    let message = e.to_string().split_whitespace().collect::<Vec<_>>().join(" ");
+    match e {
+        substep::Error::Diverged { .. } | substep::Error::Stopped { .. } => RunError::new_err(message),
+        _ => ConfigError::new_err(message),
+    }
+}
+
+/// A test definition from a path, TOML text or a JSON text (a Python dict).
+pub(crate) fn definition(kind: &str, text: &str, name: &str, base_dir: &str) -> substep::Result<TestDefinition> {
+    match kind {
+        "path" => TestDefinition::from_file(text),
+        "toml" => TestDefinition::from_toml(text, name, Path::new(base_dir)),
+        "json" => {
+            let json: serde_json::Value = serde_json::from_str(text)
+                .map_err(|e| substep::Error::invalid(name, format!("not a JSON-compatible dict: {e}")))?;
+            let value = toml::Value::try_from(json).map_err(|e| {
+                substep::Error::invalid(name, format!("cannot be written as TOML (None is not a value): {e}"))
+            })?;
+            let toml = toml::to_string(&value)
+                .map_err(|e| substep::Error::invalid(name, format!("cannot be written as TOML: {e}")))?;
+            TestDefinition::from_toml(&toml, name, Path::new(base_dir))
+        }
+        other => Err(substep::Error::invalid("config", format!("unknown kind {other:?}"))),
+    }
+}
+
+/// The in-memory table, plus a look at Python's signals every [`SIGNAL_CHECK`] (with the GIL
+/// taken only for that).
+struct Collector {
+    table: HistoryTable,
+    last_check: Instant,
+    interrupted: Option<PyErr>,
+}
+
+impl SubstepObserver for Collector {
+    fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.table.substep(step, j, command, force, displacement);
+    }
+    fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
+        self.table.phase_lag(tracking_error, correction);
+    }
+    fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.table.ramp(step, j, s, command, force, displacement);
+    }
+}
+
+impl RunObserver for Collector {
+    fn start(&mut self, layout: &Layout) {
+        self.table.start(layout);
+    }
+    fn step(&mut self, row: &StepRow<'_>) -> ControlFlow<()> {
+        let flow = self.table.step(row);
+        if self.last_check.elapsed() >= SIGNAL_CHECK {
+            self.last_check = Instant::now();
+            if let Err(e) = Python::attach(|py| py.check_signals()) {
+                self.interrupted = Some(e);
+                return ControlFlow::Break(());
+            }
+        }
+        flow
+    }
+}
+
+fn table_pair<'py>(py: Python<'py>, t: Table) -> PyResult<(Vec<String>, Bound<'py, PyArray2<f64>>)> {
+    // Columns × rows (Python transposes it into a view); an empty table still has its columns.
+    let array = PyArray2::from_vec2(py, &t.columns).map_err(|e| ConfigError::new_err(e.to_string()))?;
+    Ok((t.names, array))
+}
+
+/// Run a test: `kind` is `"path"`, `"toml"` or `"json"`, `text` the path or the text, `name`
+/// how messages and the summary name it, `base_dir` where relative paths in it start. Returns
+/// a dict with `summary` (the JSON text of `summary.json`), `history`, `substeps`, `response`
+/// (each `(column names, columns × rows array)` or None) and `error` (the one-line message of
+/// a run that did not complete, else None).
+#[pyfunction]
+#[pyo3(signature = (kind, text, name, base_dir))]
+fn run<'py>(py: Python<'py>, kind: &str, text: &str, name: &str, base_dir: &str) -> PyResult<Bound<'py, PyDict>> {
+    let def = py
+        .detach(|| definition(kind, text, name, base_dir))
+        .map_err(|e| to_py(&e))?;
+    let mut collector = Collector {
+        table: HistoryTable::default(),
+        last_check: Instant::now(),
+        interrupted: None,
+    };
+    let cancel = AtomicBool::new(false);
+    let summary = py
+        .detach(|| substep::run::execute(&def, &mut collector, &cancel))
+        .map_err(|e| to_py(&e))?;
+    if let Some(e) = collector.interrupted {
+        return Err(e);
+    }
+    let out = PyDict::new(py);
+    out.set_item("summary", summary.to_json())?;
+    out.set_item(
+        "error",
+        summary.failure.as_ref().map(|e| to_py(e).value(py).to_string()),
+    )?;
+    out.set_item(
+        "error_kind",
+        summary.failure.as_ref().map(|e| match e {
+            substep::Error::Diverged { .. } | substep::Error::Stopped { .. } => "run",
+            _ => "config",
+        }),
+    )?;
+    let HistoryTable {
+        history,
+        substeps,
+        response,
+        ..
+    } = collector.table;
+    out.set_item("history", table_pair(py, history)?)?;
+    out.set_item("substeps", substeps.map(|t| table_pair(py, t)).transpose()?)?;
+    out.set_item("response", response.map(|t| table_pair(py, t)).transpose()?)?;
+    Ok(out)
+}
+
+/// Write a table (`names`, a rows × columns array) as CSV in the format of `substep run`'s files
+/// (`step`, `substep` and `ramp` columns as integers).
+#[pyfunction]
+fn write_csv(py: Python<'_>, path: &str, names: Vec<String>, rows: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+    let a = rows.as_array();
+    if a.ncols() != names.len() {
+        return Err(ConfigError::new_err(format!(
+            "{path}: {} column names for {} columns",
+            names.len(),
+            a.ncols()
+        )));
+    }
+    let table = Table::from_columns(names, a.columns().into_iter().map(|c| c.to_vec()).collect());
+    py.detach(|| {
+        let file = std::fs::File::create(path)?;
+        let mut w = std::io::BufWriter::new(file);
+        table.write_csv(&mut w)?;
+        std::io::Write::flush(&mut w)
+    })
+    .map_err(|e| pyo3::exceptions::PyOSError::new_err(format!("cannot write {path}: {e}")))
+}
+
+#[pymodule]
+fn _substep(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("ConfigError", m.py().get_type::<ConfigError>())?;
+    m.add("RunError", m.py().get_type::<RunError>())?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(write_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(analyze::stability, m)?)?;
+    m.add_function(wrap_pyfunction!(analyze::accuracy, m)?)?;
+    m.add_function(wrap_pyfunction!(analyze::transfer_function, m)?)?;
+    m.add_function(wrap_pyfunction!(analyze::plan, m)?)?;
+    m.add_function(wrap_pyfunction!(benchmark::rths, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,211 @@
+"""substep: real-time substructure testing (hybrid simulation) with Dorka's sub-step control.
+
+A thin Python front end over the Rust library ``substep`` (no numerics in Python): the run
+loop, the reference solution, the summary and the analyses are the library's, so the numbers
+are the ones the ``substep`` command line writes.
+
+>>> import substep
+>>> r = substep.run("examples/default.toml")
+>>> r.summary["reference"]["max_displacement_error"]     # doctest: +SKIP
+0.01714...
+>>> r.to_pandas().head()                                  # doctest: +SKIP
+
+See ``docs/python.md`` for a worked example.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
+
+import numpy as np
+
+from . import _substep
+from ._substep import ConfigError, RunError
+
+__all__ = ["run", "Result", "Table", "ConfigError", "RunError", "analyze", "benchmark"]
+
+ConfigLike = Union[str, "os.PathLike[str]", Mapping[str, Any]]
+
+
+class Table:
+    """Named columns of a run, as one ``rows × columns`` float64 array.
+
+    ``names`` are the CSV's column names, ``values`` the array; ``table["u1"]`` is one column.
+    """
+
+    def __init__(self, names: List[str], values: np.ndarray) -> None:
+        self.names = list(names)
+        self.values = values
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.values[:, self.names.index(name)]
+        except ValueError:
+            raise KeyError(f"no column {name!r} (columns: {', '.join(self.names)})") from None
+
+    def __len__(self) -> int:
+        return self.values.shape[0]
+
+    def group(self, prefix: str) -> np.ndarray:
+        """The columns ``prefix1, prefix2, ...`` as a ``rows × count`` array (e.g. ``"u"``)."""
+        cols = [k for k, n in enumerate(self.names) if n.startswith(prefix) and n[len(prefix):].isdigit()]
+        return self.values[:, cols]
+
+    def to_pandas(self):
+        """A ``pandas.DataFrame`` with the CSV's column names."""
+        import pandas as pd
+
+        return pd.DataFrame(self.values, columns=self.names)
+
+    def __repr__(self) -> str:
+        return f"Table({len(self)} rows: {', '.join(self.names)})"
+
+
+def _table(pair) -> Optional[Table]:
+    if pair is None:
+        return None
+    names, columns = pair
+    # The library hands columns × rows; the transpose is a view (no copy).
+    return Table(names, np.asarray(columns).T)
+
+
+class Result:
+    """The outcome of :func:`run`.
+
+    Attributes (numpy arrays, one row per step from ``t = 0``):
+
+    * ``t`` (steps+1,); ``u``, ``v``, ``a`` (steps+1, n_dofs): relative displacement, velocity,
+      acceleration;
+    * ``coupling_force``, ``error_force``, ``compensation_force``, ``measured_displacement``
+      (steps+1, n_coupling) for substructure tests, else None;
+    * ``reference`` (steps+1, n_dofs): the monolithic reference's displacements, or None;
+    * ``history``: every column of ``history.csv`` (a :class:`Table`);
+    * ``substeps``: the sub-step records (``substeps.csv``: step, substep, t, cmd, fm, dm, ...)
+      or None for a monolithic run;
+    * ``response``: the engineering rows (``response.csv``) or None;
+    * ``summary``: the dict of ``summary.json`` (its ``outputs`` is empty until :meth:`save`);
+    * ``completed``, ``error``: whether the run completed, and the one-line reason if not.
+    """
+
+    def __init__(self, raw: Dict[str, Any]) -> None:
+        self.summary: Dict[str, Any] = json.loads(raw["summary"])
+        self.history: Table = _table(raw["history"])
+        self.substeps: Optional[Table] = _table(raw["substeps"])
+        self.response: Optional[Table] = _table(raw["response"])
+        self.error: Optional[str] = raw["error"]
+        h = self.history
+        self.t = h["t"]
+        self.u = h.group("u")
+        self.v = h.group("v")
+        self.a = h.group("a")
+        sub = "fc1" in h.names
+        self.coupling_force = h.group("fc") if sub else None
+        self.error_force = h.group("fe") if sub else None
+        self.compensation_force = h.group("fu") if sub else None
+        self.measured_displacement = h.group("dm") if sub else None
+        self.reference = h.group("uref") if "uref1" in h.names else None
+
+    @property
+    def completed(self) -> bool:
+        return bool(self.summary.get("completed"))
+
+    def to_pandas(self):
+        """The history as a ``pandas.DataFrame``, columns named as in ``history.csv``."""
+        return self.history.to_pandas()
+
+    def save(self, path: Union[str, "os.PathLike[str]"]) -> List[str]:
+        """Write the results; the format follows ``path``:
+
+        * a directory (an existing one, or a path without suffix): ``history.csv``,
+          ``substeps.csv``, ``response.csv`` and ``summary.json`` in it, byte for byte as
+          ``substep run`` writes them (timings aside);
+        * ``*.csv``: the history alone;
+        * ``*.h5`` / ``*.hdf5`` / ``*.mat``: HDF5 or MATLAB files (see docs/python.md).
+
+        Returns the paths written.
+        """
+        p = Path(path)
+        suffix = p.suffix.lower()
+        if suffix == ".csv":
+            _substep.write_csv(str(p), self.history.names, np.ascontiguousarray(self.history.values))
+            return [str(p)]
+        if suffix in (".h5", ".hdf5", ".mat"):
+            return _save_binary(self, p, suffix)
+        if suffix and not p.is_dir():
+            raise ConfigError(f"{p}: unknown output format {suffix!r} (use a directory, .csv, .h5, .hdf5 or .mat)")
+        p.mkdir(parents=True, exist_ok=True)
+        written = []
+        for name, table in (("history.csv", self.history), ("substeps.csv", self.substeps),
+                            ("response.csv", self.response)):
+            if table is not None:
+                out = p / name
+                _substep.write_csv(str(out), table.names, np.ascontiguousarray(table.values))
+                written.append(str(out))
+        summary = dict(self.summary)
+        summary["outputs"] = written + [str(p / "summary.json")]
+        (p / "summary.json").write_text(json.dumps(summary, indent=2, ensure_ascii=False) + "\n")
+        written.append(str(p / "summary.json"))
+        return written
+
+    def __repr__(self) -> str:
+        s = self.summary
+        state = "completed" if self.completed else f"stopped: {self.error}"
+        return f"<substep.Result {s.get('config')}: {s.get('steps_done')} of {s.get('steps')} steps, {state}>"
+
+
+def _save_binary(result: Result, path: Path, suffix: str) -> List[str]:
+    writer = getattr(_substep, "write_hdf5" if suffix in (".h5", ".hdf5") else "write_mat", None)
+    if writer is None:
+        what = "HDF5" if suffix in (".h5", ".hdf5") else "MATLAB .mat"
+        raise ConfigError(
+            f"{path}: {what} output is not available in this build of substep yet "
+            "(save to a directory or a .csv file instead)"
+        )
+    return writer(result, str(path))
+
+
+def _config_source(config: ConfigLike) -> Tuple[str, str, str]:
+    """(kind, text, name) of a config given as a path, TOML text or dict."""
+    if isinstance(config, Mapping):
+        return "json", json.dumps(config, allow_nan=True), "<dict>"
+    if isinstance(config, os.PathLike):
+        return "path", os.fspath(config), os.fspath(config)
+    if isinstance(config, str):
+        if "\n" in config or ("=" in config and not os.path.exists(config)):
+            return "toml", config, "<string>"
+        return "path", config, config
+    raise TypeError(f"config must be a path, a TOML string or a dict, not {type(config).__name__}")
+
+
+def run(config: ConfigLike, *, raise_on_stop: bool = True) -> Result:
+    """Run a test definition and return its histories and summary.
+
+    ``config`` is a path to a TOML test definition (``docs/config.md``), the TOML text itself,
+    or a dict with the same structure (``{"structure": {"sdof": {...}}, ...}``). Relative paths
+    inside a TOML string or dict start at the current directory; inside a file, at its folder.
+
+    Returns a :class:`Result` (numpy arrays ``t``, ``u``, ``v``, ``a``, ``coupling_force``,
+    ``error_force``, ``measured_displacement``, ``reference``, ``substeps``; ``summary``, the
+    dict of ``summary.json``; ``to_pandas()``; ``save(path)``).
+
+    Raises :class:`ConfigError` for bad input (the CLI's one-line message, its exit code 2) and
+    :class:`RunError` for a run that diverged or stopped (a safety limit, a failing site; the
+    CLI's exit code 1) unless ``raise_on_stop=False``; the exception's ``result`` attribute has
+    the steps done. The GIL is released while the test runs; Ctrl-C stops it between two steps
+    and raises ``KeyboardInterrupt``.
+    """
+    kind, text, name = _config_source(config)
+    raw = _substep.run(kind, text, name, os.getcwd())
+    result = Result(raw)
+    if raw["error"] is not None and raise_on_stop:
+        cls = RunError if raw["error_kind"] == "run" else ConfigError
+        err = cls(raw["error"])
+        err.result = result
+        raise err
+    return result
+
+
+from . import analyze, benchmark  # noqa: E402  (they use run's helpers)

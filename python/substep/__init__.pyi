@@ -1,0 +1,49 @@
+import os
+from typing import Any, Dict, List, Mapping, Optional, Union
+
+import numpy as np
+import pandas
+
+from . import analyze as analyze
+from . import benchmark as benchmark
+
+ConfigLike = Union[str, os.PathLike[str], Mapping[str, Any]]
+
+class ConfigError(Exception):
+    """Bad input (the CLI's exit code 2); the message is the CLI's one-line error."""
+
+class RunError(Exception):
+    """A run that diverged or stopped (the CLI's exit code 1); `result` has the steps done."""
+    result: "Result"
+
+class Table:
+    names: List[str]
+    values: np.ndarray
+    def __init__(self, names: List[str], values: np.ndarray) -> None: ...
+    def __getitem__(self, name: str) -> np.ndarray: ...
+    def __len__(self) -> int: ...
+    def group(self, prefix: str) -> np.ndarray: ...
+    def to_pandas(self) -> pandas.DataFrame: ...
+
+class Result:
+    summary: Dict[str, Any]
+    history: Table
+    substeps: Optional[Table]
+    response: Optional[Table]
+    error: Optional[str]
+    t: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    coupling_force: Optional[np.ndarray]
+    error_force: Optional[np.ndarray]
+    compensation_force: Optional[np.ndarray]
+    measured_displacement: Optional[np.ndarray]
+    reference: Optional[np.ndarray]
+    @property
+    def completed(self) -> bool: ...
+    def to_pandas(self) -> pandas.DataFrame: ...
+    def save(self, path: Union[str, os.PathLike[str]]) -> List[str]: ...
+
+def run(config: ConfigLike, *, raise_on_stop: bool = True) -> Result:
+    """Run a test definition (path, TOML text or dict) and return its histories and summary."""

@@ -1,0 +1,104 @@
+"""`substep.analyze` and `substep.benchmark` against the CLI: the same numbers (parsed from
+the CLI's CSV / JSON, compared exactly)."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import substep
+from conftest import read_csv_exact, run_cli
+
+
+def test_stability_map_equals_stability_csv(cli, tmp_path):
+    p = run_cli(cli, "analyze", "stability", "--k-sub", "1,3", "--omega", "0.1:3:12", "--vary", "zeta_s=0:0.5:4",
+                "--eta-p", "0.5", "--out", str(tmp_path), "--quiet", "--no-plots")
+    assert p.returncode == 0, p.stderr
+    csv = read_csv_exact(tmp_path / "stability.csv")
+    m = substep.analyze.stability(k_sub=[1, 3], omega=(0.1, 3, 12), vary=("zeta_s", (0, 0.5, 4)), eta_p=0.5)
+    assert list(m) == list(csv.columns)
+    for name in csv.columns:
+        np.testing.assert_array_equal(m[name], csv[name].to_numpy(), err_msg=name)
+    # ρ ≤ 1 somewhere and > 1 somewhere on this grid: the map is not trivial.
+    assert m["rho"].min() < 1 < m["rho"].max()
+    m2 = substep.analyze.stability(k_sub=[1, 3], omega="0.1:3:12", vary="zeta_s=0:0.5:4", eta_p=0.5)
+    np.testing.assert_array_equal(m2["rho"], m["rho"])
+
+
+def test_accuracy_equals_accuracy_csv(cli, tmp_path):
+    p = run_cli(cli, "analyze", "accuracy", "--k-sub", "1,2", "--eta-t", "0.01,0.05", "--eta-p", "0,0.5",
+                "--error-force", "pid:1", "--out", str(tmp_path), "--quiet", "--no-plots")
+    assert p.returncode == 0, p.stderr
+    csv = read_csv_exact(tmp_path / "accuracy.csv")
+    a = substep.analyze.accuracy(k_sub=[1, 2], eta_t=[0.01, 0.05], eta_p=[0, 0.5], error_force="pid:1")
+    assert list(a) == list(csv.columns)
+    for name in csv.columns:
+        np.testing.assert_array_equal(a[name], csv[name].to_numpy(dtype=float), err_msg=name)
+
+
+def test_analysis_errors_name_the_parameter():
+    with pytest.raises(substep.ConfigError, match="^vary: 'Omega' is the x axis already"):
+        substep.analyze.stability(vary=("Omega", (0, 1, 3)))
+    with pytest.raises(substep.ConfigError, match="^eta_t: 0.7 is outside"):
+        substep.analyze.accuracy(eta_t=[0.7])
+    with pytest.raises(substep.ConfigError, match="^case: unknown case 'big'"):
+        substep.analyze.accuracy(case="big")
+
+
+def test_rths_equals_the_cli_json(cli):
+    p = run_cli(cli, "benchmark", "rths", "--case", "1", "--json")
+    assert p.returncode == 0, p.stderr
+    expected = json.loads(p.stdout)
+    got = substep.benchmark.rths(case=1)
+    for key in ("controller", "record", "intensity", "algorithm"):
+        assert got[key] == expected[key], key
+    assert got["cases"] == expected["cases"]
+    assert 0 < got["cases"][0]["J4"] < 100
+    with pytest.raises(substep.ConfigError, match="^intensity: must be a finite number >= 0"):
+        substep.benchmark.rths(case=1, intensity=-1)
+
+
+def test_plan_equals_plan_csv(cli, root, tmp_path, monkeypatch):
+    monkeypatch.chdir(root)
+    p = run_cli(cli, "analyze", "plan", "examples/tmd_substructure.toml", "--out", str(tmp_path), "--quiet")
+    assert p.returncode == 0, p.stderr
+    import csv
+
+    with open(tmp_path / "plan.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    got = substep.analyze.plan("examples/tmd_substructure.toml")
+    assert len(got["dt"]) == len(rows) > 0
+    timing = ("us_per_step", "budget_share")
+    for name in rows[0]:
+        if name in timing:
+            continue
+        for i, row in enumerate(rows):
+            x = got[name][i]
+            if name in ("class", "dominant"):
+                assert x == row[name], (name, i)
+            elif row[name] == "":
+                assert np.isnan(x), (name, i)
+            else:
+                assert float(x) == float(row[name]), (name, i, x, row[name])
+    assert got["recommended"] is None or got["recommended"]["k_sub"] in set(got["k_sub"])
+
+
+def test_plan_refuses_a_monolithic_test(root, monkeypatch):
+    monkeypatch.chdir(root)
+    with pytest.raises(substep.ConfigError, match="^examples/monolithic_tmd.toml: plan needs a \\[substructure\\]"):
+        substep.analyze.plan("examples/monolithic_tmd.toml")
+
+
+def test_transfer_function_peaks_are_the_accuracy_peaks():
+    a = substep.analyze.accuracy(k_sub=[2], eta_t=[0.05])
+    r = np.linspace(0.5, 1.5, 20001)
+    tf = substep.analyze.transfer_function(k_sub=2, eta_t=0.05, r=r)
+    h, h_exact = tf["h"], tf["h_exact"]
+    for peak_r, peak_h, col in ((a["freq_ratio"], a["h"], h), (a["freq_ratio_exact"], a["h_exact"], h_exact)):
+        for rp, hp in zip(peak_r, peak_h):
+            near = np.abs(r - rp) < 0.02
+            # The grid's largest value near each peak is the peak (to the grid's resolution).
+            assert col[near].max() == pytest.approx(hp, rel=1e-4)
+    # Two peaks of a tuned mass damper, around r = 0.89 and 1.11, in both.
+    assert len(a["peak"]) == 2

@@ -1,0 +1,210 @@
+"""`substep.run` against the CLI: the same summary (every number to the last bit, timings
+aside), the same history and sub-step rows, the same one-line errors."""
+
+import json
+import threading
+import time
+import _thread
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import substep
+from conftest import read_csv_exact, run_cli
+
+TIMING = ("wall_time_s", "us_per_step")
+
+
+def comparable(summary: dict) -> dict:
+    """The summary without its timings and the list of files written."""
+    return {k: v for k, v in summary.items() if k not in TIMING + ("outputs",)}
+
+
+@pytest.fixture(scope="module")
+def default_run(cli, root, tmp_path_factory, request):
+    """The default example run by the CLI (into a temp dir) and by Python, both from the repo root."""
+    out = tmp_path_factory.mktemp("cli_default")
+    p = run_cli(cli, "run", "examples/default.toml", "--out", str(out), "--quiet", "--no-plots")
+    assert p.returncode == 0, p.stderr
+    cwd = request.config.invocation_params.dir
+    import os
+
+    os.chdir(root)
+    try:
+        result = substep.run("examples/default.toml")
+    finally:
+        os.chdir(cwd)
+    return out, result
+
+
+def test_summary_equals_the_cli_summary(default_run):
+    out, result = default_run
+    cli_summary = json.loads((out / "summary.json").read_text())
+    assert comparable(result.summary) == comparable(cli_summary)
+    # The numbers that matter, bit for bit (== on floats parsed from the shortest round-trip text).
+    ref, cli_ref = result.summary["reference"], cli_summary["reference"]
+    assert ref["max_displacement_error"] == cli_ref["max_displacement_error"]
+    assert 0.001 < ref["max_displacement_error"] < 0.05
+    assert result.summary["outputs"] == []
+    assert result.completed and result.error is None
+
+
+def test_to_pandas_equals_history_csv(default_run):
+    out, result = default_run
+    csv = read_csv_exact(out / "history.csv")
+    df = result.to_pandas()
+    assert list(df.columns) == list(csv.columns)
+    pd.testing.assert_frame_equal(df, csv.astype(float), check_exact=True)
+    sub = read_csv_exact(out / "substeps.csv")
+    pd.testing.assert_frame_equal(result.substeps.to_pandas(), sub.astype(float), check_exact=True)
+    resp = read_csv_exact(out / "response.csv")
+    pd.testing.assert_frame_equal(result.response.to_pandas(), resp.astype(float), check_exact=True)
+
+
+def test_arrays_are_the_history_columns(default_run):
+    _, r = default_run
+    steps = r.summary["steps"]
+    assert r.t.shape == (steps + 1,) and r.t[0] == 0.0 and r.t[-1] == pytest.approx(20.0, abs=0)
+    assert r.u.shape == (steps + 1, 1)
+    np.testing.assert_array_equal(r.u[:, 0], r.history["u1"])
+    np.testing.assert_array_equal(r.coupling_force[:, 0], r.history["fc1"])
+    np.testing.assert_array_equal(r.measured_displacement[:, 0], r.history["dm1"])
+    np.testing.assert_array_equal(r.reference[:, 0], r.history["uref1"])
+    # The summary's peak is the largest |u| of the array, at its time.
+    i = int(np.argmax(np.abs(r.u[:, 0])))
+    assert r.summary["peaks"][0]["u"]["max_abs"] == abs(r.u[i, 0])
+    assert r.summary["peaks"][0]["u"]["t"] == i * r.summary["dt"]
+    assert len(r.substeps) == 4 * steps
+
+
+def test_save_writes_the_cli_files(default_run, tmp_path):
+    out, result = default_run
+    written = result.save(tmp_path / "saved")
+    for name in ("history.csv", "substeps.csv", "response.csv"):
+        assert (tmp_path / "saved" / name).read_bytes() == (out / name).read_bytes(), name
+    saved = json.loads((tmp_path / "saved" / "summary.json").read_text())
+    assert comparable(saved) == comparable(json.loads((out / "summary.json").read_text()))
+    assert saved["outputs"] == written
+    result.save(tmp_path / "h.csv")
+    assert (tmp_path / "h.csv").read_bytes() == (out / "history.csv").read_bytes()
+
+
+def test_binary_formats_name_what_is_missing(default_run, tmp_path):
+    _, result = default_run
+    if hasattr(substep._substep, "write_hdf5"):
+        pytest.skip("HDF5 output is built in")
+    with pytest.raises(substep.ConfigError, match="HDF5 output is not available"):
+        result.save(tmp_path / "r.h5")
+    with pytest.raises(substep.ConfigError, match="unknown output format '.xyz'"):
+        result.save(tmp_path / "r.xyz")
+
+
+def test_toml_text_and_dict_give_the_same_run(root, default_run):
+    tomllib = pytest.importorskip("tomllib")
+    _, by_path = default_run
+    text = (root / "examples" / "default.toml").read_text()
+    by_text = substep.run(text)
+    by_dict = substep.run(tomllib.loads(text))
+    for r, name in ((by_text, "<string>"), (by_dict, "<dict>")):
+        assert r.summary["config"] == name
+        assert {**comparable(r.summary), "config": None} == {**comparable(by_path.summary), "config": None}
+        np.testing.assert_array_equal(r.history.values, by_path.history.values)
+
+
+def test_monolithic_run_has_no_coupling_arrays(cli, root, tmp_path, monkeypatch):
+    monkeypatch.chdir(root)
+    r = substep.run("examples/monolithic_tmd.toml")
+    assert r.coupling_force is None and r.substeps is None and r.reference is None
+    p = run_cli(cli, "run", "examples/monolithic_tmd.toml", "--out", str(tmp_path), "--quiet", "--no-plots")
+    assert p.returncode == 0, p.stderr
+    assert comparable(r.summary) == comparable(json.loads((tmp_path / "summary.json").read_text()))
+    csv = read_csv_exact(tmp_path / "history.csv")
+    pd.testing.assert_frame_equal(r.to_pandas(), csv.astype(float), check_exact=True)
+
+
+def test_bad_input_raises_config_error_with_the_cli_message(cli, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "bad.toml").write_text(
+        "[structure.sdof]\nmass = 1.0\nstiffness = -4.0\ndamping = 0.0\n"
+        "[ground_motion]\ngenerator = \"sine\"\namplitude = 1.0\nfrequency = 1.0\nduration = 1.0\n"
+        "[integrator]\nscheme = \"average_acceleration\"\ndt = 0.01\n"
+    )
+    p = run_cli(cli, "run", "bad.toml", "--quiet", "--no-plots", cwd=tmp_path)
+    assert p.returncode == 2
+    message = p.stderr.strip()
+    assert message.startswith("error: bad.toml")
+    with pytest.raises(substep.ConfigError) as e:
+        substep.run("bad.toml")
+    assert "error: " + str(e.value) == message
+    with pytest.raises(substep.ConfigError, match="missing.toml"):
+        substep.run("missing.toml")
+    with pytest.raises(TypeError):
+        substep.run(42)
+
+
+def test_a_stopped_run_raises_run_error_with_the_cli_message(cli, root, tmp_path, monkeypatch):
+    text = (root / "examples" / "default.toml").read_text()
+    text += "\n[substructure.limits]\ndisplacement = 0.05\nramp_time = 0.2\n"
+    (tmp_path / "limits.toml").write_text(text)
+    monkeypatch.chdir(tmp_path)
+    p = run_cli(cli, "run", "limits.toml", "--out", "out", "--quiet", "--no-plots", cwd=tmp_path)
+    assert p.returncode == 1
+    with pytest.raises(substep.RunError) as e:
+        substep.run("limits.toml")
+    assert "error: " + str(e.value) == p.stderr.strip()
+    r = e.value.result
+    cli_summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert comparable(r.summary) == comparable(cli_summary)
+    assert not r.completed and r.summary["ramp_substeps"] == 80
+    sub = read_csv_exact(tmp_path / "out" / "substeps.csv")
+    pd.testing.assert_frame_equal(r.substeps.to_pandas(), sub.astype(float), check_exact=True)
+    r2 = substep.run("limits.toml", raise_on_stop=False)
+    assert r2.error == str(e.value)
+
+
+def long_config(root) -> str:
+    """The default example over 2000 s: long enough to be interrupted."""
+    return (root / "examples" / "default.toml").read_text().replace("duration = 20.0", "duration = 2000.0")
+
+
+def test_ctrl_c_interrupts_a_run(root):
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    t0 = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            substep.run(long_config(root))
+    finally:
+        timer.cancel()
+    assert time.monotonic() - t0 < 10
+
+
+def test_the_gil_is_released_while_a_run_steps(root):
+    text = (root / "examples" / "default.toml").read_text().replace("duration = 20.0", "duration = 100.0")
+    ticks = []
+    done = threading.Event()
+
+    def count():
+        while not done.is_set():
+            ticks.append(time.monotonic())
+            time.sleep(0.001)
+
+    counter = threading.Thread(target=count)
+    counter.start()
+    try:
+        t0 = time.monotonic()
+        r = substep.run(text)
+        t1 = time.monotonic()
+    finally:
+        done.set()
+        counter.join(timeout=10)
+    assert r.completed
+    during = [t for t in ticks if t0 < t < t1]
+    # A held GIL would let the counter run only at the signal checks (every 0.1 s).
+    assert len(during) > 20 * (t1 - t0), (len(during), t1 - t0)
+
+
+def test_help_is_useful():
+    doc = substep.run.__doc__
+    assert "ConfigError" in doc and "to_pandas" in doc and "Ctrl-C" in doc
