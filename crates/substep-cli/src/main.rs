@@ -13,6 +13,7 @@ mod benchmark;
 mod container;
 mod engineering;
 mod model_export;
+mod monitor;
 mod output;
 mod plots;
 mod realtime;
@@ -94,6 +95,31 @@ pub struct RunArgs {
     /// With --realtime: SCHED_FIFO priority of the sub-step thread; reported when not permitted
     #[arg(long, requires = "realtime", value_name = "PRIO")]
     pub fifo_priority: Option<i32>,
+    /// Serve a live monitor page during the run at ADDR (default 127.0.0.1:8080; see docs/monitor.md)
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8080")]
+    pub monitor: Option<String>,
+    /// With --monitor: allow an address that is not loopback (controls still need the token)
+    #[arg(long, requires = "monitor")]
+    pub monitor_public: bool,
+    /// With --monitor: the token the controls need (default: a random one, printed at start)
+    #[arg(long, requires = "monitor", value_name = "TOKEN")]
+    pub monitor_token: Option<String>,
+    /// With --monitor: seconds the page keeps showing the final state after the run
+    #[arg(long, requires = "monitor", value_name = "SECONDS", default_value_t = 30.0)]
+    pub monitor_linger: f64,
+    /// On-line stability indicator: warn, or stop with the controlled ramp-down (overrides
+    /// `[substructure.limits] stability`)
+    #[arg(long, value_enum, value_name = "ACTION")]
+    pub stability: Option<StabilityArg>,
+    /// Pace an offline run at FACTOR × real time (1 = wall clock)
+    #[arg(long, value_name = "FACTOR", conflicts_with = "realtime")]
+    pub pace: Option<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum StabilityArg {
+    Warn,
+    Stop,
 }
 
 /// Exit code of a failed command: 1 for a diverged or stopped run and for runtime failures

@@ -47,13 +47,17 @@ fn report_json(r: &RealtimeReport) -> serde_json::Value {
 }
 
 pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, config_name: String) -> Result<()> {
-    let Some(sub) = &def.substructure else {
+    let Some(_) = &def.substructure else {
         return Err(substep::Error::invalid(
             "--realtime",
             "needs a [substructure] (a monolithic run has no real-time part)",
         )
         .into());
     };
+    let mut def = def.clone();
+    let mut live = crate::monitor::live::Live::start(args, &mut def, &config_name, true)?;
+    let def = &def;
+    let sub = def.substructure.as_ref().expect("checked above");
     let accel = def.ground_motion.accel.clone();
     let load0 = -def.model.effective_mass_vector() * accel[0];
     let test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
@@ -62,7 +66,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         fifo_priority: args.fifo_priority,
         ..RealtimeOptions::default()
     };
-    let runner = RealtimeRunner::new(&def.model, test, accel, options)?;
+    let runner = RealtimeRunner::new(&def.model, test, accel.clone(), options)?;
     // Everything above is validation; no output of an earlier run survives into this one.
     prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
@@ -97,7 +101,13 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     // Response peaks for the printed summary: (|x|, index, t) of u and of f_c.
     let mut peak_u = (0.0_f64, 0usize, 0.0_f64);
     let mut peak_f = (0.0_f64, 0usize, 0.0_f64);
+    let coupling = sub.coupling_dofs.clone();
+    let mut warnings: Vec<String> = Vec::new();
     let sink = |r: &substep::realtime::StepRecordOwned| {
+        let ag = accel.get(r.step).copied().unwrap_or(0.0);
+        if let Some(w) = live.record_realtime(r, ag, &coupling) {
+            warnings.push(w);
+        }
         for (k, &x) in r.u.iter().enumerate() {
             if x.abs() > peak_u.0 {
                 peak_u = (x.abs(), k, r.time);
@@ -181,6 +191,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         "missed_deadlines": report.missed,
         "late_steps": report.late_steps,
         "wake_up_latency_p99_us": report.latency_p99.as_secs_f64() * 1e6,
+        "warnings": warnings,
+        "stability": live.summary(),
         "outputs": outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
     });
     write_json(&summary_path, &summary)?;
@@ -218,6 +230,12 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             names.join(", ")
         );
     }
+    live.finish(
+        serde_json::json!({ "completed": failure.is_none(), "reason": summary["reason"], "steps_done": report.steps,
+            "missed_deadlines": report.missed, "late_steps": report.late_steps }),
+        &outputs,
+        args.quiet,
+    );
     match failure {
         Some(e) => Err(e.into()),
         None => Ok(()),

@@ -3,6 +3,7 @@
 //! output directory, draw the plots, write `summary.json` and print a summary.
 
 use crate::engineering::{ResponseWriter, ground_motion_outputs};
+use crate::monitor::live::{Live, LiveObserver};
 use crate::output::{Decimated, HistoryWriter, SubstepWriter, prepare_dir, write_atomic};
 use crate::plots::{Curve, Figure, Panel, line_chart, output_path};
 use crate::{DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, RunArgs};
@@ -567,7 +568,7 @@ impl RunObserver for CliObserver {
 }
 
 pub fn run(args: &RunArgs) -> Result<()> {
-    let def = match &args.config {
+    let mut def = match &args.config {
         None => TestDefinition::from_toml(DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, Path::new("."))?,
         Some(p) => TestDefinition::from_file(p)?,
     };
@@ -600,6 +601,9 @@ fn run_definition(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf) -> Res
             .map_or(DEFAULT_CONFIG_NAME.to_string(), |p| p.display().to_string());
         return crate::realtime::run_realtime(args, &def, out_dir, name);
     }
+    let config_name = def.source.clone();
+    let mut live = Live::start(args, &mut def, &config_name, false)?;
+    let def = def;
     let mut run = Run::new(&def)?;
     let layout = run.layout().clone();
     let steps = def.integrator.steps;
@@ -622,7 +626,15 @@ fn run_definition(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf) -> Res
     let mut observer = CliObserver::create(&def, &layout, &out_dir, !args.quiet)?;
     write_atomic(&summary_path, (running.to_string() + "\n").as_bytes())
         .with_context(|| cannot_write(&summary_path))?;
-    let mut summary = run.execute(&mut observer, &AtomicBool::new(false));
+    let mut watched = LiveObserver {
+        inner: &mut observer,
+        live: &mut live,
+        warnings: Vec::new(),
+        quiet: args.quiet,
+    };
+    let mut summary = run.execute(&mut watched, &AtomicBool::new(false));
+    let live_warnings = std::mem::take(&mut watched.warnings);
+    summary.warnings.extend(live_warnings);
     if let Some(e) = observer.error.take() {
         return Err(e);
     }
@@ -681,7 +693,33 @@ fn run_definition(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf) -> Res
     }
     outputs.push(summary_path.clone());
     summary.outputs = outputs.iter().map(|p| p.display().to_string()).collect();
-    write_atomic(&summary_path, summary.to_json().as_bytes()).with_context(|| cannot_write(&summary_path))?;
+    // The monitor's additions: who stopped the run, the stability indicator.
+    let mut json: serde_json::Value = serde_json::from_str(&summary.to_json()).context("summary.json")?;
+    if let Some(obj) = json.as_object_mut() {
+        let stopped_by = match &summary.failure {
+            Some(substep::Error::Stopped { reason, .. }) => {
+                Some(live.stopped_by.unwrap_or(if reason.starts_with("safety stop") {
+                    "safety_limit"
+                } else {
+                    "site"
+                }))
+            }
+            Some(substep::Error::Diverged { .. }) => Some("diverged"),
+            _ => None,
+        };
+        if let Some(s) = stopped_by {
+            obj.insert("stopped_by".into(), s.into());
+        }
+        if let Some(s) = live.summary() {
+            obj.insert("stability".into(), s);
+        }
+    }
+    let final_state = serde_json::json!({
+        "completed": json["completed"], "reason": json["reason"], "stopped_by": json["stopped_by"],
+        "steps_done": json["steps_done"], "steps": json["steps"],
+    });
+    let text = serde_json::to_string_pretty(&json).expect("summary serialises") + "\n";
+    write_atomic(&summary_path, text.as_bytes()).with_context(|| cannot_write(&summary_path))?;
 
     let failure = summary.failure.take();
     if !args.quiet {
@@ -736,6 +774,7 @@ fn run_definition(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf) -> Res
             .collect();
         println!("  outputs in {}: {}", out_dir.display(), names.join(", "));
     }
+    live.finish(final_state, &outputs, args.quiet);
     match failure {
         Some(e) => Err(e.into()),
         None => Ok(()),

@@ -18,6 +18,7 @@ pub mod excitation;
 pub mod integrate;
 pub mod io;
 pub mod model;
+pub mod monitor;
 pub mod realtime;
 pub mod run;
 

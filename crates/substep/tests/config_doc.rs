@@ -63,6 +63,7 @@ const TABLES: &[(&str, Option<&str>, &str)] = &[
         "### `[substructure.actuator]`",
     ),
     ("[substructure.sensors]", None, "### `[substructure.sensors]`"),
+    ("[substructure.delay_ramp]", None, "### `[substructure.delay_ramp]`"),
     (
         "[substructure.error_force]",
         Some("none"),

@@ -85,6 +85,7 @@ fn displacement_limit_stops_and_ramps_down_linearly() {
         velocity: None,
         force: None,
         ramp_time: 0.1,
+        stability: None,
     };
     let (mut test, commands) = test_with(limits);
     // 1 Hz (near resonance) ground motion of growing response
@@ -125,6 +126,7 @@ fn velocity_limit_refuses_the_command() {
         velocity: Some(vec![1e-3]),
         force: None,
         ramp_time: 0.05,
+        stability: None,
     };
     let (mut test, commands) = test_with(limits);
     let err = (0..100)
@@ -152,6 +154,7 @@ fn limits_are_validated() {
         velocity: None,
         force: None,
         ramp_time: 1.0,
+        stability: None,
     };
     assert!(
         bad.validate(1)
@@ -191,6 +194,7 @@ fn the_ramp_down_reaches_the_observer() {
         velocity: None,
         force: None,
         ramp_time: 0.1,
+        stability: None,
     };
     let (mut test, commands) = test_with(limits);
     let ag = |i: usize| 2.0 * (2.0 * std::f64::consts::PI * i as f64 * 0.01).sin();
@@ -228,6 +232,7 @@ fn a_refused_command_is_not_recorded_but_the_ramp_is() {
         velocity: Some(vec![1e-3]),
         force: None,
         ramp_time: 0.05,
+        stability: None,
     };
     let (mut test, commands) = test_with(limits);
     let mut rows = Rows::default();

@@ -148,6 +148,9 @@ impl<S: ExperimentalSubstructure + ?Sized> ExperimentalSubstructure for Compensa
     fn take_stop_log(&mut self) -> Option<crate::substructure::StopLog> {
         self.inner.take_stop_log()
     }
+    fn request_stop(&mut self, reason: &str) -> bool {
+        self.inner.request_stop(reason)
+    }
 
     fn is_linear(&self) -> Result<()> {
         if !self.frozen {

@@ -118,6 +118,17 @@ impl Simulation {
         }
     }
 
+    /// Ask for the controlled stop (operator, stability indicator): the next step's first
+    /// sub-step ramps the actuators to the safe position (the safety limits' ramp) and the step
+    /// fails with [`Error::Stopped`] and `reason`. `false` if this run cannot ramp (no
+    /// `[substructure.limits]` on a local or per-sub-step test, or a per-step remote site).
+    pub fn request_stop(&mut self, reason: &str) -> bool {
+        match &mut self.engine {
+            Engine::Substructured(test) => test.site.request_stop(reason),
+            _ => false,
+        }
+    }
+
     /// Advance one step; `observer` sees every sub-step of a substructured run. A non-finite
     /// state gives [`Error::Diverged`]; stepping past the end is an error.
     pub fn step(&mut self, observer: &mut impl SubstepObserver) -> Result<()> {

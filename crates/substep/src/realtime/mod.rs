@@ -93,7 +93,7 @@ pub use bench::{BenchOverlap, bench_overlap, bench_overlap_with};
 pub use histogram::{LatencyHistogram, LatencySummary};
 pub use os::RtSetting;
 pub use overlap::OverlapPredictor;
-pub use ring::{Consumer, Producer, SpscRing};
+pub use ring::{Consumer, OwnedConsumer, OwnedProducer, Producer, SpscRing, owned_ring};
 pub use runner::{RealtimeFailure, RealtimeResult, RealtimeRunner};
 
 use crate::substructure::StepRecord;

@@ -119,3 +119,43 @@ impl<T> Consumer<'_, T> {
         Some(out)
     }
 }
+
+/// A ring shared by two threads that own their ends (no borrow of a ring on the stack): made
+/// with [`owned_ring`], one producer and one consumer per ring.
+pub struct OwnedProducer<T> {
+    ring: std::sync::Arc<SpscRing<T>>,
+}
+
+/// The reading end of an [`owned_ring`].
+pub struct OwnedConsumer<T> {
+    ring: std::sync::Arc<SpscRing<T>>,
+}
+
+/// A ring of `capacity` slots made by `make`, split into owned ends. The ring is created here
+/// and never handed out, so there is exactly one producer and one consumer (the condition of
+/// the `Sync` impl).
+pub fn owned_ring<T>(capacity: usize, make: impl FnMut() -> T) -> (OwnedProducer<T>, OwnedConsumer<T>) {
+    let ring = std::sync::Arc::new(SpscRing::new(capacity, make));
+    (OwnedProducer { ring: ring.clone() }, OwnedConsumer { ring })
+}
+
+impl<T> OwnedProducer<T> {
+    /// See [`Producer::push_or_drop`].
+    pub fn push_or_drop(&mut self, fill: impl FnOnce(&mut T)) -> bool {
+        Producer { ring: &self.ring }.push_or_drop(fill)
+    }
+    /// Pushes dropped because the ring was full.
+    pub fn overflows(&self) -> u64 {
+        self.ring.overflows()
+    }
+}
+
+impl<T> OwnedConsumer<T> {
+    /// See [`Consumer::try_pop_with`].
+    pub fn try_pop_with<R>(&mut self, read: impl FnOnce(&mut T) -> R) -> Option<R> {
+        Consumer { ring: &self.ring }.try_pop_with(read)
+    }
+    pub fn overflows(&self) -> u64 {
+        self.ring.overflows()
+    }
+}

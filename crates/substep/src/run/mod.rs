@@ -161,6 +161,13 @@ pub trait RunObserver: SubstepObserver {
     /// Before the first row: the columns of the run.
     fn start(&mut self, _layout: &Layout) {}
     fn step(&mut self, row: &StepRow<'_>) -> ControlFlow<()>;
+    /// A controlled stop the front end asks for after [`step`](Self::step) (an operator on the
+    /// monitor page, the stability indicator): the loop hands `reason` to the test's safety
+    /// ramp ([`Simulation::request_stop`]), so the next step ramps the actuators to the safe
+    /// position and the run ends `Stopped` with `reason`. Default: never.
+    fn stop_request(&mut self) -> Option<String> {
+        None
+    }
 }
 
 /// Two sub-step observers fed in turn (the front end's and the tracking metrics).
@@ -419,6 +426,16 @@ impl<'d> Run<'d> {
                 engineering: engineering.as_ref().map(|e| e.row(sim.time())),
             });
             recorder.record(sim, reference.as_ref());
+            if let Some(reason) = observer.stop_request()
+                && !sim.request_stop(&reason)
+            {
+                failure = Some(Error::Stopped {
+                    step: i + 1,
+                    time: def.time(i + 1),
+                    reason: format!("{reason} (between steps: this run has no ramp to the safe position)"),
+                });
+                break;
+            }
             if i == steps {
                 break;
             }

@@ -73,4 +73,12 @@ pub trait ExperimentalSubstructure: Send {
     fn take_stop_log(&mut self) -> Option<StopLog> {
         None
     }
+    /// Ask for the controlled stop from outside (operator, stability indicator): the next
+    /// sub-step is not executed; the actuators ramp from the last command to the safe position
+    /// as after a tripped limit, and that sub-step returns [`crate::Error::Stopped`] with
+    /// `reason`. `false` if this side has no [`LimitedSite`] to ramp with (default); wrappers
+    /// forward it to the side they wrap.
+    fn request_stop(&mut self, _reason: &str) -> bool {
+        false
+    }
 }

@@ -31,6 +31,9 @@ pub struct SafetyLimits {
     pub force: Option<Vec<f64>>,
     /// Duration of the ramp to the safe position after a stop \[s\].
     pub ramp_time: f64,
+    /// `stability = "warn" | "stop"` and the thresholds of the on-line stability indicator
+    /// ([`crate::monitor`]); the driver runs the indicator and, for "stop", asks for the ramp.
+    pub stability: Option<crate::monitor::StabilitySettings>,
 }
 
 impl SafetyLimits {
@@ -149,6 +152,8 @@ pub struct LimitedSite {
     scratch_disp: Vec<f64>,
     stopped: bool,
     log: Option<StopLog>,
+    /// A stop asked for from outside ([`ExperimentalSubstructure::request_stop`]).
+    requested: Option<String>,
 }
 
 impl LimitedSite {
@@ -164,6 +169,7 @@ impl LimitedSite {
             scratch_disp: vec![0.0; n],
             stopped: false,
             log: None,
+            requested: None,
         })
     }
 
@@ -248,6 +254,9 @@ impl ExperimentalSubstructure for LimitedSite {
                 reason: "the test was stopped earlier".into(),
             });
         }
+        if let Some(reason) = self.requested.take() {
+            return Err(self.stop(dtau, reason, None));
+        }
         if let Some(v) = &self.limits.velocity {
             for (i, (&c, &l)) in command.iter().zip(&self.last_command).enumerate() {
                 let vel = (c - l) / dtau;
@@ -281,6 +290,12 @@ impl ExperimentalSubstructure for LimitedSite {
 
     fn take_stop_log(&mut self) -> Option<StopLog> {
         self.log.take()
+    }
+    fn request_stop(&mut self, reason: &str) -> bool {
+        if !self.stopped && self.requested.is_none() {
+            self.requested = Some(reason.to_string());
+        }
+        true
     }
     fn true_force(&self) -> Option<&[f64]> {
         self.inner.true_force()

@@ -90,6 +90,9 @@ impl ExperimentalSubstructure for ControlledSite {
     fn take_stop_log(&mut self) -> Option<crate::substructure::StopLog> {
         self.inner.take_stop_log()
     }
+    fn request_stop(&mut self, reason: &str) -> bool {
+        self.inner.request_stop(reason)
+    }
 
     fn is_linear(&self) -> Result<()> {
         self.inner.is_linear()

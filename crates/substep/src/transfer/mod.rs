@@ -24,6 +24,7 @@
 mod actuator;
 mod controlled;
 pub mod converter;
+mod delay_ramp;
 pub mod discrete;
 mod lab;
 pub mod lti;
@@ -33,5 +34,6 @@ pub mod servo;
 
 pub use actuator::{Actuator, ActuatorSpec, DELAY_MAX_SAMPLES, DelayLine, Dynamics, ServoSpec};
 pub use controlled::ControlledSite;
+pub use delay_ramp::{DelayRamp, DelayRampSite, MAX_RAMP_DELAY};
 pub use lab::{AttachedSpecimen, LabOptions, VirtualLab};
 pub use sensor::{NoiseGenerator, Sensor, SensorSpec, channel_seed, channel_seed_for, channel_sensors};

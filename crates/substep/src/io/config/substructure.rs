@@ -22,7 +22,9 @@ use crate::substructure::{
     SubstructureTest,
 };
 use crate::transfer::lti::TransferFunction;
-use crate::transfer::{ActuatorSpec, ControlledSite, Dynamics, LabOptions, SensorSpec, VirtualLab};
+use crate::transfer::{
+    ActuatorSpec, ControlledSite, DelayRamp, DelayRampSite, Dynamics, LabOptions, SensorSpec, VirtualLab,
+};
 use nalgebra::DVector;
 use serde::Deserialize;
 use std::path::Path;
@@ -53,6 +55,8 @@ pub struct SubstructureDefinition {
     pub remote: Option<RemoteDefinition>,
     /// Safety limits with a controlled stop.
     pub limits: Option<SafetyLimits>,
+    /// `[substructure.delay_ramp]`: a growing extra command delay (virtual tests), if any.
+    pub delay_ramp: Option<DelayRamp>,
     /// D/A converter on the commands and how the lab builds the force (`[substructure] force`).
     pub lab: LabOptions,
     /// Tracking controller `C(s)` (`[substructure.controller]`), Tustin-discretised at the
@@ -99,6 +103,11 @@ impl SubstructureDefinition {
                     ));
                 }
             },
+        };
+        // A degrading transfer system (fault injection) belongs to the actuators themselves.
+        let site: Box<dyn ExperimentalSubstructure> = match &self.delay_ramp {
+            Some(r) => Box::new(DelayRampSite::new(site, *r, dt / self.substeps as f64)?),
+            None => site,
         };
         // The limits sit next to the actuators: they check the command actually sent (after the
         // tracking controller and the phase-lag compensator), and their ramp to the safe
@@ -182,9 +191,20 @@ pub(crate) struct RawSubstructure {
     pub(crate) phase_lag: Option<RawPhaseLag>,
     pub(crate) remote: Option<RawRemote>,
     pub(crate) limits: Option<RawLimits>,
+    pub(crate) delay_ramp: Option<RawDelayRamp>,
     /// `"model"` (default) or `"from_motion"`.
     pub(crate) force: Option<String>,
     pub(crate) controller: Option<RawController>,
+}
+
+/// `[substructure.delay_ramp]`: an extra command delay growing from 0 at `start` to `delay` at
+/// `end` (fault injection for virtual tests).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawDelayRamp {
+    pub(crate) start: f64,
+    pub(crate) end: f64,
+    pub(crate) delay: f64,
 }
 
 /// `[substructure.controller]`: the tracking controller `C(s) = num/den` (descending powers of s).
@@ -443,6 +463,18 @@ impl RawSubstructure {
             },
             controller,
             controller_feedforward,
+            delay_ramp: match &self.delay_ramp {
+                None => None,
+                Some(r) => {
+                    let ramp = DelayRamp {
+                        start: r.start,
+                        end: r.end,
+                        delay: r.delay,
+                    };
+                    ramp.validate(dt / self.substeps as f64)?;
+                    Some(ramp)
+                }
+            },
         })
     }
 }

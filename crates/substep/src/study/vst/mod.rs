@@ -255,6 +255,7 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
         lab: Default::default(),
         controller: None,
         controller_feedforward: None,
+        delay_ramp: None,
     };
     Ok(TestDefinition {
         source: format!("vst: {}", method.name),

@@ -1,0 +1,302 @@
+//! `substep run --monitor` driven by headless Chromium through chromedriver (plain HTTP
+//! WebDriver calls): the page shows live data, a controlled stop pressed in the page without
+//! the token is refused, with the token it stops the run with the ramp-down, and
+//! `summary.json` says who stopped it. Skipped, with a message, where Chromium or chromedriver
+//! is not installed (`.ci/run` installs Debian's `chromium` and `chromium-driver`).
+
+use serde_json::{Value, json};
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const CHROMIUM: &str = "/usr/bin/chromium";
+const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// One HTTP/1.1 request with `Connection: close`; returns (status, body).
+fn http(port: u16, method: &str, path: &str, body: Option<&Value>) -> std::io::Result<(u16, String)> {
+    let mut s = TcpStream::connect(("127.0.0.1", port))?;
+    s.set_read_timeout(Some(Duration::from_secs(30)))?;
+    let body = body.map(|b| b.to_string()).unwrap_or_default();
+    write!(
+        s,
+        "{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )?;
+    // Read the head, then exactly Content-Length bytes (chromedriver may keep the connection open).
+    let mut r = std::io::BufReader::new(s);
+    let mut head = String::new();
+    loop {
+        let mut line = String::new();
+        if std::io::BufRead::read_line(&mut r, &mut line)? == 0 || line == "\r\n" {
+            break;
+        }
+        head.push_str(&line);
+        if head.len() > 65536 {
+            break;
+        }
+    }
+    let status = head.split_whitespace().nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
+    let length = head
+        .lines()
+        .find_map(|l| {
+            l.split_once(':')
+                .filter(|(k, _)| k.eq_ignore_ascii_case("content-length"))
+        })
+        .and_then(|(_, v)| v.trim().parse::<usize>().ok());
+    let mut out = Vec::new();
+    match length {
+        Some(n) => {
+            out.resize(n.min(64 << 20), 0);
+            r.read_exact(&mut out)?;
+        }
+        None => {
+            r.take(64 << 20).read_to_end(&mut out)?;
+        }
+    }
+    let body = String::from_utf8_lossy(&out).into_owned();
+    Ok((status, body))
+}
+
+struct Driver {
+    port: u16,
+    session: String,
+    child: Child,
+}
+
+impl Driver {
+    fn cmd(&self, method: &str, path: &str, body: Option<Value>) -> Value {
+        let (_, b) = http(
+            self.port,
+            method,
+            &format!("/session/{}{path}", self.session),
+            body.as_ref(),
+        )
+        .unwrap();
+        serde_json::from_str(&b).unwrap_or(Value::Null)
+    }
+    fn element(&self, css: &str) -> String {
+        let v = self.cmd("POST", "/element", Some(json!({"using": "css selector", "value": css})));
+        v["value"]
+            .as_object()
+            .and_then(|o| o.values().next())
+            .and_then(|x| x.as_str())
+            .unwrap_or_else(|| panic!("no element {css}: {v}"))
+            .to_string()
+    }
+    fn text(&self, css: &str) -> String {
+        let e = self.element(css);
+        self.cmd("GET", &format!("/element/{e}/text"), None)["value"]
+            .as_str()
+            .unwrap_or("")
+            .to_string()
+    }
+    fn click(&self, css: &str) {
+        let e = self.element(css);
+        self.cmd("POST", &format!("/element/{e}/click"), Some(json!({})));
+    }
+    fn type_into(&self, css: &str, text: &str) {
+        let e = self.element(css);
+        self.cmd("POST", &format!("/element/{e}/value"), Some(json!({ "text": text })));
+    }
+    /// Poll `f` every 100 ms for at most `limit`.
+    fn wait_for(&self, limit: Duration, what: &str, mut f: impl FnMut(&Self) -> bool) {
+        let t0 = Instant::now();
+        while !f(self) {
+            assert!(t0.elapsed() < limit, "timed out waiting for {what}");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = http(self.port, "DELETE", &format!("/session/{}", self.session), None);
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn start_driver(profile: &Path) -> Option<Driver> {
+    let port = free_port();
+    let child = Command::new(CHROMEDRIVER)
+        .arg(format!("--port={port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .ok()?;
+    let t0 = Instant::now();
+    while http(port, "GET", "/status", None).is_err() {
+        if t0.elapsed() > Duration::from_secs(20) {
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let caps = json!({"capabilities": {"alwaysMatch": {"goog:chromeOptions": {
+        "binary": CHROMIUM,
+        "args": ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--window-size=1400,1100", format!("--user-data-dir={}", profile.display())]
+    }}}});
+    let (_, body) = http(port, "POST", "/session", Some(&caps)).ok()?;
+    let v: Value = serde_json::from_str(&body).ok()?;
+    let session = v["value"]["sessionId"].as_str()?.to_string();
+    Some(Driver { port, session, child })
+}
+
+#[test]
+fn monitor_page_shows_live_data_and_stops_the_run_with_the_token() {
+    if !Path::new(CHROMIUM).exists() || !Path::new(CHROMEDRIVER).exists() {
+        eprintln!(
+            "SKIPPED monitor_page_shows_live_data_and_stops_the_run_with_the_token: {CHROMIUM} or {CHROMEDRIVER} \
+             is missing (apt-get install chromium chromium-driver; .ci/run does this)"
+        );
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("substep_monitor_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = free_port();
+    let token = "0123456789abcdef-token";
+    let out = dir.join("out");
+    let mut run = Command::new(env!("CARGO_BIN_EXE_substep"))
+        .args([
+            "run",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/default.toml"),
+        ])
+        .arg("--out")
+        .arg(&out)
+        .args([
+            "--no-plots",
+            "--quiet",
+            "--pace",
+            "1",
+            "--monitor-linger",
+            "2",
+            "--monitor-token",
+            token,
+        ])
+        .arg("--monitor")
+        .arg(format!("127.0.0.1:{port}"))
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The run is 20 s of test time at wall-clock pace; kill it whatever happens below.
+    struct Kill<'a>(&'a mut Child);
+    impl Drop for Kill<'_> {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let run = Kill(&mut run);
+    let Some(driver) = start_driver(&dir.join("profile")) else {
+        eprintln!("SKIPPED: chromedriver did not start a headless Chromium session");
+        return;
+    };
+    let t0 = Instant::now();
+    while http(port, "GET", "/state", None).is_err() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "monitor did not come up");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    driver.cmd(
+        "POST",
+        "/url",
+        Some(json!({ "url": format!("http://127.0.0.1:{port}/") })),
+    );
+    driver.wait_for(Duration::from_secs(20), "live data on the page", |d| {
+        d.text("#step") != "–"
+    });
+    let (step1, time1) = (driver.text("#step"), driver.text("#time"));
+    std::thread::sleep(Duration::from_millis(700));
+    let (step2, time2) = (driver.text("#step"), driver.text("#time"));
+    let (s1, s2): (u64, u64) = (step1.parse().unwrap(), step2.parse().unwrap());
+    assert!(s2 > s1, "the page did not update: step {step1} then {step2}");
+    assert_ne!(time1, time2);
+    assert!(
+        driver.text("#eta") != "–" || s2 < 250,
+        "energy ratio not shown at step {s2}"
+    );
+    // docs/img/monitor.png is taken here (a run in progress).
+    if let Ok(p) = std::env::var("SUBSTEP_MONITOR_SCREENSHOT") {
+        let png = driver.cmd("GET", "/screenshot", None)["value"]
+            .as_str()
+            .unwrap_or("")
+            .to_string();
+        std::fs::write(p, decode_base64(&png)).unwrap();
+    }
+
+    // Without the token the stop is refused and the run goes on.
+    driver.click("#stop");
+    driver.wait_for(Duration::from_secs(10), "the refusal", |d| {
+        d.text("#reply").contains("refused")
+    });
+    let (_, state) = http(port, "GET", "/state", None).unwrap();
+    let state: Value = serde_json::from_str(&state).unwrap();
+    assert!(state["stop"].is_null(), "{state}");
+    assert!(state["finished"].is_null());
+
+    // With the token it starts the controlled stop.
+    driver.type_into("#token", token);
+    driver.click("#stop");
+    driver.wait_for(Duration::from_secs(30), "the final state on the page", |d| {
+        d.text("#status").starts_with("finished")
+    });
+    assert!(
+        driver.text("#final_text").contains("operator"),
+        "{}",
+        driver.text("#final_text")
+    );
+    let child = &mut *run.0;
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "the run did not end after the stop"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert_eq!(status.code(), Some(1), "a stopped run exits with 1");
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["completed"], false);
+    assert_eq!(summary["stopped_by"], "operator");
+    assert!(
+        summary["reason"].as_str().unwrap().contains("ramped to 0 over 1 s"),
+        "{}",
+        summary["reason"]
+    );
+    assert_eq!(summary["ramp_substeps"], 400, "1 s ramp in sub-steps of 2.5 ms");
+    let stopped: u64 = summary["steps_done"].as_u64().unwrap();
+    assert!(stopped > s2 && stopped < 2000, "stopped at step {stopped}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn decode_base64(s: &str) -> Vec<u8> {
+    let val = |c: u8| match c {
+        b'A'..=b'Z' => Some(c - b'A'),
+        b'a'..=b'z' => Some(c - b'a' + 26),
+        b'0'..=b'9' => Some(c - b'0' + 52),
+        b'+' => Some(62),
+        b'/' => Some(63),
+        _ => None,
+    };
+    let mut out = Vec::with_capacity(s.len() * 3 / 4);
+    let (mut acc, mut bits) = (0u32, 0);
+    for v in s.bytes().filter_map(val) {
+        acc = (acc << 6) | v as u32;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    out
+}

@@ -1,0 +1,365 @@
+//! The on-line stability indicator: both views (energy, model) fed step by step, with the
+//! thresholds of `[substructure.limits]` (docs/theory.md §15).
+
+use super::energy::EnergyIndicator;
+use super::model_view::{Identification, ModelView};
+use crate::error::{Error, Result, require_positive};
+use crate::io::SubstructureDefinition;
+use crate::model::Model;
+
+/// What crossing a threshold does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StabilityAction {
+    /// Warn (console, monitor page, `summary.json`) and go on.
+    #[default]
+    Warn,
+    /// Start the controlled ramp-down of the safety limits.
+    Stop,
+}
+
+impl StabilityAction {
+    pub fn name(self) -> &'static str {
+        match self {
+            StabilityAction::Warn => "warn",
+            StabilityAction::Stop => "stop",
+        }
+    }
+}
+
+/// `[substructure.limits] stability` and its thresholds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StabilitySettings {
+    pub action: StabilityAction,
+    /// Alarm when the energy ratio `η` exceeds this (1 = no damping left).
+    pub energy_threshold: f64,
+    /// Alarm when the model view's margin `1 − ρ` falls below this.
+    pub margin_threshold: f64,
+    /// Sliding window of the energy view and memory of the identification \[s\].
+    pub window: f64,
+    /// Steps between two evaluations of the model view.
+    pub refresh: usize,
+    /// Consecutive evaluations beyond a threshold before the alarm (noise immunity).
+    pub persistence: usize,
+}
+
+impl Default for StabilitySettings {
+    fn default() -> Self {
+        Self {
+            action: StabilityAction::Warn,
+            energy_threshold: 0.8,
+            margin_threshold: -1e-3,
+            window: 2.0,
+            refresh: 10,
+            persistence: 3,
+        }
+    }
+}
+
+impl StabilitySettings {
+    pub fn validate(&self) -> Result<()> {
+        require_positive("substructure.limits.stability_energy", self.energy_threshold)?;
+        if !(self.margin_threshold.is_finite() && self.margin_threshold < 1.0) {
+            return Err(Error::invalid(
+                "substructure.limits.stability_margin",
+                format!("must be a finite number below 1, got {}", self.margin_threshold),
+            ));
+        }
+        require_positive("substructure.limits.stability_window", self.window)?;
+        if self.window > 600.0 {
+            return Err(Error::invalid(
+                "substructure.limits.stability_window",
+                format!("{} s is longer than the maximum of 600 s", self.window),
+            ));
+        }
+        if self.refresh == 0 {
+            return Err(Error::invalid(
+                "substructure.limits.stability_refresh",
+                "must be at least 1 step",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Which view raised an alarm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IndicatorView {
+    Energy,
+    Model,
+}
+
+impl IndicatorView {
+    pub fn name(self) -> &'static str {
+        match self {
+            IndicatorView::Energy => "energy",
+            IndicatorView::Model => "model",
+        }
+    }
+}
+
+/// The first crossing of a threshold.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Alarm {
+    pub step: usize,
+    pub time: f64,
+    pub view: IndicatorView,
+    /// `η` (energy view) or `1 − ρ` (model view).
+    pub value: f64,
+    pub threshold: f64,
+}
+
+impl Alarm {
+    pub fn message(&self) -> String {
+        match self.view {
+            IndicatorView::Energy => format!(
+                "stability indicator (energy): the transfer system cancels {:.0} % of the dissipation (threshold {:.0} %) at t = {:.3} s (step {})",
+                100.0 * self.value,
+                100.0 * self.threshold,
+                self.time,
+                self.step
+            ),
+            IndicatorView::Model => format!(
+                "stability indicator (model): margin 1 − ρ = {:.3e} is below {:.3e} for the identified specimen and lag at t = {:.3} s (step {})",
+                self.value, self.threshold, self.time, self.step
+            ),
+        }
+    }
+}
+
+/// Both views of the indicator for one test. Feed it the state after every step with
+/// [`Self::push`]; only the model-view refresh (every `refresh` steps, and only when the
+/// identified values changed) builds and probes a small linear test (it allocates: keep it off
+/// real-time threads).
+pub struct StabilityMonitor {
+    settings: StabilitySettings,
+    dt: f64,
+    coupling: Vec<usize>,
+    energy: EnergyIndicator,
+    ident: Identification,
+    view: Option<ModelView>,
+    view_note: Option<String>,
+    damping: DampingWork,
+    steps: usize,
+    rho: f64,
+    last_probe: Vec<f64>,
+    over_energy: usize,
+    over_model: usize,
+    alarm: Option<Alarm>,
+}
+
+/// The damping work of the numerical substructure `E_D = Σ Δuᵀ C v̄` (trapezoidal, as
+/// [`crate::analysis::energy`]), on dense or sparse `C`; allocation-free per step.
+struct DampingWork {
+    c: DampingMatrix,
+    u: Vec<f64>,
+    v: Vec<f64>,
+    cv: Vec<f64>,
+    work: f64,
+    started: bool,
+}
+
+enum DampingMatrix {
+    Dense(nalgebra::DMatrix<f64>),
+    Sparse(crate::sparse::CscMatrix),
+}
+
+impl DampingWork {
+    fn new(model: &Model) -> Self {
+        let n = model.n_dofs();
+        let c = match (model.as_dense(), model.as_sparse()) {
+            (Some(d), _) => DampingMatrix::Dense(d.damping.clone()),
+            (None, Some(s)) => DampingMatrix::Sparse(s.damping.clone()),
+            (None, None) => DampingMatrix::Dense(nalgebra::DMatrix::zeros(n, n)),
+        };
+        Self {
+            c,
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            cv: vec![0.0; n],
+            work: 0.0,
+            started: false,
+        }
+    }
+
+    fn push(&mut self, u: &[f64], v: &[f64]) -> f64 {
+        if u.len() != self.u.len() || v.len() != self.v.len() {
+            return self.work;
+        }
+        if self.started {
+            for (m, &x) in self.v.iter_mut().zip(v) {
+                *m = 0.5 * (*m + x);
+            }
+            match &self.c {
+                DampingMatrix::Dense(c) => {
+                    let vm = nalgebra::DVectorView::from_slice(&self.v, self.v.len());
+                    let mut out = nalgebra::DVectorViewMut::from_slice(&mut self.cv, self.u.len());
+                    out.gemv(1.0, c, &vm, 0.0);
+                }
+                DampingMatrix::Sparse(c) => c.sym_mul_add(1.0, &self.v, 0.0, &mut self.cv),
+            }
+            self.work += self
+                .cv
+                .iter()
+                .zip(u.iter().zip(&self.u))
+                .map(|(f, (a, b))| f * (a - b))
+                .sum::<f64>();
+        }
+        self.u.copy_from_slice(u);
+        self.v.copy_from_slice(v);
+        self.started = true;
+        self.work
+    }
+}
+
+impl StabilityMonitor {
+    /// For the test `sub` on `model` with time step `dt`.
+    pub fn new(sub: &SubstructureDefinition, model: &Model, dt: f64, settings: StabilitySettings) -> Result<Self> {
+        settings.validate()?;
+        let n_c = sub.coupling_dofs.len();
+        let window = ((settings.window / dt).round() as usize).max(2);
+        let (view, view_note) = match model.as_dense().map(|m| ModelView::new(sub, m, dt)) {
+            Some(Ok(v)) => (Some(v), None),
+            Some(Err(e)) => (None, Some(e.to_string())),
+            None => (
+                None,
+                Some(format!(
+                    "the model view needs a dense model of at most {} DOFs",
+                    super::model_view::MODEL_VIEW_MAX_DOFS
+                )),
+            ),
+        };
+        Ok(Self {
+            dt,
+            coupling: sub.coupling_dofs.clone(),
+            energy: EnergyIndicator::new(n_c, window),
+            ident: Identification::new(n_c, dt, window),
+            view,
+            view_note,
+            damping: DampingWork::new(model),
+            steps: 0,
+            rho: f64::NAN,
+            last_probe: vec![f64::NAN; 3 * n_c],
+            over_energy: 0,
+            over_model: 0,
+            alarm: None,
+            settings,
+        })
+    }
+
+    pub fn settings(&self) -> &StabilitySettings {
+        &self.settings
+    }
+
+    /// The state after step `step`: `u`, `v` of every numerical DOF, ground acceleration `ag`,
+    /// and per coupling DOF the force on the numerical substructure, the command and the
+    /// measured displacement. Returns the alarm if this step raised it (the first one only).
+    #[allow(clippy::too_many_arguments)]
+    pub fn push(
+        &mut self,
+        step: usize,
+        u: &[f64],
+        v: &[f64],
+        ag: f64,
+        force: &[f64],
+        command: &[f64],
+        measured: &[f64],
+    ) -> Option<Alarm> {
+        let _ = ag;
+        let damping = self.damping.push(u, v);
+        self.ident.push(force, command, measured);
+        let stored: f64 = self
+            .ident
+            .stiffness()
+            .iter()
+            .zip(measured)
+            .map(|(&k, &x)| if k > 0.0 { 0.5 * k * x * x } else { 0.0 })
+            .sum();
+        self.energy.push(force, command, measured, damping, stored);
+        self.steps += 1;
+        let eta = self.energy.eta();
+        if !self.steps.is_multiple_of(self.settings.refresh) {
+            return None;
+        }
+        // Both views are judged at the refresh points: `persistence` refreshes in a row.
+        self.refresh_model();
+        self.over_energy = if eta > self.settings.energy_threshold {
+            self.over_energy + 1
+        } else {
+            0
+        };
+        let time = step as f64 * self.dt;
+        if self.alarm.is_some() {
+            return None;
+        }
+        let margin = self.margin();
+        let alarm = if self.over_energy >= self.settings.persistence {
+            Some((IndicatorView::Energy, eta, self.settings.energy_threshold))
+        } else if self.over_model >= self.settings.persistence {
+            Some((IndicatorView::Model, margin, self.settings.margin_threshold))
+        } else {
+            None
+        };
+        self.alarm = alarm.map(|(view, value, threshold)| Alarm {
+            step,
+            time,
+            view,
+            value,
+            threshold,
+        });
+        self.alarm
+    }
+
+    fn refresh_model(&mut self) {
+        let Some(view) = &self.view else { return };
+        let n_c = self.coupling.len();
+        let (k, c, t) = (self.ident.stiffness(), self.ident.damping(), self.ident.lag());
+        if k.iter().chain(c).chain(t).any(|x| !x.is_finite()) {
+            return;
+        }
+        // Probing allocates and costs one step per state: skip it while the identified
+        // values stay within 0.5 % (lag: 0.5 % of a sub-step) of the last probed ones.
+        let close = (0..n_c).all(|i| {
+            let near = |a: f64, b: f64, scale: f64| (a - b).abs() <= 5e-3 * scale;
+            near(k[i], self.last_probe[i], k[i].abs())
+                && near(c[i], self.last_probe[n_c + i], c[i].abs())
+                && near(t[i], self.last_probe[2 * n_c + i], self.dt)
+        });
+        if !close {
+            self.rho = view.spectral_radius(k, c, t).unwrap_or(f64::NAN);
+            self.last_probe[..n_c].copy_from_slice(k);
+            self.last_probe[n_c..2 * n_c].copy_from_slice(c);
+            self.last_probe[2 * n_c..].copy_from_slice(t);
+        }
+        self.over_model = if self.margin() < self.settings.margin_threshold {
+            self.over_model + 1
+        } else {
+            0
+        };
+    }
+
+    /// Energy ratio `η` of the last window (NaN until known).
+    pub fn eta(&self) -> f64 {
+        self.energy.eta()
+    }
+    pub fn energy(&self) -> &EnergyIndicator {
+        &self.energy
+    }
+    /// Spectral radius of the model view (NaN until known or without a model view).
+    pub fn rho(&self) -> f64 {
+        self.rho
+    }
+    /// `1 − ρ`.
+    pub fn margin(&self) -> f64 {
+        1.0 - self.rho
+    }
+    pub fn identification(&self) -> &Identification {
+        &self.ident
+    }
+    /// Why there is no model view, if there is none.
+    pub fn model_view_note(&self) -> Option<&str> {
+        self.view_note.as_deref()
+    }
+    pub fn alarm(&self) -> Option<&Alarm> {
+        self.alarm.as_ref()
+    }
+}
