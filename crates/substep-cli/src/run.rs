@@ -568,7 +568,7 @@ impl RunObserver for CliObserver {
 }
 
 pub fn run(args: &RunArgs) -> Result<()> {
-    let mut def = match &args.config {
+    let def = match &args.config {
         None => TestDefinition::from_toml(DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, Path::new("."))?,
         Some(p) => TestDefinition::from_file(p)?,
     };
@@ -578,11 +578,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
         .or_else(|| def.output.dir.clone())
         .unwrap_or_else(|| PathBuf::from("results"));
     let container = crate::container::format(args.format.as_deref(), def.output.format)?;
-    let result = run_definition(args, &def, out_dir.clone());
+    let result = run_definition(args, def, out_dir.clone());
     crate::container::finish(args, &out_dir, container, result)
 }
 
-fn run_definition(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf) -> Result<()> {
+fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> Result<()> {
     let format = args
         .plot_format
         .or_else(|| {
