@@ -218,10 +218,11 @@ fn monitor_page_shows_live_data_and_stops_the_run_with_the_token() {
     let (s1, s2): (u64, u64) = (step1.parse().unwrap(), step2.parse().unwrap());
     assert!(s2 > s1, "the page did not update: step {step1} then {step2}");
     assert_ne!(time1, time2);
-    assert!(
-        driver.text("#eta") != "–" || s2 < 250,
-        "energy ratio not shown at step {s2}"
-    );
+    // The energy ratio needs a full window of the sweep with enough dissipation (it shows "–"
+    // while unknown); the paced run lasts 20 s, so it must appear well within 10 s.
+    driver.wait_for(Duration::from_secs(10), "the energy ratio on the page", |d| {
+        d.text("#eta") != "–"
+    });
     // docs/img/monitor.png is taken here (a run in progress).
     if let Ok(p) = std::env::var("SUBSTEP_MONITOR_SCREENSHOT") {
         let png = driver.cmd("GET", "/screenshot", None)["value"]
