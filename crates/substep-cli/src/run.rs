@@ -696,15 +696,11 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
     // The monitor's additions: who stopped the run, the stability indicator.
     let mut json: serde_json::Value = serde_json::from_str(&summary.to_json()).context("summary.json")?;
     if let Some(obj) = json.as_object_mut() {
+        // Only the monitor's own stops (operator, stability indicator) are named here; the
+        // library's summary already says why any other stop happened (`reason`), and a front end
+        // without a monitor (Python) must get the same summary.
         let stopped_by = match &summary.failure {
-            Some(substep::Error::Stopped { reason, .. }) => {
-                Some(live.stopped_by.unwrap_or(if reason.starts_with("safety stop") {
-                    "safety_limit"
-                } else {
-                    "site"
-                }))
-            }
-            Some(substep::Error::Diverged { .. }) => Some("diverged"),
+            Some(substep::Error::Stopped { .. }) => live.stopped_by,
             _ => None,
         };
         if let Some(s) = stopped_by {
