@@ -95,13 +95,15 @@ pub struct RunArgs {
     /// With --realtime: SCHED_FIFO priority of the sub-step thread; reported when not permitted
     #[arg(long, requires = "realtime", value_name = "PRIO")]
     pub fifo_priority: Option<i32>,
-    /// Serve a live monitor page during the run at ADDR (default 127.0.0.1:8080; see docs/monitor.md)
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8080")]
+    /// Serve a live monitor page during the run at ADDR (default: `[monitor] address`, else
+    /// 127.0.0.1:8080; see docs/monitor.md)
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "")]
     pub monitor: Option<String>,
     /// With --monitor: allow an address that is not loopback (controls still need the token)
     #[arg(long, requires = "monitor")]
     pub monitor_public: bool,
-    /// With --monitor: the token the controls need (default: a random one, printed at start)
+    /// With --monitor: the token the controls need, at least 16 printable ASCII characters
+    /// (default: `[monitor] token`, else a random one, printed at start)
     #[arg(long, requires = "monitor", value_name = "TOKEN")]
     pub monitor_token: Option<String>,
     /// With --monitor: seconds the page keeps showing the final state after the run

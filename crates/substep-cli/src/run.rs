@@ -605,6 +605,7 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
     let mut live = Live::start(args, &mut def, &config_name, false)?;
     let def = def;
     let mut run = Run::new(&def)?;
+    run.set_stability(live.stability_settings.clone())?;
     let layout = run.layout().clone();
     let steps = def.integrator.steps;
     if !args.quiet {
@@ -629,12 +630,9 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
     let mut watched = LiveObserver {
         inner: &mut observer,
         live: &mut live,
-        warnings: Vec::new(),
         quiet: args.quiet,
     };
     let mut summary = run.execute(&mut watched, &AtomicBool::new(false));
-    let live_warnings = std::mem::take(&mut watched.warnings);
-    summary.warnings.extend(live_warnings);
     if let Some(e) = observer.error.take() {
         return Err(e);
     }
@@ -693,29 +691,11 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
     }
     outputs.push(summary_path.clone());
     summary.outputs = outputs.iter().map(|p| p.display().to_string()).collect();
-    // The monitor's additions: who stopped the run, the stability indicator.
-    let mut json: serde_json::Value = serde_json::from_str(&summary.to_json()).context("summary.json")?;
-    if let Some(obj) = json.as_object_mut() {
-        // Only the monitor's own stops (operator, stability indicator) are named here; the
-        // library's summary already says why any other stop happened (`reason`), and a front end
-        // without a monitor (Python) must get the same summary.
-        let stopped_by = match &summary.failure {
-            Some(substep::Error::Stopped { .. }) => live.stopped_by,
-            _ => None,
-        };
-        if let Some(s) = stopped_by {
-            obj.insert("stopped_by".into(), s.into());
-        }
-        if let Some(s) = live.summary() {
-            obj.insert("stability".into(), s);
-        }
-    }
     let final_state = serde_json::json!({
-        "completed": json["completed"], "reason": json["reason"], "stopped_by": json["stopped_by"],
-        "steps_done": json["steps_done"], "steps": json["steps"],
+        "completed": summary.completed, "reason": summary.reason, "stopped_by": summary.stopped_by,
+        "steps_done": summary.steps_done, "steps": summary.steps,
     });
-    let text = serde_json::to_string_pretty(&json).expect("summary serialises") + "\n";
-    write_atomic(&summary_path, text.as_bytes()).with_context(|| cannot_write(&summary_path))?;
+    write_atomic(&summary_path, summary.to_json().as_bytes()).with_context(|| cannot_write(&summary_path))?;
 
     let failure = summary.failure.take();
     if !args.quiet {

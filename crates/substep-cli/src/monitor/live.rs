@@ -1,5 +1,7 @@
 //! The run loop's side of the monitor and of the stability indicator: a few calls per step
-//! from `substep run` (offline) — feed the indicator, push a frame, obey the controls, pace.
+//! from `substep run` (offline) — read the indicator of the run (`substep::run` computes it),
+//! push a frame, obey the controls, pace. Real-time runs feed their own indicator here, from
+//! the writer thread.
 
 use super::{Monitor, MonitorOptions};
 use crate::RunArgs;
@@ -15,6 +17,8 @@ use substep::substructure::{SafetyLimits, SubstepObserver};
 
 /// Ramp time used for operator and stability stops when the config sets no limits \[s\].
 pub const DEFAULT_STOP_RAMP: f64 = 1.0;
+/// Address of the page when neither `--monitor ADDR` nor `[monitor] address` gives one.
+pub const DEFAULT_ADDRESS: &str = "127.0.0.1:8080";
 
 /// The last command of each coupling DOF (the step's last sub-step).
 #[derive(Debug, Default)]
@@ -27,12 +31,11 @@ impl SubstepObserver for LastCommand {
 }
 
 /// A front end's observer with the monitor around it: every row and sub-step reach `inner`
-/// unchanged; the last command, the indicator, the frames and the stop request are taken on
-/// the way.
+/// unchanged; the last command, the indicator's alarm, the frames and the operator's stop are
+/// taken on the way.
 pub struct LiveObserver<'a, O> {
     pub inner: &'a mut O,
     pub live: &'a mut Live,
-    pub warnings: Vec<String>,
     pub quiet: bool,
 }
 
@@ -55,13 +58,12 @@ impl<O: RunObserver> RunObserver for LiveObserver<'_, O> {
         self.inner.start(layout);
     }
     fn step(&mut self, row: &StepRow<'_>) -> ControlFlow<()> {
+        // The run's summary gets the alarm (the library raises it); here it is shown at once.
         let quiet = self.quiet;
-        let warnings = &mut self.warnings;
         self.live.tick(row, &mut |w| {
             if !quiet {
                 println!("  warning: {w}");
             }
-            warnings.push(w);
         });
         self.inner.step(row)
     }
@@ -72,16 +74,19 @@ impl<O: RunObserver> RunObserver for LiveObserver<'_, O> {
 
 pub struct Live {
     monitor: Option<Monitor>,
+    /// The indicator's settings for the run (`--stability`, `--monitor` or the config); an
+    /// offline run hands them to [`substep::run::Run::set_stability`].
+    pub stability_settings: Option<StabilitySettings>,
+    /// Real-time runs: the indicator fed from the writer thread.
     stability: Option<StabilityMonitor>,
-    action: StabilityAction,
     pub last: LastCommand,
     stop_sent: bool,
     pending: Option<String>,
     coupling: Vec<usize>,
     pub stopped_by: Option<&'static str>,
     pace: Option<(Instant, f64)>,
-    max_eta: f64,
-    min_margin: f64,
+    /// Offline: the run's alarm has been shown.
+    alarm_shown: bool,
     linger: Duration,
     late_steps: u64,
     hold_substeps: u64,
@@ -126,27 +131,44 @@ impl Live {
                 ..SafetyLimits::default()
             });
         }
-        let stability = match (&def.substructure, settings) {
-            (Some(sub), Some(s)) if sub.remote.is_none() || !realtime => {
-                Some(StabilityMonitor::new(sub, &def.model, def.integrator.dt, s)?)
+        let settings = settings.filter(|_| {
+            def.substructure
+                .as_ref()
+                .is_some_and(|s| s.remote.is_none() || !realtime)
+        });
+        let stability = match (&def.substructure, &settings) {
+            (Some(sub), Some(s)) if realtime => {
+                Some(StabilityMonitor::new(sub, &def.model, def.integrator.dt, s.clone())?)
+            }
+            (Some(sub), Some(s)) => {
+                // Validated here, before the monitor starts; the run builds its own.
+                StabilityMonitor::new(sub, &def.model, def.integrator.dt, s.clone())?;
+                None
             }
             _ => None,
         };
-        let action = stability
-            .as_ref()
-            .map_or(StabilityAction::Warn, |s| s.settings().action);
         let monitor = match &args.monitor {
             None => None,
             Some(addr) => {
+                let (addr, what) = match (addr.as_str(), &def.monitor.address) {
+                    ("", Some(a)) => (a.as_str(), "monitor.address"),
+                    ("", None) => (DEFAULT_ADDRESS, "--monitor"),
+                    (a, _) => (a, "--monitor"),
+                };
                 let addr = addr.parse().map_err(|e| {
-                    substep::Error::invalid("--monitor", format!("'{addr}' is not an address host:port ({e})"))
+                    substep::Error::invalid(what, format!("'{addr}' is not an address host:port ({e})"))
                 })?;
-                let token = match &args.monitor_token {
-                    Some(t) if t.len() >= 8 => t.clone(),
-                    Some(_) => {
-                        return Err(substep::Error::invalid("--monitor-token", "must be at least 8 characters").into());
+                // The command line's token overrides the config's; without either a random one.
+                let (token, shown) = match (&args.monitor_token, &def.monitor.token) {
+                    (Some(t), _) => {
+                        substep::io::check_token("--monitor-token", t)?;
+                        (t.clone(), "the token given with --monitor-token".to_string())
                     }
-                    None => substep::monitor::new_token()?,
+                    (None, Some(t)) => (t.clone(), format!("the token of [monitor] token in {config}")),
+                    (None, None) => {
+                        let t = substep::monitor::new_token()?;
+                        (t.clone(), format!("the token {t}"))
+                    }
                 };
                 let limits = def.substructure.as_ref().and_then(|s| s.limits.as_ref()).map(|l| {
                     let mut parts = Vec::new();
@@ -162,7 +184,7 @@ impl Live {
                     parts.push(format!("ramp {} s", l.ramp_time));
                     parts.join(", ")
                 });
-                let st = stability.as_ref().map(|s| s.settings().clone());
+                let st = settings.as_ref();
                 let info = json!({
                     "config": config, "dt": def.integrator.dt, "steps": def.integrator.steps, "n_c": n_c,
                     "realtime": realtime, "limits": limits,
@@ -180,7 +202,7 @@ impl Live {
                     info,
                 })?;
                 // The operator needs both at start; printed even with --quiet.
-                println!("monitor: {} (controls need the token {token})", m.url);
+                println!("monitor: {} (controls need {shown})", m.url);
                 use std::io::Write;
                 let _ = std::io::stdout().flush();
                 Some(m)
@@ -189,8 +211,8 @@ impl Live {
         let pace = args.pace.map(|p| (Instant::now(), p));
         Ok(Self {
             monitor,
+            stability_settings: settings,
             stability,
-            action,
             last: LastCommand(vec![0.0; n_c]),
             stop_sent: false,
             pending: None,
@@ -200,49 +222,40 @@ impl Live {
                 .map_or_else(Vec::new, |s| s.coupling_dofs.clone()),
             stopped_by: None,
             pace,
-            max_eta: f64::NAN,
-            min_margin: f64::NAN,
+            alarm_shown: false,
             linger: Duration::from_secs_f64(args.monitor_linger.max(0.0)),
             late_steps: 0,
             hold_substeps: 0,
         })
     }
 
-    /// The row of step `row.step` (the run API's [`StepRow`]): feed the indicator, push a
-    /// frame, then obey the controls and the pace. A stop to ask for is kept for
-    /// [`RunObserver::stop_request`]; warnings go to `warn`.
+    /// The row of step `row.step` (the run API's [`StepRow`]): show a new alarm of the run's
+    /// indicator, push a frame, then obey the controls and the pace. An operator's stop is kept
+    /// for [`RunObserver::stop_request`]; the alarm's message goes to `warn`.
     pub fn tick(&mut self, row: &StepRow<'_>, warn: &mut dyn FnMut(String)) {
         let i = row.step;
-        let mut alarm = None;
-        if let (Some(st), Some(rec)) = (&mut self.stability, &row.coupling) {
-            alarm = st.push(
-                i,
-                row.u,
-                row.v,
-                0.0,
-                rec.coupling_force,
-                &self.last.0,
-                rec.measured_displacement,
-            );
-            self.max_eta = nan_max(self.max_eta, st.eta());
-            self.min_margin = -nan_max(-self.min_margin, -st.margin());
-        }
-        if let Some(a) = alarm {
+        if let Some(a) = row.indicator.and_then(|st| st.alarm())
+            && !self.alarm_shown
+        {
+            self.alarm_shown = true;
             let msg = a.message();
             if let Some(m) = &self.monitor {
                 m.warn(&msg);
             }
-            warn(msg.clone());
-            if self.action == StabilityAction::Stop && !self.stop_sent {
-                self.stopped_by = Some("stability");
+            warn(msg);
+            if row
+                .indicator
+                .is_some_and(|st| st.settings().action == StabilityAction::Stop)
+            {
+                // The run stops itself (the library's indicator); the page's stop is moot.
                 self.stop_sent = true;
-                self.pending = Some(format!("stability stop: {msg}"));
+                self.stopped_by = Some("stability");
             }
         }
         let t = row.t;
         if let Some(m) = &mut self.monitor {
             if let Some(rec) = &row.coupling {
-                let st = &self.stability;
+                let st = row.indicator;
                 let last = &self.last.0;
                 let coupling = &self.coupling;
                 m.push(|f| {
@@ -334,8 +347,6 @@ impl Live {
             ) {
                 msg = Some(a.message());
             }
-            self.max_eta = nan_max(self.max_eta, st.eta());
-            self.min_margin = -nan_max(-self.min_margin, -st.margin());
         }
         if r.holds > 0 {
             self.late_steps += 1;
@@ -367,31 +378,12 @@ impl Live {
         msg
     }
 
-    /// `summary.json`'s `stability` object.
+    /// `summary.json`'s `stability` object of a real-time run (offline runs: the library's
+    /// summary has it).
     pub fn summary(&self) -> Option<Value> {
-        let st = self.stability.as_ref()?;
-        let s = st.settings();
-        Some(json!({
-            "action": s.action.name(),
-            "energy_threshold": s.energy_threshold,
-            "margin_threshold": s.margin_threshold,
-            "window_s": s.window,
-            "max_eta": finite(self.max_eta),
-            "min_margin": finite(self.min_margin),
-            "final_eta": finite(st.eta()),
-            "final_margin": finite(st.margin()),
-            "added_energy_j": st.energy().total_added(),
-            "identified": {
-                "stiffness": st.identification().stiffness().iter().map(|&v| finite(v)).collect::<Vec<_>>(),
-                "damping": st.identification().damping().iter().map(|&v| finite(v)).collect::<Vec<_>>(),
-                "lag_s": st.identification().lag().iter().map(|&v| finite(v)).collect::<Vec<_>>(),
-            },
-            "model_view": st.model_view_note().map_or(Value::from("on"), |n| Value::from(format!("off: {n}"))),
-            "alarm": st.alarm().map(|a| json!({
-                "view": a.view.name(), "step": a.step, "time": a.time, "value": a.value,
-                "threshold": a.threshold, "message": a.message(),
-            })),
-        }))
+        self.stability
+            .as_ref()
+            .and_then(|st| serde_json::to_value(st.summary()).ok())
     }
 
     /// The run ended: hand the result to the page and keep serving it for `--monitor-linger`.
@@ -406,19 +398,5 @@ impl Live {
             }
             m.finish(result, outputs, self.linger);
         }
-    }
-}
-
-fn finite(x: f64) -> Value {
-    if x.is_finite() { json!(x) } else { Value::Null }
-}
-
-fn nan_max(a: f64, b: f64) -> f64 {
-    if a.is_nan() {
-        b
-    } else if b.is_nan() {
-        a
-    } else {
-        a.max(b)
     }
 }

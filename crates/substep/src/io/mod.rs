@@ -11,7 +11,10 @@ pub mod results;
 pub mod run;
 pub mod site_config;
 
-pub use config::{GroundMotion, IntegratorDefinition, OutputSettings, SubstructureDefinition, TestDefinition};
+pub use config::{
+    GroundMotion, IntegratorDefinition, MonitorSettings, OutputSettings, SubstructureDefinition, TestDefinition,
+    check_token,
+};
 pub use limits::Limits;
 pub use matrix_market::{
     parse_matrix_market, parse_matrix_market_sparse, read_matrix_market, read_matrix_market_sparse,

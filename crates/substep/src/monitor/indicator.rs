@@ -6,6 +6,7 @@ use super::model_view::{Identification, ModelView};
 use crate::error::{Error, Result, require_positive};
 use crate::io::SubstructureDefinition;
 use crate::model::Model;
+use serde::Serialize;
 
 /// What crossing a threshold does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -145,6 +146,13 @@ pub struct StabilityMonitor {
     over_energy: usize,
     over_model: usize,
     alarm: Option<Alarm>,
+    /// Worst values so far (NaN until known).
+    max_eta: f64,
+    min_margin: f64,
+    /// A threshold is crossed (for `persistence` evaluations) at the last refresh point.
+    alarm_active: bool,
+    /// Episodes of [`Self::alarm_active`] (the first one raised [`Self::alarm`]).
+    alarm_count: usize,
 }
 
 /// The damping work of the numerical substructure `E_D = Σ Δuᵀ C v̄` (trapezoidal, as
@@ -242,6 +250,10 @@ impl StabilityMonitor {
             over_energy: 0,
             over_model: 0,
             alarm: None,
+            max_eta: f64::NAN,
+            min_margin: f64::NAN,
+            alarm_active: false,
+            alarm_count: 0,
             settings,
         })
     }
@@ -277,21 +289,19 @@ impl StabilityMonitor {
         self.energy.push(force, command, measured, damping, stored);
         self.steps += 1;
         let eta = self.energy.eta();
+        self.max_eta = nan_max(self.max_eta, eta);
         if !self.steps.is_multiple_of(self.settings.refresh) {
             return None;
         }
         // Both views are judged at the refresh points: `persistence` refreshes in a row.
         self.refresh_model();
+        let margin = self.margin();
+        self.min_margin = -nan_max(-self.min_margin, -margin);
         self.over_energy = if eta > self.settings.energy_threshold {
             self.over_energy + 1
         } else {
             0
         };
-        let time = step as f64 * self.dt;
-        if self.alarm.is_some() {
-            return None;
-        }
-        let margin = self.margin();
         let alarm = if self.over_energy >= self.settings.persistence {
             Some((IndicatorView::Energy, eta, self.settings.energy_threshold))
         } else if self.over_model >= self.settings.persistence {
@@ -299,9 +309,16 @@ impl StabilityMonitor {
         } else {
             None
         };
+        if alarm.is_some() && !self.alarm_active {
+            self.alarm_count += 1;
+        }
+        self.alarm_active = alarm.is_some();
+        if self.alarm.is_some() {
+            return None;
+        }
         self.alarm = alarm.map(|(view, value, threshold)| Alarm {
             step,
-            time,
+            time: step as f64 * self.dt,
             view,
             value,
             threshold,
@@ -361,5 +378,112 @@ impl StabilityMonitor {
     }
     pub fn alarm(&self) -> Option<&Alarm> {
         self.alarm.as_ref()
+    }
+    /// Largest `η` so far (NaN while unknown).
+    pub fn max_eta(&self) -> f64 {
+        self.max_eta
+    }
+    /// Smallest margin `1 − ρ` so far (NaN while unknown).
+    pub fn min_margin(&self) -> f64 {
+        self.min_margin
+    }
+    /// Alarm episodes so far: runs of refresh points at which a threshold stays crossed
+    /// (`persistence` evaluations in a row) count once each.
+    pub fn alarm_count(&self) -> usize {
+        self.alarm_count
+    }
+
+    /// `summary.json`'s `stability` block of the run so far.
+    pub fn summary(&self) -> StabilitySummary {
+        let s = &self.settings;
+        let id = &self.ident;
+        StabilitySummary {
+            action: s.action.name(),
+            energy_threshold: s.energy_threshold,
+            margin_threshold: s.margin_threshold,
+            window_s: s.window,
+            max_eta: self.max_eta,
+            min_margin: self.min_margin,
+            final_eta: self.eta(),
+            final_margin: self.margin(),
+            first_alarm_s: self.alarm.map(|a| a.time),
+            alarm_count: self.alarm_count,
+            added_energy_j: self.energy.total_added(),
+            identified: IdentifiedSummary {
+                stiffness: id.stiffness().to_vec(),
+                damping: id.damping().to_vec(),
+                lag_s: id.lag().to_vec(),
+            },
+            model_view: self
+                .view_note
+                .as_ref()
+                .map_or_else(|| "on".to_string(), |n| format!("off: {n}")),
+            alarm: self.alarm.map(|a| AlarmSummary {
+                view: a.view.name(),
+                step: a.step,
+                time: a.time,
+                value: a.value,
+                threshold: a.threshold,
+                message: a.message(),
+            }),
+        }
+    }
+}
+
+/// `summary.json`'s `stability` block. Numbers that are not known (NaN) are written `null`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StabilitySummary {
+    /// `warn` or `stop`.
+    pub action: &'static str,
+    pub energy_threshold: f64,
+    pub margin_threshold: f64,
+    pub window_s: f64,
+    /// Worst values over the run: largest `η`, smallest `1 − ρ`.
+    pub max_eta: f64,
+    pub min_margin: f64,
+    /// The values at the end of the run.
+    pub final_eta: f64,
+    pub final_margin: f64,
+    /// Time of the first alarm \[s\] (`null`: none).
+    pub first_alarm_s: Option<f64>,
+    /// Alarm episodes ([`StabilityMonitor::alarm_count`]).
+    pub alarm_count: usize,
+    /// Energy the transfer system added at the interface over the run \[J\].
+    pub added_energy_j: f64,
+    /// The identified values at the end of the run, per coupling DOF.
+    pub identified: IdentifiedSummary,
+    /// `on`, or `off: ` and why the model view does not run.
+    pub model_view: String,
+    /// The first alarm.
+    pub alarm: Option<AlarmSummary>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct IdentifiedSummary {
+    /// Stiffness \[N/m\], damping \[N s/m\] and lag \[s\] per coupling DOF.
+    pub stiffness: Vec<f64>,
+    pub damping: Vec<f64>,
+    pub lag_s: Vec<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AlarmSummary {
+    /// `energy` or `model`.
+    pub view: &'static str,
+    pub step: usize,
+    pub time: f64,
+    pub value: f64,
+    pub threshold: f64,
+    pub message: String,
+}
+
+/// The larger of two values, ignoring NaN.
+fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() {
+        b
+    } else if b.is_nan() {
+        a
+    } else {
+        a.max(b)
     }
 }

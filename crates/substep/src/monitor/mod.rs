@@ -15,7 +15,10 @@ pub mod energy;
 mod indicator;
 pub mod model_view;
 
-pub use indicator::{Alarm, IndicatorView, StabilityAction, StabilityMonitor, StabilitySettings};
+pub use indicator::{
+    Alarm, AlarmSummary, IdentifiedSummary, IndicatorView, StabilityAction, StabilityMonitor, StabilitySettings,
+    StabilitySummary,
+};
 
 use crate::realtime::{OwnedConsumer, OwnedProducer, owned_ring};
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};

@@ -36,6 +36,7 @@ pub use table::{HistoryTable, Table, push_number};
 use crate::analysis::tracking::{ErrorAccumulator, TrackingMetrics};
 use crate::error::{Error, Result};
 use crate::io::{Reference, Simulation, TestDefinition};
+use crate::monitor::{StabilityAction, StabilityMonitor, StabilitySettings};
 use crate::substructure::{StepRecord, SubstepObserver};
 use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -58,6 +59,9 @@ pub struct Layout {
     pub extra_groups: Vec<&'static str>,
     /// The history has the reference's displacements `uref1..urefn`.
     pub reference: bool,
+    /// The stability indicator runs: the history ends with `eta`, `margin` and, per coupling
+    /// DOF, `k_id`, `c_id`, `lag_id` (docs/monitor.md).
+    pub indicator: bool,
     pub dt: f64,
     /// `k_sub` of a substructured run, `None` for a monolithic one (no sub-step rows).
     pub substeps: Option<usize>,
@@ -75,7 +79,8 @@ fn group(names: &mut Vec<String>, prefix: &str, n: usize) {
 
 impl Layout {
     /// The columns of `history.csv`: `t, u1..un, v1..vn, a1..an`, for substructured runs `fc,
-    /// fe, fu, dm` and the extra groups per coupling DOF, with a reference `uref1..urefn`.
+    /// fe, fu, dm` and the extra groups per coupling DOF, with a reference `uref1..urefn`, with
+    /// the stability indicator `eta, margin, k_id1.., c_id1.., lag_id1..`.
     pub fn history_columns(&self) -> Vec<String> {
         let n_c = self.coupling_dofs.len();
         let mut c = vec!["t".to_string()];
@@ -90,6 +95,13 @@ impl Layout {
         }
         if self.reference {
             group(&mut c, "uref", self.n_dofs);
+        }
+        if self.indicator {
+            c.push("eta".into());
+            c.push("margin".into());
+            for p in ["k_id", "c_id", "lag_id"] {
+                group(&mut c, p, n_c);
+            }
         }
         c
     }
@@ -131,6 +143,8 @@ pub struct StepRow<'a> {
     pub reference: Option<&'a [f64]>,
     /// The engineering row, when it is recorded.
     pub engineering: Option<EngineeringRow<'a>>,
+    /// The stability indicator after this step's data, when it runs.
+    pub indicator: Option<&'a StabilityMonitor>,
 }
 
 impl StepRow<'_> {
@@ -151,6 +165,12 @@ impl StepRow<'_> {
             }))
             .chain(self.extra.iter().copied())
             .chain(self.reference.into_iter().flatten().copied())
+            .chain(self.indicator.into_iter().flat_map(|m| {
+                let id = m.identification();
+                [m.eta(), m.margin()]
+                    .into_iter()
+                    .chain(id.stiffness().iter().chain(id.damping()).chain(id.lag()).copied())
+            }))
     }
 }
 
@@ -162,9 +182,11 @@ pub trait RunObserver: SubstepObserver {
     fn start(&mut self, _layout: &Layout) {}
     fn step(&mut self, row: &StepRow<'_>) -> ControlFlow<()>;
     /// A controlled stop the front end asks for after [`step`](Self::step) (an operator on the
-    /// monitor page, the stability indicator): the loop hands `reason` to the test's safety
-    /// ramp ([`Simulation::request_stop`]), so the next step ramps the actuators to the safe
-    /// position and the run ends `Stopped` with `reason`. Default: never.
+    /// monitor page): the loop hands `reason` to the test's safety ramp
+    /// ([`Simulation::request_stop`]), so the next step ramps the actuators to the safe position
+    /// and the run ends `Stopped` with `reason` and `stopped_by: "operator"`. The stability
+    /// indicator's stop (`stability = "stop"`) is the loop's own. Only the first stop counts.
+    /// Default: never.
     fn stop_request(&mut self) -> Option<String> {
         None
     }
@@ -189,16 +211,20 @@ impl<A: SubstepObserver + ?Sized, B: SubstepObserver> SubstepObserver for Both<'
     }
 }
 
-/// What the loop itself gathers from the sub-steps: the tracking metrics and the ramp
-/// sub-steps after a safety stop.
+/// What the loop itself gathers from the sub-steps: the tracking metrics, the ramp sub-steps
+/// after a safety stop and the last command (the stability indicator's).
 struct SubstepMetrics {
     tracking: TrackingMetrics,
     ramp: usize,
+    command: Vec<f64>,
 }
 
 impl SubstepObserver for SubstepMetrics {
     fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
         self.tracking.substep(step, j, command, force, displacement);
+        if command.len() == self.command.len() {
+            self.command.copy_from_slice(command);
+        }
     }
     fn ramp(&mut self, _step: usize, _j: usize, _s: usize, _command: &[f64], _force: &[f64], _displacement: &[f64]) {
         self.ramp += 1;
@@ -332,7 +358,18 @@ pub struct Run<'d> {
     /// Computed after the loop (a long record's Fourier amplitude takes a while; a remote site
     /// should not wait for it between connecting and the first step).
     input_motion: Option<InputMotion>,
+    /// The on-line stability indicator (`[substructure.limits] stability`, or
+    /// [`Self::set_stability`]).
+    stability: Option<StabilityMonitor>,
     layout: Layout,
+}
+
+/// The indicator of `settings` for the test `def` (`None` without a substructure).
+fn stability_monitor(def: &TestDefinition, settings: Option<StabilitySettings>) -> Result<Option<StabilityMonitor>> {
+    match (&def.substructure, settings) {
+        (Some(sub), Some(s)) => Ok(Some(StabilityMonitor::new(sub, &def.model, def.integrator.dt, s)?)),
+        _ => Ok(None),
+    }
 }
 
 impl<'d> Run<'d> {
@@ -341,11 +378,16 @@ impl<'d> Run<'d> {
         let reference = Reference::new(def)?;
         let engineering = EngineeringRecorder::new(def);
         let sub = def.substructure.as_ref();
+        let stability = stability_monitor(
+            def,
+            sub.and_then(|s| s.limits.as_ref()).and_then(|l| l.stability.clone()),
+        )?;
         let layout = Layout {
             n_dofs: def.model.n_dofs(),
             coupling_dofs: sub.map_or_else(Vec::new, |s| s.coupling_dofs.clone()),
             extra_groups: extra_groups(def),
             reference: reference.is_some(),
+            indicator: stability.is_some(),
             dt: def.integrator.dt,
             substeps: sub.map(|s| s.substeps),
             phase_lag: sub.is_some_and(|s| s.phase_lag.is_some()),
@@ -358,8 +400,22 @@ impl<'d> Run<'d> {
             reference,
             engineering,
             input_motion: None,
+            stability,
             layout,
         })
+    }
+
+    /// Run the stability indicator with `settings` whatever the config says (`None`: not at
+    /// all), e.g. for a front end's `--stability`. A test without a substructure has none.
+    pub fn set_stability(&mut self, settings: Option<StabilitySettings>) -> Result<()> {
+        self.stability = stability_monitor(self.def, settings)?;
+        self.layout.indicator = self.stability.is_some();
+        Ok(())
+    }
+
+    /// The stability indicator, when it runs.
+    pub fn stability(&self) -> Option<&StabilityMonitor> {
+        self.stability.as_ref()
     }
 
     pub fn layout(&self) -> &Layout {
@@ -382,6 +438,7 @@ impl<'d> Run<'d> {
             reference,
             engineering,
             input_motion,
+            stability,
             layout,
         } = self;
         let def: &TestDefinition = def;
@@ -399,7 +456,13 @@ impl<'d> Run<'d> {
         let mut metrics = SubstepMetrics {
             tracking: TrackingMetrics::new(coupling.len(), substep_length),
             ramp: 0,
+            command: vec![0.0; coupling.len()],
         };
+        let mut indicator_warnings = Vec::new();
+        // The first stop asked for (indicator or observer) and who asked.
+        let mut stop_sent = false;
+        let mut stopped_by: Option<&'static str> = None;
+        let mut pending_stop: Option<String> = None;
         let started = Instant::now();
         let mut compute = Duration::ZERO;
         let mut failure: Option<Error> = None;
@@ -414,6 +477,25 @@ impl<'d> Run<'d> {
                 break;
             }
             let s = sim.state();
+            if let (Some(st), Some(rec)) = (stability.as_mut(), sim.coupling())
+                && let Some(alarm) = st.push(
+                    i,
+                    s.u.as_slice(),
+                    s.v.as_slice(),
+                    sim.ground_acceleration(i),
+                    rec.coupling_force,
+                    &metrics.command,
+                    rec.measured_displacement,
+                )
+            {
+                let msg = alarm.message();
+                if st.settings().action == StabilityAction::Stop && !stop_sent {
+                    stop_sent = true;
+                    stopped_by = Some("stability");
+                    pending_stop = Some(format!("stability stop: {msg}"));
+                }
+                indicator_warnings.push(msg);
+            }
             let flow = observer.step(&StepRow {
                 step: i,
                 t: sim.time(),
@@ -424,9 +506,18 @@ impl<'d> Run<'d> {
                 extra: &extra,
                 reference: reference.as_ref().map(|r| r.u()),
                 engineering: engineering.as_ref().map(|e| e.row(sim.time())),
+                indicator: stability.as_ref(),
             });
             recorder.record(sim, reference.as_ref());
-            if let Some(reason) = observer.stop_request()
+            let asked = observer.stop_request();
+            if let Some(reason) = asked
+                && !stop_sent
+            {
+                stop_sent = true;
+                stopped_by = Some("operator");
+                pending_stop = Some(reason);
+            }
+            if let Some(reason) = pending_stop.take()
                 && !sim.request_stop(&reason)
             {
                 failure = Some(Error::Stopped {
@@ -493,7 +584,8 @@ impl<'d> Run<'d> {
             Some(e) => (Some(done + 1), Some(e.to_string())),
             None => (None, None),
         };
-        let (estimation, phase_lag, warnings) = summary::compensation_summary(sim);
+        let (estimation, phase_lag, mut warnings) = summary::compensation_summary(sim);
+        warnings.extend(indicator_warnings);
         let sub = def.substructure.as_ref();
         RunSummary {
             config: def.source.clone(),
@@ -508,6 +600,8 @@ impl<'d> Run<'d> {
             steps_done: done,
             stopped_at_step,
             reason,
+            // Named only when the run did end by that stop (not by a later divergence).
+            stopped_by: stopped_by.filter(|_| matches!(failure, Some(Error::Stopped { .. }))),
             ramp_substeps: (metrics.ramp > 0).then_some(metrics.ramp),
             wall_time_s: wall,
             us_per_step: compute.as_secs_f64() * 1e6 / done.max(1) as f64,
@@ -549,6 +643,7 @@ impl<'d> Run<'d> {
             reference: reference.as_ref().map(|r| recorder.reference_summary(r)),
             estimation,
             phase_lag,
+            stability: stability.as_ref().map(StabilityMonitor::summary),
             warnings,
             input_motion: motion_summary,
             engineering: engineering.as_ref().map(EngineeringRecorder::summary),

@@ -93,6 +93,10 @@ pub struct RunSummary {
     pub stopped_at_step: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// `operator` (a front end's [`super::RunObserver::stop_request`]) or `stability` (the
+    /// indicator's `stability = "stop"`), when the run ended by that controlled stop.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stopped_by: Option<&'static str>,
     /// Sub-steps of the ramp to the safe position after a safety stop (in `substeps.csv`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ramp_substeps: Option<usize>,
@@ -113,6 +117,9 @@ pub struct RunSummary {
     /// Phase-lag compensation: kind and guard trips.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phase_lag: Option<Value>,
+    /// The on-line stability indicator: thresholds, worst values, alarms (docs/monitor.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stability: Option<crate::monitor::StabilitySummary>,
     /// Warnings of the run (e.g. a phase-lag compensator disabled by its guard).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,

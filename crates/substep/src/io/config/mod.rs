@@ -30,6 +30,7 @@ mod actuator;
 mod compensation;
 mod ground_motion;
 mod integrator;
+mod monitor;
 mod output;
 mod remote;
 mod safety_limits;
@@ -52,6 +53,8 @@ pub use ground_motion::GroundMotion;
 use ground_motion::RawGroundMotion;
 pub use integrator::IntegratorDefinition;
 use integrator::RawIntegrator;
+use monitor::RawMonitor;
+pub use monitor::{MAX_TOKEN_CHARS, MIN_TOKEN_CHARS, MonitorSettings, check_token};
 use nalgebra::DMatrix;
 use output::{Format, RawOutput};
 pub use output::{OutputSettings, PLOT_FIGURES, PlotOptions};
@@ -77,6 +80,8 @@ pub struct TestDefinition {
     pub integrator: IntegratorDefinition,
     pub substructure: Option<SubstructureDefinition>,
     pub output: OutputSettings,
+    /// `[monitor]`: token and address of the live page (used with `--monitor`).
+    pub monitor: MonitorSettings,
 }
 
 impl TestDefinition {
@@ -138,6 +143,8 @@ pub(crate) struct RawConfig {
     #[serde(default)]
     pub(crate) output: RawOutput,
     pub(crate) limits: Option<RawRunLimits>,
+    #[serde(default)]
+    pub(crate) monitor: RawMonitor,
 }
 
 /// `[limits]`: what one run may ask of the machine (docs/limits.md).
@@ -376,6 +383,7 @@ impl RawConfig {
                     },
                 }
             },
+            monitor: self.monitor.build()?,
         })
     }
 }

@@ -280,5 +280,6 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
             plot_options: Default::default(),
             format: Default::default(),
         },
+        monitor: Default::default(),
     })
 }

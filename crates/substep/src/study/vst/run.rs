@@ -4,6 +4,7 @@
 use super::{ErrorForceSpec, Method, TOP, VstSettings, definition, methods};
 use crate::analysis::spectral::band_coherence;
 use crate::io::{Reference, Simulation};
+use crate::monitor::{StabilityMonitor, StabilitySettings, StabilitySummary};
 use crate::substructure::SubstepObserver;
 use crate::{Error, Result};
 
@@ -57,6 +58,9 @@ pub struct RunResult {
     pub estimated: Option<(u64, u64)>,
     /// Guard warnings.
     pub warnings: Vec<String>,
+    /// The on-line stability indicator with its default settings (docs/monitor.md), fed with
+    /// every step of the run: a stable method raises no alarm.
+    pub stability: StabilitySummary,
     pub series: Series,
 }
 
@@ -87,6 +91,8 @@ struct Tracking {
     sum: f64,
     count: usize,
     last: f64,
+    /// The last command (the stability indicator's input).
+    command: f64,
 }
 
 impl SubstepObserver for Tracking {
@@ -94,6 +100,7 @@ impl SubstepObserver for Tracking {
         // The displacement sensor is ideal: measured = achieved (y_true).
         let e = command[0] - displacement[0];
         self.last = e;
+        self.command = command[0];
         if step as f64 * self.dt > self.from {
             self.sum += e * e;
             self.count += 1;
@@ -138,6 +145,24 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
         sum: 0.0,
         count: 0,
         last: 0.0,
+        command: 0.0,
+    };
+    let sub = def.substructure.as_ref().expect("the VST is substructured");
+    let mut indicator = StabilityMonitor::new(sub, &def.model, s.dt, StabilitySettings::default())?;
+    let feed = |indicator: &mut StabilityMonitor, sim: &Simulation, command: f64| {
+        if let Some(rec) = sim.coupling() {
+            let st = sim.state();
+            let i = sim.steps_done();
+            indicator.push(
+                i,
+                st.u.as_slice(),
+                st.v.as_slice(),
+                sim.ground_acceleration(i),
+                rec.coupling_force,
+                &[command],
+                rec.measured_displacement,
+            );
+        }
     };
     let mut ser = Series::default();
     let push = |ser: &mut Series, sim: &Simulation, te: f64| {
@@ -156,6 +181,7 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
         ser.tracking.push(te);
     };
     push(&mut ser, &sim, 0.0);
+    feed(&mut indicator, &sim, 0.0);
     let mut completed = true;
     while sim.steps_done() < sim.steps_total() {
         if sim.step(&mut track).is_err() {
@@ -163,6 +189,7 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
             break;
         }
         push(&mut ser, &sim, track.last);
+        feed(&mut indicator, &sim, track.command);
     }
     let n = ser.t.len();
     let err = |x: &[f64], r: &[f64]| -> (f64, f64) {
@@ -209,6 +236,7 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
         },
         estimated: test.controller.estimation_stats().map(|st| (st.estimated, st.steps)),
         warnings,
+        stability: indicator.summary(),
         series: ser,
     })
 }
