@@ -301,3 +301,169 @@ fn decode_base64(s: &str) -> Vec<u8> {
     }
     out
 }
+
+/// `[monitor] token` and `address` in the config (no browser needed): the page is served at
+/// the config's address, the token is not printed, /control refuses another token (403) and
+/// accepts the config's, whose stop ends the run with `stopped_by: operator`.
+#[test]
+fn the_config_token_opens_the_controls_and_no_other_does() {
+    let dir = std::env::temp_dir().join(format!("substep_monitor_token_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = free_port();
+    let token = "cfg-token-5e1f09a7c3";
+    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/default.toml")).unwrap();
+    let cfg = dir.join("test.toml");
+    std::fs::write(
+        &cfg,
+        format!("{base}\n[monitor]\ntoken = \"{token}\"\naddress = \"127.0.0.1:{port}\"\n"),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let mut run = Command::new(env!("CARGO_BIN_EXE_substep"))
+        .arg("run")
+        .arg(&cfg)
+        .arg("--out")
+        .arg(&out)
+        .args([
+            "--no-plots",
+            "--quiet",
+            "--pace",
+            "2",
+            "--monitor-linger",
+            "0",
+            "--monitor",
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    struct Kill<'a>(&'a mut Child);
+    impl Drop for Kill<'_> {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(run.stdout.take().unwrap()), &mut line).unwrap();
+    let run = Kill(&mut run);
+    assert!(
+        line.contains(&format!("http://127.0.0.1:{port}/")) && line.contains("[monitor] token"),
+        "{line}"
+    );
+    assert!(!line.contains(token), "the config's token is printed: {line}");
+    let t0 = Instant::now();
+    while http(port, "GET", "/state", None).is_err() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "monitor did not come up");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    for wrong in [
+        "",
+        "cfg-token-5e1f09a7c4",
+        "cfg-token-5e1f09a7c3x",
+        "0123456789abcdef0123456789abcdef",
+    ] {
+        let (code, body) = http(
+            port,
+            "POST",
+            "/control",
+            Some(&json!({ "token": wrong, "action": "stop" })),
+        )
+        .unwrap();
+        assert_eq!(code, 403, "token {wrong:?}: {body}");
+    }
+    let (_, state) = http(port, "GET", "/state", None).unwrap();
+    let state: Value = serde_json::from_str(&state).unwrap();
+    assert!(state["stop"].is_null() && state["finished"].is_null(), "{state}");
+    let (code, body) = http(
+        port,
+        "POST",
+        "/control",
+        Some(&json!({ "token": token, "action": "ack" })),
+    )
+    .unwrap();
+    assert_eq!(code, 200, "{body}");
+    let (code, body) = http(
+        port,
+        "POST",
+        "/control",
+        Some(&json!({ "token": token, "action": "stop" })),
+    )
+    .unwrap();
+    assert_eq!(code, 200, "{body}");
+    let child = &mut *run.0;
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "the run did not end after the stop"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert_eq!(status.code(), Some(1), "a stopped run exits with 1");
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["stopped_by"], "operator", "{summary}");
+    assert_eq!(summary["completed"], false);
+    assert!(summary["steps_done"].as_u64().unwrap() < 2000);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Bad tokens and addresses are refused before the run: exit 2, one line naming the key.
+#[test]
+fn bad_monitor_tokens_and_addresses_are_refused_naming_the_key() {
+    let dir = std::env::temp_dir().join(format!("substep_monitor_bad_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/default.toml")).unwrap();
+    let cases: &[(&str, &[&str], &str)] = &[
+        ("token = \"\"", &[], "monitor.token: is empty"),
+        (
+            "token = \"short-token\"",
+            &[],
+            "monitor.token: is 11 characters; a control token needs at least 16",
+        ),
+        (
+            "token = \"with a space 0123456\"",
+            &[],
+            "monitor.token: must be printable ASCII without spaces; it contains ' '",
+        ),
+        (
+            "token = \"non-ascii-token-é12345\"",
+            &[],
+            "monitor.token: must be printable ASCII without spaces; it contains 'é'",
+        ),
+        (
+            "address = \"here\"",
+            &[],
+            "monitor.address: 'here' is not an address host:port",
+        ),
+        (
+            "",
+            &["--monitor", "127.0.0.1:0", "--monitor-token", "1234567"],
+            "--monitor-token: is 7 characters; a control token needs at least 16",
+        ),
+    ];
+    for (i, (table, args, expected)) in cases.iter().enumerate() {
+        let cfg = dir.join(format!("bad{i}.toml"));
+        std::fs::write(&cfg, format!("{base}\n[monitor]\n{table}\n")).unwrap();
+        let out = dir.join(format!("out{i}"));
+        let o = Command::new(env!("CARGO_BIN_EXE_substep"))
+            .arg("run")
+            .arg(&cfg)
+            .arg("--out")
+            .arg(&out)
+            .args(["--no-plots", "--quiet", "--monitor-linger", "0"])
+            .args(*args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{table} {args:?}: {err}");
+        assert!(err.contains(expected), "{table} {args:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(!out.exists(), "a refused config wrote {}", out.display());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

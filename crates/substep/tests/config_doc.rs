@@ -82,6 +82,7 @@ const TABLES: &[(&str, Option<&str>, &str)] = &[
     ("[substructure.phase_lag]", None, "### `[substructure.phase_lag]`"),
     ("[substructure.remote]", None, "### `[substructure.remote]`"),
     ("[substructure.limits]", None, "### `[substructure.limits]`"),
+    ("[monitor]", None, "## `[monitor]`"),
     ("[output]", None, "## `[output]`"),
     ("[output.plots]", None, "## `[output]`"),
 ];

@@ -2,6 +2,7 @@
 //! and the method list.
 
 use substep::study::vst::{ORDERS, VstSettings, acceptance, methods, run_study};
+use substep::substructure::ErrorForceSpec;
 
 /// The acceptance lines on the shortened study (12 s sweep, 10 ms delay, 1 % noise).
 #[test]
@@ -45,6 +46,49 @@ fn quick_study_meets_the_acceptance_lines() {
     }
     let checks = acceptance(&st);
     assert_eq!(checks.iter().filter(|(_, ok)| !ok).count(), 1, "{checks:?}");
+    // 4. The on-line stability indicator (default settings, fed every step of every method)
+    //    raises no alarm on the study: every method is stable. Both views must have run.
+    let (mut worst_eta, mut worst_margin) = (f64::NEG_INFINITY, f64::INFINITY);
+    for r in &st.runs {
+        let s = &r.stability;
+        assert!(
+            s.alarm.is_none() && s.alarm_count == 0 && s.first_alarm_s.is_none(),
+            "{}: {:?}",
+            r.method.key,
+            s.alarm
+        );
+        // The model view analyses linear algorithms: off with error-force estimation.
+        let estimation = matches!(r.method.error_force, ErrorForceSpec::Arx { .. });
+        assert_eq!(
+            s.model_view.starts_with("off"),
+            estimation,
+            "{}: {}",
+            r.method.key,
+            s.model_view
+        );
+        assert!(
+            s.max_eta.is_finite() && s.max_eta < s.energy_threshold,
+            "{}: {s:?}",
+            r.method.key
+        );
+        assert!(
+            estimation || (s.min_margin.is_finite() && s.min_margin > s.margin_threshold),
+            "{}: {s:?}",
+            r.method.key
+        );
+        println!(
+            "{:12} max η = {:.3}, min margin = {:.3e}",
+            r.method.key, s.max_eta, s.min_margin
+        );
+        worst_eta = worst_eta.max(s.max_eta);
+        if s.min_margin.is_finite() {
+            worst_margin = worst_margin.min(s.min_margin);
+        }
+    }
+    println!(
+        "{} runs: worst η = {worst_eta:.3}, worst margin = {worst_margin:.3e}",
+        st.runs.len()
+    );
 }
 
 #[test]

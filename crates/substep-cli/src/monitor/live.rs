@@ -335,8 +335,7 @@ impl Live {
         let mut msg = None;
         if let Some(st) = &mut self.stability
             && r.u.len() == r.v.len()
-        {
-            if let Some(a) = st.push(
+            && let Some(a) = st.push(
                 r.step,
                 &r.u,
                 &r.v,
@@ -344,9 +343,9 @@ impl Live {
                 &r.coupling_force,
                 &r.command,
                 &r.measured_displacement,
-            ) {
-                msg = Some(a.message());
-            }
+            )
+        {
+            msg = Some(a.message());
         }
         if r.holds > 0 {
             self.late_steps += 1;

@@ -7,6 +7,7 @@ use crate::error::{Error, Result};
 use crate::io::SubstructureDefinition;
 use crate::model::StructuralModel;
 use crate::specimen::SpecimenSpec;
+use crate::substructure::ErrorForceSpec;
 use crate::transfer::{ActuatorSpec, Dynamics};
 
 /// Exponentially weighted least squares with forgetting `λ`: the RLS of [`crate::ident`]
@@ -143,6 +144,13 @@ impl ModelView {
                     "the numerical model has {} DOFs; the view probes models up to {MODEL_VIEW_MAX_DOFS} DOFs",
                     model.n_dofs()
                 ),
+            ));
+        }
+        if matches!(sub.error_force, ErrorForceSpec::Arx { .. }) {
+            // Probing needs a linear step map; the estimation identifies its model on line.
+            return Err(Error::invalid(
+                "stability model view",
+                "error-force estimation (error_force.kind = \"arx\") is adaptive; the view analyses linear algorithms only (the energy view runs)",
             ));
         }
         let mut base = sub.clone();

@@ -31,16 +31,16 @@ impl RawMonitor {
         if let Some(t) = &self.token {
             check_token("monitor.token", t)?;
         }
-        if let Some(a) = &self.address {
-            if a.parse::<std::net::SocketAddr>().is_err() {
-                return Err(Error::invalid(
-                    "monitor.address",
-                    format!(
-                        "'{}' is not an address host:port (e.g. \"127.0.0.1:8080\")",
-                        a.escape_debug()
-                    ),
-                ));
-            }
+        if let Some(a) = &self.address
+            && a.parse::<std::net::SocketAddr>().is_err()
+        {
+            return Err(Error::invalid(
+                "monitor.address",
+                format!(
+                    "'{}' is not an address host:port (e.g. \"127.0.0.1:8080\")",
+                    a.escape_debug()
+                ),
+            ));
         }
         Ok(MonitorSettings {
             token: self.token,
