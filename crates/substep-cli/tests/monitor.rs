@@ -455,7 +455,7 @@ fn bad_monitor_tokens_and_addresses_are_refused_naming_the_key() {
             .arg(&cfg)
             .arg("--out")
             .arg(&out)
-            .args(["--no-plots", "--quiet", "--monitor-linger", "0"])
+            .args(["--no-plots", "--quiet"])
             .args(*args)
             .output()
             .unwrap();
