@@ -162,6 +162,25 @@ def test_a_stopped_run_raises_run_error_with_the_cli_message(cli, root, tmp_path
     assert r2.error == str(e.value)
 
 
+def test_the_stability_indicator_columns_and_summary_equal_the_cli(cli, root, tmp_path, monkeypatch):
+    text = (root / "examples" / "default.toml").read_text()
+    text += '\n[substructure.limits]\nstability = "warn"\n'
+    (tmp_path / "stability.toml").write_text(text)
+    monkeypatch.chdir(tmp_path)
+    p = run_cli(cli, "run", "stability.toml", "--out", "out", "--quiet", "--no-plots", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    r = substep.run("stability.toml")
+    assert r.history.names[-5:] == ["eta", "margin", "k_id1", "c_id1", "lag_id1"]
+    csv = read_csv_exact(tmp_path / "out" / "history.csv")
+    pd.testing.assert_frame_equal(r.to_pandas(), csv.astype(float), check_exact=True)
+    cli_summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert comparable(r.summary) == comparable(cli_summary)
+    st = r.summary["stability"]
+    assert st["alarm"] is None and st["alarm_count"] == 0
+    assert st["max_eta"] == np.nanmax(r.history["eta"])
+    assert st["min_margin"] == np.nanmin(r.history["margin"])
+
+
 def long_config(root) -> str:
     """The default example over 2000 s: long enough to be interrupted."""
     return (root / "examples" / "default.toml").read_text().replace("duration = 20.0", "duration = 2000.0")
