@@ -131,6 +131,30 @@ pub fn markdown(st: &Study) -> String {
             pct(r.force_rms),
         );
     }
+    md.push_str(
+        "\n## On-line stability indicator (default settings, every run)\n\n\
+         Largest energy ratio η (alarm above 0.8), smallest model margin 1 − ρ (alarm below −0.001; \
+         – where the model view is off: error-force estimation), alarms (docs/monitor.md).\n\n\
+         | run | max η | min 1 − ρ | alarms |\n|---|---|---|---|\n",
+    );
+    for r in &st.runs {
+        let s = &r.stability;
+        let margin = if s.min_margin.is_finite() {
+            format!("{:.1e}", s.min_margin)
+        } else {
+            "–".into()
+        };
+        let alarms = match &s.alarm {
+            None => "none".to_string(),
+            Some(a) => format!("{} (first at {:.2} s, {} view)", s.alarm_count, a.time, a.view),
+        };
+        let _ = writeln!(
+            md,
+            "| {} | {} | {margin} | {alarms} |",
+            r.method.name,
+            num(s.max_eta, 3)
+        );
+    }
     md.push_str("\n## Acceptance checks (computed by the tool)\n\n");
     for (text, ok) in acceptance(st) {
         let _ = writeln!(md, "* {} — {}", if ok { "holds" } else { "**does not hold**" }, text);
@@ -148,7 +172,7 @@ pub fn markdown(st: &Study) -> String {
 /// `vst.csv`: one row per run.
 pub fn csv(st: &Study) -> String {
     let mut out = String::from(
-        "key,name,completed,u_rms,u_peak,f_rms,f_peak,f_meas_rms,tracking_rms_m,e_rms_n,ideal_rms_n,diff_rms_n,coherence,equilibrium_rms_n,estimated,steps\n",
+        "key,name,completed,u_rms,u_peak,f_rms,f_peak,f_meas_rms,tracking_rms_m,e_rms_n,ideal_rms_n,diff_rms_n,coherence,equilibrium_rms_n,estimated,steps,max_eta,min_margin,stability_alarms\n",
     );
     for r in &st.runs {
         let (e, n) = r
@@ -156,7 +180,7 @@ pub fn csv(st: &Study) -> String {
             .map_or((String::new(), String::new()), |(a, b)| (a.to_string(), b.to_string()));
         let _ = writeln!(
             out,
-            "{},\"{}\",{},{},{},{},{},{},{},{},{},{},{},{},{e},{n}",
+            "{},\"{}\",{},{},{},{},{},{},{},{},{},{},{},{},{e},{n},{},{},{}",
             r.method.key,
             r.method.name,
             r.completed,
@@ -170,7 +194,10 @@ pub fn csv(st: &Study) -> String {
             r.ideal_rms,
             r.diff_rms,
             r.coherence,
-            r.equilibrium_rms
+            r.equilibrium_rms,
+            r.stability.max_eta,
+            r.stability.min_margin,
+            r.stability.alarm_count
         );
     }
     out
