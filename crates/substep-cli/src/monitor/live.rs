@@ -261,8 +261,8 @@ impl Live {
                     }
                 });
             }
+            self.page_stop();
         }
-        self.page_stop();
         // Hold between steps until resumed or stopped.
         let mut held = false;
         while let Some(m) = &self.monitor
