@@ -717,22 +717,14 @@ fn forward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut 
     for g in (0..nc).step_by(4) {
         let width = (nc - g).min(4);
         let block = &off[g * r..(g + width) * r];
-        if width == 4 {
-            let (y0, y1, y2, y3) = (top[g], top[g + 1], top[g + 2], top[g + 3]);
-            for (t, v) in tmp.iter_mut().zip(block.chunks_exact(4)) {
-                let a = madd::<FMA>(v[1], y1, v[0] * y0);
-                let b = madd::<FMA>(v[3], y3, v[2] * y2);
-                *t += a + b;
-            }
-        } else {
-            let y = &top[g..g + width];
-            for (t, v) in tmp.iter_mut().zip(block.chunks_exact(width)) {
-                let mut acc = *t;
-                for (&vl, &yl) in v.iter().zip(y) {
-                    acc = madd::<FMA>(vl, yl, acc);
-                }
-                *t = acc;
-            }
+        let y = &top[g..g + width];
+        // The width is a constant in each arm, so the per-row loop is unrolled (frames have
+        // three DOFs per node: groups of one to three columns are common, not a remainder).
+        match width {
+            4 => forward_group::<FMA, 4>(block, y, tmp),
+            3 => forward_group::<FMA, 3>(block, y, tmp),
+            2 => forward_group::<FMA, 2>(block, y, tmp),
+            _ => forward_group::<FMA, 1>(block, y, tmp),
         }
     }
     for (&p, &t) in pat.iter().zip(tmp.iter()) {
@@ -765,40 +757,14 @@ fn backward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut
         for g in (0..nc).step_by(4) {
             let width = (nc - g).min(4);
             let block = &off[g * r..(g + width) * r];
-            if width == 4 {
-                // Four lanes (one per column), two sets for even and odd rows so that
-                // consecutive rows do not wait on each other's additions.
-                let (mut even, mut odd) = ([0.0; 4], [0.0; 4]);
-                let (pairs, rest) = (block.chunks_exact(8), tmp.chunks_exact(2));
-                let last = if r % 2 == 1 {
-                    Some((&block[8 * (r / 2)..], tmp[r - 1]))
-                } else {
-                    None
-                };
-                for (v, t) in pairs.zip(rest) {
-                    for l in 0..4 {
-                        even[l] = madd::<FMA>(v[l], t[0], even[l]);
-                        odd[l] = madd::<FMA>(v[4 + l], t[1], odd[l]);
-                    }
-                }
-                if let Some((v, t)) = last {
-                    for l in 0..4 {
-                        even[l] = madd::<FMA>(v[l], t, even[l]);
-                    }
-                }
-                for l in 0..4 {
-                    w.own[at + g + l] -= even[l] + odd[l];
-                }
-            } else {
-                let mut acc = [0.0; 4];
-                for (v, &t) in block.chunks_exact(width).zip(tmp.iter()) {
-                    for l in 0..width {
-                        acc[l] = madd::<FMA>(v[l], t, acc[l]);
-                    }
-                }
-                for (l, a) in acc.iter().take(width).enumerate() {
-                    w.own[at + g + l] -= a;
-                }
+            let acc = match width {
+                4 => backward_group::<FMA, 4>(block, tmp),
+                3 => backward_group::<FMA, 3>(block, tmp),
+                2 => backward_group::<FMA, 2>(block, tmp),
+                _ => backward_group::<FMA, 1>(block, tmp),
+            };
+            for (l, a) in acc.iter().take(width).enumerate() {
+                w.own[at + g + l] -= a;
             }
         }
     }
@@ -810,6 +776,53 @@ fn backward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut
         let d = dot::<FMA>(&col[1..], &top[j + 1..]);
         top[j] = (top[j] - d) * col[0];
     }
+}
+
+/// `tmp += block · y` for a group of `W` columns stored row by row.
+#[inline(always)]
+fn forward_group<const FMA: bool, const W: usize>(block: &[f64], y: &[f64], tmp: &mut [f64]) {
+    let mut yw = [0.0; W];
+    yw.copy_from_slice(&y[..W]);
+    for (t, v) in tmp.iter_mut().zip(block.chunks_exact(W)) {
+        if W == 4 {
+            // Two short chains instead of one of four.
+            let a = madd::<FMA>(v[1], yw[1], v[0] * yw[0]);
+            let b = madd::<FMA>(v[3], yw[3], v[2] * yw[2]);
+            *t += a + b;
+        } else {
+            let mut acc = *t;
+            for l in 0..W {
+                acc = madd::<FMA>(v[l], yw[l], acc);
+            }
+            *t = acc;
+        }
+    }
+}
+
+/// `blockᵀ · tmp` for a group of `W ≤ 4` columns stored row by row (lanes `W..` are zero);
+/// even and odd rows in separate partial sums, so consecutive rows do not wait on each
+/// other's additions.
+#[inline(always)]
+fn backward_group<const FMA: bool, const W: usize>(block: &[f64], tmp: &[f64]) -> [f64; 4] {
+    let (mut even, mut odd) = ([0.0; W], [0.0; W]);
+    let r = tmp.len();
+    for (v, t) in block.chunks_exact(2 * W).zip(tmp.chunks_exact(2)) {
+        for l in 0..W {
+            even[l] = madd::<FMA>(v[l], t[0], even[l]);
+            odd[l] = madd::<FMA>(v[W + l], t[1], odd[l]);
+        }
+    }
+    if r % 2 == 1 {
+        let (v, t) = (&block[W * (r - 1)..W * r], tmp[r - 1]);
+        for l in 0..W {
+            even[l] = madd::<FMA>(v[l], t, even[l]);
+        }
+    }
+    let mut out = [0.0; 4];
+    for l in 0..W {
+        out[l] = even[l] + odd[l];
+    }
+    out
 }
 
 /// Dot product with eight partial sums (vectorises; the order is fixed, so reruns are
