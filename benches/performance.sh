@@ -4,8 +4,9 @@
 # with OpenSees, SciPy splu (COLAMD, MMD) and CHOLMOD (each skipped if not installed) on the
 # 5000-DOF chain and the 10^4- and 10^5-DOF frames. Peers: python3 -m venv .venv &&
 # .venv/bin/pip install scipy openseespy (OpenSees needs apt-get install libblas3 liblapack3;
-# CHOLMOD: libsuitesparse-dev + scikit-sparse).
-# Usage: bash benches/performance.sh   (from the repository root; takes a quarter of an hour)
+# CHOLMOD: apt-get install libsuitesparse-dev && .venv/bin/pip install scikit-sparse==0.4.16 --
+# 0.5 needs SuiteSparse 7, Debian 12 ships 5.12).
+# Usage: bash benches/performance.sh   (from the repository root; takes about twenty minutes)
 set -euo pipefail
 cargo build --release -q
 bin=target/release/substep
@@ -15,9 +16,14 @@ $bin bench --model chain --sweep --steps 2000 --json > "$tmp/chain.json"
 $bin bench --model frame --sweep --steps 1000 --json > "$tmp/frame.json"
 $bin bench --model frame --sweep --sizes 10000,30000,100000 --steps 1000 --two-cores --json > "$tmp/frame2.json"
 $bin bench --model frame3d --dofs 10000 --steps 1000 --json > "$tmp/frame3d.json"
+$bin bench --model frame3d --dofs 100000 --steps 50 --json > "$tmp/frame3d_1e5.json"
+$bin bench --model frame3d --dofs 100000 --steps 50 --two-cores --json > "$tmp/frame3d_1e5_2.json"
 $bin bench --compare --steps 1000 --json > "$tmp/compare.json"
 $bin bench --compare --compare-model frame --compare-dofs 10000 --steps 200 --json > "$tmp/compare_frame_1e4.json"
+$bin bench --compare --compare-model frame --compare-dofs 10000 --steps 200 --two-cores --json > "$tmp/compare_frame_1e4_2.json"
 $bin bench --compare --compare-model frame --compare-dofs 100000 --steps 50 --json > "$tmp/compare_frame_1e5.json"
+$bin bench --compare --compare-model frame --compare-dofs 100000 --steps 50 --two-cores --json > "$tmp/compare_frame_1e5_2.json"
+$bin bench --compare --compare-model frame3d --compare-dofs 10000 --steps 100 --json > "$tmp/compare_frame3d_1e4.json"
 load_after=$(cut -d' ' -f1-3 /proc/loadavg)
 python3 - "$tmp" "$load_before" "$load_after" > docs/performance.json <<'PY'
 import json, os, platform, sys
@@ -31,9 +37,14 @@ out = {
     "frame_sweep": json.load(open(f"{tmp}/frame.json")),
     "frame_sweep_two_cores": json.load(open(f"{tmp}/frame2.json")),
     "frame3d_1e4": json.load(open(f"{tmp}/frame3d.json")),
+    "frame3d_1e5": json.load(open(f"{tmp}/frame3d_1e5.json")),
+    "frame3d_1e5_two_cores": json.load(open(f"{tmp}/frame3d_1e5_2.json")),
     "compare_5000_dof_chain": json.load(open(f"{tmp}/compare.json")),
     "compare_frame_1e4": json.load(open(f"{tmp}/compare_frame_1e4.json")),
+    "compare_frame_1e4_two_cores": json.load(open(f"{tmp}/compare_frame_1e4_2.json")),
     "compare_frame_1e5": json.load(open(f"{tmp}/compare_frame_1e5.json")),
+    "compare_frame_1e5_two_cores": json.load(open(f"{tmp}/compare_frame_1e5_2.json")),
+    "compare_frame3d_1e4": json.load(open(f"{tmp}/compare_frame3d_1e4.json")),
 }
 print(json.dumps(out, indent=1))
 PY

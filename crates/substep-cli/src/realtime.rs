@@ -2,7 +2,9 @@
 //! `docs/realtime.md`). Writes `history.csv` (as `substep run`, without reference columns),
 //! `realtime.json` (deadline report and latency histograms) and `summary.json`; after a safety
 //! stop also `substeps.csv` with the tripping sub-step and the ramp to the safe position (the
-//! real-time thread records no sub-steps otherwise: it does no I/O).
+//! real-time thread records no sub-steps otherwise: it does no I/O). A stop from the monitor
+//! page or the stability indicator reaches the real-time thread through the runner's
+//! [`StopHandle`] (set on the writer thread, polled once per step by the real-time thread).
 
 use crate::RunArgs;
 use crate::output::{SubstepWriter, num, prepare_dir, write_atomic};
@@ -10,7 +12,7 @@ use anyhow::{Context, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use substep::io::config::TestDefinition;
-use substep::realtime::{LatencyHistogram, RealtimeOptions, RealtimeReport, RealtimeRunner, RtSetting};
+use substep::realtime::{LatencyHistogram, RealtimeOptions, RealtimeReport, RealtimeRunner, RtSetting, StopHandle};
 
 fn histogram_json(h: &LatencyHistogram) -> serde_json::Value {
     let bins: Vec<serde_json::Value> = h
@@ -66,7 +68,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         fifo_priority: args.fifo_priority,
         ..RealtimeOptions::default()
     };
-    let runner = RealtimeRunner::new(&def.model, test, accel.clone(), options)?;
+    let stop = StopHandle::new();
+    let runner = RealtimeRunner::new(&def.model, test, accel.clone(), options)?.with_stop_handle(stop.clone());
     // Everything above is validation; no output of an earlier run survives into this one.
     prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
@@ -107,6 +110,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         let ag = accel.get(r.step).copied().unwrap_or(0.0);
         if let Some(w) = live.record_realtime(r, ag, &coupling) {
             warnings.push(w);
+        }
+        if let Some(reason) = live.take_stop() {
+            stop.request(reason);
         }
         for (k, &x) in r.u.iter().enumerate() {
             if x.abs() > peak_u.0 {
@@ -178,7 +184,12 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         Some(e) => (Some(report.steps + 1), Some(e.to_string())),
         None => (None, None),
     };
-    let summary = serde_json::json!({
+    // As offline: only the monitor's own stops (operator, stability indicator) are named.
+    let stopped_by = match &failure {
+        Some(substep::Error::Stopped { .. }) => live.stopped_by,
+        _ => None,
+    };
+    let mut summary = serde_json::json!({
         "config": config_name,
         "mode": "realtime",
         "dt": def.integrator.dt,
@@ -195,6 +206,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         "stability": live.summary(),
         "outputs": outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
     });
+    if let (Some(s), Some(obj)) = (stopped_by, summary.as_object_mut()) {
+        obj.insert("stopped_by".into(), s.into());
+    }
     write_json(&summary_path, &summary)?;
     // The full report with the latency histogram goes to a file; stdout gets the statistics.
     let text = report.to_string();
@@ -231,7 +245,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         );
     }
     live.finish(
-        serde_json::json!({ "completed": failure.is_none(), "reason": summary["reason"], "steps_done": report.steps,
+        serde_json::json!({ "completed": failure.is_none(), "reason": summary["reason"], "stopped_by": stopped_by,
+            "steps_done": report.steps,
             "missed_deadlines": report.missed, "late_steps": report.late_steps }),
         &outputs,
         args.quiet,

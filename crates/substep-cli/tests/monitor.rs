@@ -149,13 +149,49 @@ fn start_driver(profile: &Path) -> Option<Driver> {
     Some(Driver { port, session, child })
 }
 
+/// The two browser runs of this binary one at a time (each is a paced run plus Chromium).
+static BROWSER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn browser_lock() -> std::sync::MutexGuard<'static, ()> {
+    BROWSER.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Kills the run whatever happens in the test.
+struct Kill<'a>(&'a mut Child);
+impl Drop for Kill<'_> {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Wait (bounded) for the run to exit.
+fn wait_exit(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
+    let t0 = Instant::now();
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s;
+        }
+        assert!(t0.elapsed() < limit, "the run did not end after the stop");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn browser_missing(test: &str) -> bool {
+    let missing = !Path::new(CHROMIUM).exists() || !Path::new(CHROMEDRIVER).exists();
+    if missing {
+        eprintln!(
+            "SKIPPED {test}: {CHROMIUM} or {CHROMEDRIVER} is missing (apt-get install chromium chromium-driver; \
+             .ci/run does this)"
+        );
+    }
+    missing
+}
+
 #[test]
 fn monitor_page_shows_live_data_and_stops_the_run_with_the_token() {
-    if !Path::new(CHROMIUM).exists() || !Path::new(CHROMEDRIVER).exists() {
-        eprintln!(
-            "SKIPPED monitor_page_shows_live_data_and_stops_the_run_with_the_token: {CHROMIUM} or {CHROMEDRIVER} \
-             is missing (apt-get install chromium chromium-driver; .ci/run does this)"
-        );
+    let _g = browser_lock();
+    if browser_missing("monitor_page_shows_live_data_and_stops_the_run_with_the_token") {
         return;
     }
     let dir = std::env::temp_dir().join(format!("substep_monitor_{}", std::process::id()));
@@ -187,13 +223,6 @@ fn monitor_page_shows_live_data_and_stops_the_run_with_the_token() {
         .spawn()
         .unwrap();
     // The run is 20 s of test time at wall-clock pace; kill it whatever happens below.
-    struct Kill<'a>(&'a mut Child);
-    impl Drop for Kill<'_> {
-        fn drop(&mut self) {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
     let run = Kill(&mut run);
     let Some(driver) = start_driver(&dir.join("profile")) else {
         eprintln!("SKIPPED: chromedriver did not start a headless Chromium session");
@@ -253,18 +282,7 @@ fn monitor_page_shows_live_data_and_stops_the_run_with_the_token() {
         "{}",
         driver.text("#final_text")
     );
-    let child = &mut *run.0;
-    let t0 = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "the run did not end after the stop"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let status = wait_exit(&mut *run.0, Duration::from_secs(30));
     assert_eq!(status.code(), Some(1), "a stopped run exits with 1");
     let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["completed"], false);
@@ -277,6 +295,179 @@ fn monitor_page_shows_live_data_and_stops_the_run_with_the_token() {
     assert_eq!(summary["ramp_substeps"], 400, "1 s ramp in sub-steps of 2.5 ms");
     let stopped: u64 = summary["steps_done"].as_u64().unwrap();
     assert!(stopped > s2 && stopped < 2000, "stopped at step {stopped}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A real-time run (`--realtime`, the default example: 20 s against the wall clock, Δt = 10 ms,
+/// k_sub = 4) with the page attached: hold is shown as unavailable (disabled, with the reason),
+/// acknowledge works, a stop without the token is refused, and with the token the real-time
+/// thread ramps to the safe position (substeps.csv), `summary.json` says the operator stopped it.
+#[test]
+fn realtime_run_stops_from_the_page_with_the_token_and_cannot_hold() {
+    let _g = browser_lock();
+    if browser_missing("realtime_run_stops_from_the_page_with_the_token_and_cannot_hold") {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("substep_monitor_rt_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = free_port();
+    let token = "fedcba9876543210-token";
+    let out = dir.join("out");
+    let mut run = Command::new(env!("CARGO_BIN_EXE_substep"))
+        .args([
+            "run",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/default.toml"),
+            "--realtime",
+        ])
+        .arg("--out")
+        .arg(&out)
+        .args([
+            "--no-plots",
+            "--quiet",
+            "--monitor-linger",
+            "2",
+            "--monitor-token",
+            token,
+        ])
+        .arg("--monitor")
+        .arg(format!("127.0.0.1:{port}"))
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let run = Kill(&mut run);
+    let Some(driver) = start_driver(&dir.join("profile")) else {
+        eprintln!("SKIPPED: chromedriver did not start a headless Chromium session");
+        return;
+    };
+    let t0 = Instant::now();
+    while http(port, "GET", "/state", None).is_err() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "monitor did not come up");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    driver.cmd(
+        "POST",
+        "/url",
+        Some(json!({ "url": format!("http://127.0.0.1:{port}/") })),
+    );
+    driver.wait_for(Duration::from_secs(15), "live data on the page", |d| {
+        d.text("#step") != "–"
+    });
+    let seen: u64 = driver.text("#step").parse().unwrap();
+    assert!(driver.text("#rt").starts_with("late steps"), "{}", driver.text("#rt"));
+
+    // Hold: shown as unavailable, with the reason, before anyone clicks.
+    for b in ["#hold", "#resume"] {
+        let e = driver.element(b);
+        assert_eq!(
+            driver.cmd("GET", &format!("/element/{e}/enabled"), None)["value"],
+            false,
+            "{b}"
+        );
+        let title = driver.cmd("GET", &format!("/element/{e}/attribute/title"), None)["value"]
+            .as_str()
+            .unwrap_or("")
+            .to_string();
+        assert!(title.contains("not available in real-time runs"), "{b}: {title}");
+    }
+    assert!(
+        driver.text("#hold_note").contains("rate-dependent"),
+        "{}",
+        driver.text("#hold_note")
+    );
+    // A hold posted anyway (not from the page) is refused with the same reason.
+    let (code, body) = http(
+        port,
+        "POST",
+        "/control",
+        Some(&json!({ "token": token, "action": "hold" })),
+    )
+    .unwrap();
+    assert_eq!(code, 409, "{body}");
+    assert!(body.contains("not available in real-time runs"), "{body}");
+
+    // Without the token the stop is refused and the run goes on.
+    driver.click("#stop");
+    driver.wait_for(Duration::from_secs(10), "the refusal", |d| {
+        d.text("#reply").contains("refused")
+    });
+    let (_, state) = http(port, "GET", "/state", None).unwrap();
+    let state: Value = serde_json::from_str(&state).unwrap();
+    assert!(state["stop"].is_null(), "{state}");
+    assert!(state["finished"].is_null(), "the run ended before the stop: {state}");
+
+    // Acknowledge works in real-time runs too.
+    driver.type_into("#token", token);
+    driver.click("#ack");
+    driver.wait_for(Duration::from_secs(10), "the acknowledgement", |d| {
+        d.text("#acks") == "1"
+    });
+
+    // With the token: the controlled stop.
+    driver.click("#stop");
+    driver.wait_for(Duration::from_secs(30), "the final state on the page", |d| {
+        d.text("#status").starts_with("finished")
+    });
+    let final_text = driver.text("#final_text");
+    assert!(
+        final_text.contains("operator") && final_text.contains("ramped to 0"),
+        "{final_text}"
+    );
+    let status = wait_exit(&mut *run.0, Duration::from_secs(30));
+    assert_eq!(status.code(), Some(1), "a stopped run exits with 1, as offline");
+
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["mode"], "realtime");
+    assert_eq!(summary["completed"], false);
+    assert_eq!(summary["stopped_by"], "operator");
+    let reason = summary["reason"].as_str().unwrap();
+    assert!(
+        reason.starts_with("operator stop from the monitor page (token holder); actuators ramped to 0 over 1 s"),
+        "{reason}"
+    );
+    assert_eq!(summary["ramp_substeps"], 400, "1 s ramp in sub-steps of 2.5 ms");
+    let done = summary["steps_done"].as_u64().unwrap();
+    assert!(
+        done >= seen && done < 2000,
+        "stopped at step {done}, page showed {seen}"
+    );
+    assert_eq!(
+        summary["stopped_at_step"].as_u64(),
+        Some(done + 1),
+        "the ramp replaces the next step"
+    );
+
+    // Every step up to the stop is in history.csv.
+    let history = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    assert_eq!(
+        history.lines().count() as u64,
+        1 + done + 1,
+        "header, initial state, {done} steps"
+    );
+    // substeps.csv: the 400 ramp sub-steps of step done + 1, linear from the last command to 0.
+    let substeps = std::fs::read_to_string(out.join("substeps.csv")).unwrap();
+    let mut lines = substeps.lines();
+    assert_eq!(lines.next().unwrap(), "step,substep,t,cmd1,fm1,dm1,ramp");
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 400);
+    let c1 = rows[0][3];
+    assert!(c1.abs() > 1e-6, "the test was away from 0 when stopped: {c1}");
+    for (s, r) in rows.iter().enumerate() {
+        assert_eq!(r[0] as u64, done + 1);
+        assert_eq!(r[1] as usize, s + 1);
+        assert_eq!(r[6] as usize, s + 1, "ramp column");
+        // d_s = (1 − s/400) d_last, so d_s / d_1 = (400 − s) / 399.
+        let expected = c1 * (400 - (s + 1)) as f64 / 399.0;
+        assert!(
+            (r[3] - expected).abs() <= 1e-9 * c1.abs(),
+            "ramp {}: {} vs {expected}",
+            s + 1,
+            r[3]
+        );
+    }
+    assert_eq!(rows[399][3], 0.0, "the ramp ends at the safe position");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

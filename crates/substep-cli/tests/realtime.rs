@@ -59,3 +59,106 @@ fn realtime_run_equals_offline_and_reports_latency() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("rt/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["completed"], true);
 }
+
+/// `stability = "stop"` in a real-time run: the indicator on the writer thread raises the same
+/// alarm as offline and its stop reaches the real-time thread through the runner's stop
+/// handle: a ramp to the safe position a few steps later (the writer lags the real-time
+/// thread), `stopped_by = "stability"`, exit 1.
+#[test]
+fn stability_stop_reaches_the_realtime_thread() {
+    let dir = std::env::temp_dir().join(format!("substep-rt-stability-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // SDOF 1 Hz, 2 % damping, a stiff spring specimen behind 30 ms of delay: unstable from the
+    // start (the indicator's test config with the delay beyond the critical 14.5 ms).
+    let cfg = r#"
+[structure.sdof]
+mass = 1000.0
+stiffness = 39478.4
+damping = 251.3
+
+[ground_motion]
+generator = "harmonic"
+amplitude = 0.5
+frequency = 0.5
+duration = 8.0
+
+[integrator]
+scheme = "average_acceleration"
+dt = 0.01
+
+[substructure]
+coupling_dofs = [1]
+substeps = 4
+
+[[substructure.specimen]]
+kind = "linear_sdof"
+dof = 1
+stiffness = 20000.0
+damping = 40.0
+
+[substructure.actuator]
+kind = "delay"
+delay = 0.03
+
+[substructure.sensors]
+force_noise = 0.5
+seed = 3
+
+[substructure.limits]
+ramp_time = 0.5
+stability = "stop"
+stability_window = 1.0
+"#;
+    std::fs::write(dir.join("unstable.toml"), cfg).unwrap();
+    let run = |extra: &[&str], out: &str| -> serde_json::Value {
+        let mut args = vec!["run", "unstable.toml", "--out", out, "--quiet", "--no-plots"];
+        args.extend_from_slice(extra);
+        let o = Command::new(env!("CARGO_BIN_EXE_substep"))
+            .args(&args)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("summary.json")).unwrap()).unwrap()
+    };
+    let off = run(&[], "offline");
+    let rt = run(&["--realtime"], "rt");
+    for s in [&off, &rt] {
+        assert_eq!(s["stopped_by"], "stability", "{s}");
+        assert_eq!(s["ramp_substeps"], 200, "0.5 s in sub-steps of 2.5 ms");
+        assert!(
+            s["reason"]
+                .as_str()
+                .unwrap()
+                .starts_with("stability stop: stability indicator"),
+            "{}",
+            s["reason"]
+        );
+    }
+    // The same alarm (records equal to round-off), the stop at or after the offline one.
+    let alarm = off["stability"]["alarm"]["step"].as_u64().unwrap();
+    assert_eq!(rt["stability"]["alarm"]["step"].as_u64(), Some(alarm));
+    let (off_done, rt_done) = (off["steps_done"].as_u64().unwrap(), rt["steps_done"].as_u64().unwrap());
+    assert_eq!(off_done, alarm, "offline: the step after the alarm is the ramp");
+    assert!(
+        rt_done >= alarm && rt_done < 800,
+        "real time stopped after step {rt_done}"
+    );
+    assert_eq!(rt["stopped_at_step"].as_u64(), Some(rt_done + 1));
+    let substeps = std::fs::read_to_string(dir.join("rt/substeps.csv")).unwrap();
+    let last: Vec<f64> = substeps
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(substeps.lines().count(), 1 + 200);
+    assert_eq!(
+        (last[0] as u64, last[3], last[6] as u64),
+        (rt_done + 1, 0.0, 200),
+        "ramp ends at 0"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

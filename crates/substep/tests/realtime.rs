@@ -10,11 +10,12 @@ use substep::integrate::Kinematics;
 use substep::model::{StructuralModel, TmdSystem, sdof};
 use substep::realtime::{
     LatePolicy, LatencyHistogram, OverlapPredictor, RealtimeOptions, RealtimeResult, RealtimeRunner, RtSetting,
-    SpscRing, StepRecordOwned,
+    SpscRing, StepRecordOwned, StopHandle,
 };
 use substep::specimen::SpecimenSpec;
 use substep::substructure::{
-    ErrorForceSpec, ExperimentalSubstructure, SubstepController, SubstepSettings, SubstructureTest,
+    ErrorForceSpec, ExperimentalSubstructure, LimitedSite, SafetyLimits, SubstepController, SubstepSettings,
+    SubstructureTest,
 };
 use substep::transfer::{ActuatorSpec, SensorSpec, VirtualLab};
 
@@ -653,4 +654,204 @@ fn bench_overlap_1000() {
     if b.report.hold_substeps == 0 {
         assert!(b.max_rel_diff[0] <= 1e-12 && b.max_rel_diff[1] <= 1e-12 && b.max_rel_diff[2] <= 1e-9);
     }
+}
+
+// ------------------------------------------------------------------------------------------------
+// Controlled stop from outside
+
+/// Asks for the stop through the runner's handle during sub-step call `at` (0-based), i.e. from
+/// the real-time thread at a known point of the schedule.
+struct StopTrigger {
+    inner: Box<dyn ExperimentalSubstructure>,
+    calls: usize,
+    at: usize,
+    handle: StopHandle,
+}
+
+impl ExperimentalSubstructure for StopTrigger {
+    fn n_coupling(&self) -> usize {
+        self.inner.n_coupling()
+    }
+    fn substep(
+        &mut self,
+        command: &[f64],
+        ag: (f64, f64),
+        dtau: f64,
+        force: &mut [f64],
+        displacement: &mut [f64],
+    ) -> Result<()> {
+        if self.calls == self.at {
+            self.handle.request("operator stop (test)");
+        }
+        self.calls += 1;
+        self.inner.substep(command, ag, dtau, force, displacement)
+    }
+    fn is_linear(&self) -> Result<()> {
+        self.inner.is_linear()
+    }
+    fn state_len(&self) -> usize {
+        self.inner.state_len()
+    }
+    fn write_state(&self, out: &mut [f64]) {
+        self.inner.write_state(out)
+    }
+    fn read_state(&mut self, state: &[f64]) {
+        self.inner.read_state(state)
+    }
+}
+
+/// Collects the ramp sub-steps an offline stop replays.
+#[derive(Default)]
+struct Ramp(Vec<(usize, usize, f64)>);
+impl substep::substructure::SubstepObserver for Ramp {
+    fn ramp(&mut self, step: usize, j: usize, _s: usize, command: &[f64], _f: &[f64], _d: &[f64]) {
+        self.0.push((step, j, command[0]));
+    }
+}
+
+/// The TMD test behind a ramp-only `LimitedSite` (ramp 50 ms = 50 sub-steps of 1 ms); the stop
+/// is asked for during the last sub-step of step `stop_after` (1-based step count).
+fn limited_tmd(dt: f64, k: usize, stop_after: usize, handle: StopHandle) -> (StructuralModel, SubstructureTest) {
+    let (model, test) = tmd_test(dt, k, ErrorForceSpec::Pid { p: 1.0, i: 0.0, d: 0.0 });
+    let SubstructureTest { controller, site, .. } = test;
+    let trigger = StopTrigger {
+        inner: site,
+        calls: 0,
+        at: stop_after * k - 1,
+        handle,
+    };
+    let limits = SafetyLimits {
+        ramp_time: 0.05,
+        ..SafetyLimits::default()
+    };
+    let site = LimitedSite::new(Box::new(trigger), limits).unwrap();
+    let test = SubstructureTest::new(&model, controller, Box::new(site)).unwrap();
+    (model, test)
+}
+
+#[test]
+fn external_stop_ramps_to_the_safe_position_at_the_next_step() {
+    let _g = rt_lock();
+    let (dt, k, stop_after) = (0.01, 10, 30);
+    let ag = sweep(dt, 1.0, 0.5, 3.0, 2.0);
+
+    // Reference: the offline driver, stopped between steps 30 and 31 as the monitor does.
+    let (_, mut offline_test) = limited_tmd(dt, k, usize::MAX / k, StopHandle::new());
+    let mut reference = vec![offline_test.controller.state().clone()];
+    for i in 0..stop_after {
+        offline_test.step(ag[i], ag[i + 1], &mut ()).unwrap();
+        reference.push(offline_test.controller.state().clone());
+    }
+    let last_command = offline_test.controller.command()[0];
+    assert!(last_command.abs() > 1e-6, "the test must be away from 0 when stopped");
+    assert!(offline_test.site.request_stop("operator stop (test)"));
+    let mut offline_ramp = Ramp::default();
+    let offline_err = offline_test
+        .step(ag[stop_after], ag[stop_after + 1], &mut offline_ramp)
+        .unwrap_err();
+
+    let handle = StopHandle::new();
+    let (model, test) = limited_tmd(dt, k, stop_after, handle.clone());
+    let runner = RealtimeRunner::new(&model, test, ag.clone(), exact_options())
+        .unwrap()
+        .with_stop_handle(handle.clone());
+    let mut records = Vec::new();
+    let failure = runner
+        .run(|r: &StepRecordOwned| records.push(r.clone()))
+        .err()
+        .expect("the run stops");
+    assert_eq!(handle.requested(), Some("operator stop (test)"));
+
+    // The stop comes at the next step boundary: step 31 is not executed, 30 are complete.
+    assert!(
+        matches!(failure.error, Error::Stopped { step: 31, .. }),
+        "{}",
+        failure.error
+    );
+    assert_eq!(failure.error.to_string(), offline_err.to_string());
+    assert!(
+        failure
+            .error
+            .to_string()
+            .contains("operator stop (test); actuators ramped to 0 over 0.05 s"),
+        "{}",
+        failure.error
+    );
+    assert_eq!(failure.stopped_at, Some((31, 1)));
+    assert_eq!(failure.report.steps, stop_after);
+    assert_eq!(failure.report.substeps, stop_after * k);
+    // Records up to the stop are flushed and equal the offline run.
+    assert_eq!(records.len(), stop_after + 1, "initial state + 30 steps");
+    assert_eq!(records.last().unwrap().step, stop_after);
+    let err = compare(&records, &reference, 0..stop_after + 1);
+    assert!(err.iter().all(|&e| e <= 1e-12), "{err:?}");
+
+    // The ramp: 50 sub-steps from the last command of step 30 linearly to exactly 0, numbered
+    // after it in step 31, the same rows as the offline stop.
+    let log = failure.stop_log.expect("the ramp is logged");
+    assert!(
+        log.tripped().is_none(),
+        "no sub-step was measured: the ramp starts the step"
+    );
+    assert_eq!(log.ramp_len(), 50);
+    let d_k = records.last().unwrap().command[0];
+    assert!((d_k - last_command).abs() <= 1e-12 * last_command.abs());
+    for (s, (c, _, _)) in log.ramp().enumerate() {
+        let expected = (1.0 - (s + 1) as f64 / 50.0) * d_k;
+        assert!(
+            (c[0] - expected).abs() <= 1e-12 * d_k.abs(),
+            "ramp {s}: {} vs {expected}",
+            c[0]
+        );
+    }
+    assert_eq!(
+        log.ramp().last().unwrap().0[0],
+        0.0,
+        "the ramp ends at the safe position"
+    );
+    let mut rt_ramp = Ramp::default();
+    let (step, j) = failure.stopped_at.unwrap();
+    log.replay(step, j, &mut rt_ramp);
+    assert_eq!(rt_ramp.0.len(), offline_ramp.0.len());
+    for (a, b) in rt_ramp.0.iter().zip(&offline_ramp.0) {
+        assert_eq!((a.0, a.1), (b.0, b.1));
+        assert!((a.2 - b.2).abs() <= 1e-12 * d_k.abs(), "{a:?} vs {b:?}");
+    }
+    assert_eq!(rt_ramp.0[0].0, 31);
+    assert_eq!(rt_ramp.0[0].1, 1);
+    // Paced on the real-time thread: step 31 starts 0.30 s after the first deadline and its 49
+    // ramp sub-steps after the first start 1 ms apart, so the run lasts at least that (a sleep
+    // never ends early; a lower bound, not a timing goal).
+    assert!(
+        failure.report.wall_time >= Duration::from_millis(300 + 49),
+        "{:?}",
+        failure.report.wall_time
+    );
+}
+
+#[test]
+fn external_stop_without_a_ramp_stops_before_the_first_step() {
+    let _g = rt_lock();
+    let (dt, k) = (0.01, 4);
+    let ag = sweep(dt, 0.2, 0.5, 3.0, 2.0);
+    let (model, test) = tmd_test(dt, k, ErrorForceSpec::None);
+    let handle = StopHandle::new();
+    assert!(handle.request("stability stop"));
+    assert!(!handle.request("operator stop"), "the first reason is kept");
+    let (result, records) = {
+        let runner = RealtimeRunner::new(&model, test, ag, exact_options())
+            .unwrap()
+            .with_stop_handle(handle);
+        let mut records = Vec::new();
+        let r = runner.run(|r: &StepRecordOwned| records.push(r.clone()));
+        (r, records)
+    };
+    let failure = result.err().expect("the run stops");
+    assert_eq!(
+        failure.error.to_string(),
+        "stopped at step 1 (t = 0.010000 s): stability stop (between steps: this run has no ramp to the safe position)"
+    );
+    assert!(failure.stop_log.is_none());
+    assert_eq!((failure.report.steps, failure.report.substeps), (0, 0));
+    assert_eq!(records.len(), 1, "the initial state");
 }

@@ -198,7 +198,6 @@ impl Live {
                     token: token.clone(),
                     window: 10.0,
                     hold_allowed: !realtime,
-                    stop_allowed: !realtime,
                     info,
                 })?;
                 // The operator needs both at start; printed even with --quiet.
@@ -275,21 +274,7 @@ impl Live {
                     }
                 });
             }
-            if let Some(who) = m.controls.stop_requested()
-                && !self.stop_sent
-            {
-                self.stop_sent = true;
-                self.pending = Some(match who {
-                    StopRequest::Operator => {
-                        self.stopped_by = Some("operator");
-                        "operator stop from the monitor page (token holder)".to_string()
-                    }
-                    StopRequest::Stability => {
-                        self.stopped_by = Some("stability");
-                        "stability stop".to_string()
-                    }
-                });
-            }
+            self.page_stop();
         }
         // Hold between steps until resumed or stopped.
         let mut held = false;
@@ -300,11 +285,33 @@ impl Live {
             held = true;
             std::thread::sleep(Duration::from_millis(20));
         }
+        // A stop pressed while held stops before the next step.
+        self.page_stop();
         if held && let Some((t0, p)) = &mut self.pace {
             // Resume the pace from here, not by racing to catch up.
             *t0 = Instant::now() - Duration::from_secs_f64(t / *p);
         }
         self.pace(t);
+    }
+
+    /// A stop pressed on the page (or set by the indicator in the controls), once.
+    fn page_stop(&mut self) {
+        if let Some(m) = &self.monitor
+            && let Some(who) = m.controls.stop_requested()
+            && !self.stop_sent
+        {
+            self.stop_sent = true;
+            self.pending = Some(match who {
+                StopRequest::Operator => {
+                    self.stopped_by = Some("operator");
+                    "operator stop from the monitor page (token holder)".to_string()
+                }
+                StopRequest::Stability => {
+                    self.stopped_by = Some("stability");
+                    "stability stop".to_string()
+                }
+            });
+        }
     }
 
     /// The stop to hand to the run loop, once.
@@ -325,7 +332,9 @@ impl Live {
     }
 
     /// A real-time run's step record (on the writer thread, never the real-time one): feed the
-    /// indicator and push a frame. Returns the alarm message if this record raised it.
+    /// indicator and push a frame. Returns the alarm message if this record raised it. A stop
+    /// (page, or the indicator with `stability = "stop"`) is kept for [`take_stop`](Self::take_stop),
+    /// which the caller hands to the runner's stop handle.
     pub fn record_realtime(
         &mut self,
         r: &substep::realtime::StepRecordOwned,
@@ -345,7 +354,13 @@ impl Live {
                 &r.measured_displacement,
             )
         {
-            msg = Some(a.message());
+            let m = a.message();
+            if st.settings().action == StabilityAction::Stop && !self.stop_sent {
+                self.stopped_by = Some("stability");
+                self.stop_sent = true;
+                self.pending = Some(format!("stability stop: {m}"));
+            }
+            msg = Some(m);
         }
         if r.holds > 0 {
             self.late_steps += 1;
@@ -373,6 +388,7 @@ impl Live {
                     f.set_indicator(st);
                 }
             });
+            self.page_stop();
         }
         msg
     }

@@ -29,6 +29,9 @@ const MAX_BODY: usize = 4096;
 const MAX_CONNECTIONS: usize = 16;
 /// Frames kept for the page (the last window, decimated in run time).
 const HISTORY_FRAMES: usize = 2000;
+/// Why a real-time run has no hold (the page shows it on the disabled button; a POST gets it).
+const NO_HOLD: &str = "hold is not available in real-time runs: the specimen is rate-dependent and the \
+                       schedule is the test, so it cannot pause between steps (use the controlled stop)";
 /// Interval of the event stream (20 Hz).
 const TICK: Duration = Duration::from_millis(50);
 
@@ -40,8 +43,6 @@ pub struct MonitorOptions {
     pub window: f64,
     /// Whether the test can hold between steps (offline runs).
     pub hold_allowed: bool,
-    /// Whether a stop from the page reaches the test (not yet in real-time runs).
-    pub stop_allowed: bool,
     pub info: Value,
 }
 
@@ -62,7 +63,6 @@ struct Shared {
     token: String,
     window: f64,
     hold_allowed: bool,
-    stop_allowed: bool,
     info: Value,
     controls: Arc<Controls>,
     dropped: std::sync::atomic::AtomicU64,
@@ -109,7 +109,6 @@ impl Monitor {
             token: opts.token,
             window: opts.window,
             hold_allowed: opts.hold_allowed,
-            stop_allowed: opts.stop_allowed,
             info: opts.info,
             controls: controls.clone(),
             dropped: Default::default(),
@@ -320,7 +319,8 @@ fn serve(mut stream: TcpStream, shared: &Shared) -> std::io::Result<()> {
         ("GET", "/info") => json_response(
             &mut stream,
             200,
-            &json!({ "info": shared.info, "window": shared.window, "hold_allowed": shared.hold_allowed }),
+            &json!({ "info": shared.info, "window": shared.window, "hold_allowed": shared.hold_allowed,
+                "hold_note": (!shared.hold_allowed).then_some(NO_HOLD) }),
         ),
         ("GET", "/state") => {
             let v = shared
@@ -399,22 +399,9 @@ fn control(stream: &mut TcpStream, shared: &Shared, body: &[u8]) -> std::io::Res
         return json_response(stream, 409, &json!({ "error": "the run has already ended" }));
     }
     match v["action"].as_str().unwrap_or("") {
-        "stop" if shared.stop_allowed => c.request_stop(StopRequest::Operator),
-        "stop" => {
-            return json_response(
-                stream,
-                409,
-                &json!({ "error": "a stop from the page is not wired into real-time runs yet: use the safety limits or Ctrl-C" }),
-            );
-        }
+        "stop" => c.request_stop(StopRequest::Operator),
         "hold" if shared.hold_allowed => c.set_hold(true),
-        "hold" => {
-            return json_response(
-                stream,
-                409,
-                &json!({ "error": "this run cannot hold (real-time runs keep their schedule; use stop)" }),
-            );
-        }
+        "hold" => return json_response(stream, 409, &json!({ "error": NO_HOLD })),
         "resume" => c.set_hold(false),
         "ack" => c.acknowledge(),
         other => {

@@ -151,6 +151,9 @@ impl<S: ExperimentalSubstructure + ?Sized> ExperimentalSubstructure for Compensa
     fn request_stop(&mut self, reason: &str) -> bool {
         self.inner.request_stop(reason)
     }
+    fn pace_ramp(&mut self, clock: Option<Box<dyn crate::substructure::RampClock>>) -> bool {
+        self.inner.pace_ramp(clock)
+    }
 
     fn is_linear(&self) -> Result<()> {
         if !self.frozen {

@@ -75,11 +75,27 @@
 //! waits for the predictor and re-bases the schedule: no hold sub-steps, results always equal
 //! the offline run (for virtual labs and tests).
 //!
+//! # Controlled stop from outside
+//!
+//! [`RealtimeRunner::stop_handle`] gives a [`StopHandle`] that any thread (the monitor page's
+//! server, the stability indicator on the writer thread) uses to ask for the controlled stop.
+//! The real-time thread polls it once per step, before the step's first sub-step (one atomic
+//! load). At that step's first slot it hands the reason to the experimental side's safety ramp
+//! ([`ExperimentalSubstructure::request_stop`]); the ramp from the last command to the safe
+//! position runs on the real-time thread, paced one ramp sub-step per `Δτ` (the runner gives
+//! every [`LimitedSite`] its clock with [`ExperimentalSubstructure::pace_ramp`], so a tripped
+//! limit ramps on the same schedule), and the run ends with [`crate::Error::Stopped`] at the step
+//! the offline driver reports, the records up to the stop flushed and the ramp in
+//! [`RealtimeFailure::stop_log`].
+//!
 //! Records (per step: time, `u`, `v`, `a` of the chosen DOFs, coupling, error and compensation
 //! force, last command, measured displacement) go through the SPSC ring to the writer; the
 //! initial state is recorded first.
 //!
 //! [`ExperimentalSubstructure::substep`]: crate::substructure::ExperimentalSubstructure::substep
+//! [`ExperimentalSubstructure::request_stop`]: crate::substructure::ExperimentalSubstructure::request_stop
+//! [`ExperimentalSubstructure::pace_ramp`]: crate::substructure::ExperimentalSubstructure::pace_ramp
+//! [`LimitedSite`]: crate::substructure::LimitedSite
 //! [`SubstepController`]: crate::substructure::SubstepController
 
 mod bench;
@@ -88,6 +104,7 @@ mod os;
 mod overlap;
 mod ring;
 mod runner;
+mod stop;
 
 pub use bench::{BenchOverlap, bench_overlap, bench_overlap_with};
 pub use histogram::{LatencyHistogram, LatencySummary};
@@ -95,6 +112,7 @@ pub use os::RtSetting;
 pub use overlap::OverlapPredictor;
 pub use ring::{Consumer, OwnedConsumer, OwnedProducer, Producer, SpscRing, owned_ring};
 pub use runner::{RealtimeFailure, RealtimeResult, RealtimeRunner};
+pub use stop::StopHandle;
 
 use crate::substructure::StepRecord;
 #[allow(unused_imports)] // doc links

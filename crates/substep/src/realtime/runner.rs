@@ -4,6 +4,7 @@ use super::histogram::LatencyHistogram;
 use super::os::{self, RtSetting};
 use super::overlap::{CouplingLoop, OverlapPredictor};
 use super::ring::{Consumer, Producer, SpscRing};
+use super::stop::{PacedRamp, StopHandle};
 use super::{LatePolicy, RealtimeOptions, RealtimeReport, StepRecordOwned};
 use crate::error::{Error, Result};
 use crate::model::ModelRef;
@@ -56,6 +57,7 @@ pub struct RealtimeRunner {
     mass_influence: DVector<f64>,
     ground_accel: Vec<f64>,
     options: RealtimeOptions,
+    stop: StopHandle,
 }
 
 impl RealtimeRunner {
@@ -147,7 +149,20 @@ impl RealtimeRunner {
             mass_influence: model.effective_mass_vector(),
             ground_accel,
             options,
+            stop: StopHandle::new(),
         })
+    }
+
+    /// The handle that asks this run for the controlled stop from another thread (take it
+    /// before [`run`](Self::run); the sink may use it too, e.g. for the stability indicator).
+    pub fn stop_handle(&self) -> StopHandle {
+        self.stop.clone()
+    }
+
+    /// Use `handle` (made before the runner, e.g. by the monitor) for the controlled stop.
+    pub fn with_stop_handle(mut self, handle: StopHandle) -> Self {
+        self.stop = handle;
+        self
     }
 
     /// Run all steps in real time, handing step records to `sink` (on the calling thread, in
@@ -237,6 +252,9 @@ impl RealtimeRunner {
             hist: hist(),
         };
         let site: &mut dyn ExperimentalSubstructure = &mut *self.test.site;
+        // A controlled stop ramps on the real-time thread's clock, one ramp sub-step per Δτ.
+        let paced = site.pace_ramp(Some(Box::new(PacedRamp::new(opts.spin_window))));
+        let stop = &self.stop;
         let (numerical_out, rt_out) = thread::scope(|s| {
             let numerical = thread::Builder::new()
                 .name("substep-numerical".into())
@@ -255,6 +273,7 @@ impl RealtimeRunner {
                 end_tx,
                 worker: numerical.thread().clone(),
                 shared: &shared,
+                stop,
                 opts,
                 force: vec![0.0; n_c],
                 displacement: vec![0.0; n_c],
@@ -296,6 +315,10 @@ impl RealtimeRunner {
         });
         if memory_lock == RtSetting::Applied {
             os::unlock_memory();
+        }
+        if paced {
+            // The returned test runs offline again.
+            self.test.site.pace_ramp(None);
         }
         let (numerical_hist, numerical_fifo, numerical_result) = numerical_out;
         let (stats, rt_result) = rt_out;
@@ -553,6 +576,7 @@ struct RealTime<'a> {
     end_tx: Producer<'a, EndMsg>,
     worker: Thread,
     shared: &'a Shared,
+    stop: &'a StopHandle,
     opts: &'a RealtimeOptions,
     force: Vec<f64>,
     displacement: Vec<f64>,
@@ -608,6 +632,11 @@ impl RealTime<'_> {
         for n in 0..self.n_steps {
             let step_start = Duration::from_nanos((n as u128 * dt_ns) as u64);
             let (ag_i, ag_next) = (self.ag[n], self.ag[n + 1]);
+            // The one poll per step of an external stop (an atomic load).
+            let stop = self.stop;
+            if let Some(reason) = stop.requested() {
+                return Err(self.external_stop(&sleeper, n, step_start, reason));
+            }
             let mut holds = 0;
             if n > 0 {
                 if !self.coupling.has_next() {
@@ -704,6 +733,45 @@ impl RealTime<'_> {
         let step = self.offset + n + 1;
         self.stats.stopped_at = Some((step, j));
         Halt::Failed(stopped_at(step, self.dt, e))
+    }
+
+    /// The controlled stop asked for through the [`StopHandle`], before step `n` (of this run):
+    /// at the step's first slot the site ramps to the safe position (paced by the
+    /// [`PacedRamp`]), as the offline driver does after [`ExperimentalSubstructure::request_stop`]
+    /// between two steps.
+    fn external_stop(
+        &mut self,
+        sleeper: &spin_sleep::SpinSleeper,
+        n: usize,
+        step_start: Duration,
+        reason: &str,
+    ) -> Halt {
+        sleeper.sleep_until(self.t0 + step_start);
+        let step = self.offset + n + 1;
+        let time = step as f64 * self.dt;
+        self.stats.stopped_at = Some((step, 1));
+        if !self.site.request_stop(reason) {
+            return Halt::Failed(Error::Stopped {
+                step,
+                time,
+                reason: format!("{reason} (between steps: this run has no ramp to the safe position)"),
+            });
+        }
+        let dtau = self.dt / self.k as f64;
+        let ag = self.ag[n];
+        let command = self.coupling.command();
+        match self
+            .site
+            .substep(command, (ag, ag), dtau, &mut self.force, &mut self.displacement)
+        {
+            Err(e) => self.site_failed(n, 1, e),
+            // A side that said it would ramp but ran the sub-step: stop here all the same.
+            Ok(()) => Halt::Failed(Error::Stopped {
+                step,
+                time,
+                reason: format!("{reason} (the experimental side did not ramp to the safe position)"),
+            }),
+        }
     }
 
     /// Take the next step's `W_c` if posted.

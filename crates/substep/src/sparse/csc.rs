@@ -187,8 +187,20 @@ impl CscMatrix {
         assert_eq!(x.len(), self.n, "sym_mul_add: x has the wrong length");
         assert_eq!(y.len(), self.n, "sym_mul_add: y has the wrong length");
         for (yi, w) in y.iter_mut().zip(self.col_ptr.windows(2)) {
-            let mut acc = 0.0;
-            for (&r, &v) in self.row_idx[w[0]..w[1]].iter().zip(&self.values[w[0]..w[1]]) {
+            // Four partial sums: one chain of dependent additions per row would make the
+            // product wait on the adder's latency instead of on memory (fixed order, so
+            // reruns stay bit-identical).
+            let (rows, vals) = (&self.row_idx[w[0]..w[1]], &self.values[w[0]..w[1]]);
+            let (rc, vc) = (rows.chunks_exact(4), vals.chunks_exact(4));
+            let (rr, vr) = (rc.remainder(), vc.remainder());
+            let mut s = [0.0; 4];
+            for (r4, v4) in rc.zip(vc) {
+                for k in 0..4 {
+                    s[k] += v4[k] * x[r4[k]];
+                }
+            }
+            let mut acc = (s[0] + s[1]) + (s[2] + s[3]);
+            for (&r, &v) in rr.iter().zip(vr) {
                 acc += v * x[r];
             }
             *yi = if beta == 0.0 {

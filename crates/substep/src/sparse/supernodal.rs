@@ -2,13 +2,15 @@
 //! the one thing a time step needs: stream the factor through the core as fast as memory
 //! delivers it (theory §11.4).
 //!
-//! The factor is faer's (same values, same supernodes); only the solve is ours. faer's general
-//! solve handles many right-hand sides through its matrix kernels, which for one column costs a
-//! dispatch per supernode and reads every `usize` row index; here each supernode is one
-//! contiguous column-major block `[L_diag; L_off]` read front to back, row indices are `u32`,
-//! four columns are combined per pass over the off-diagonal block (forward: one update of the
-//! gathered right-hand side per four columns; backward: four dot products per pass over it),
-//! and on x86-64 the kernels run with AVX2 + FMA when the CPU has them.
+//! The factor is faer's (same values, same supernodes, no relaxed amalgamation); only the solve
+//! is ours. faer's general solve handles many right-hand sides through its matrix kernels, which
+//! for one column costs a dispatch per supernode and reads every `usize` row index; here the
+//! values are repacked ([`pack`]) so that a sweep reads the whole factor as one sequential
+//! stream: per supernode the lower triangle of the diagonal block (with `1 / L_jj` in place of
+//! `L_jj`), then the off-diagonal block in groups of four columns stored row by row. Row
+//! indices are `u32`; forward: one update of the gathered right-hand side per group; backward:
+//! four dot products per pass over it; on x86-64 the kernels run with AVX2 + FMA when the CPU
+//! has them.
 //!
 //! Optionally ([`SupernodalSolve::enable_second_core`]) the two halves of the elimination tree
 //! below its top separator are swept on two cores: a persistent worker thread takes one half,
@@ -22,8 +24,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// One supernode: columns `start .. start + ncols` of `L`, with `rows` off-diagonal rows
-/// `pattern[pat .. pat + rows]` and values `values[val ..]` (column-major, leading dimension
-/// `ncols + rows`).
+/// `pattern[pat .. pat + rows]` and values `values[val ..]` in the streaming layout of [`pack`].
 #[derive(Debug, Clone, Copy)]
 struct Node {
     start: usize,
@@ -110,6 +111,8 @@ impl SupernodalSolve {
             max_rows = max_rows.max(p.len());
             nodes.push(node);
         }
+        let packed = pack(&mut nodes, &values);
+        drop(values);
         let fwd = match perm_fwd {
             Some(p) => p.iter().map(|&i| i as u32).collect(),
             None => (0..n as u32).collect(),
@@ -120,7 +123,7 @@ impl SupernodalSolve {
             factor: Arc::new(Factor {
                 nodes,
                 pattern,
-                values: HugeBuf::from_slice(&values),
+                values: HugeBuf::from_slice(&packed),
                 use_fma: has_fma(),
             }),
             work: vec![0.0; n],
@@ -192,6 +195,43 @@ impl SupernodalSolve {
             x[f as usize] = *w;
         }
     }
+}
+
+/// Repack faer's supernodes (column-major `[L_diag; L_off]` blocks, leading dimension
+/// `ncols + rows`, the unused upper half of `L_diag` included) into the order the sweeps read:
+/// per supernode the lower triangle of `L_diag` by columns, each column starting with
+/// `1 / L_jj` (a division on the chain of dependent updates costs several multiplications),
+/// then `L_off` in groups of four columns stored row by row (`rows × w` values, `w ≤ 4`).
+/// A sweep then reads the factor as one sequential stream: faer's layout gave the hardware
+/// prefetcher four short column streams per group that restart at every supernode (§11.4).
+/// Sets each node's `val` to its offset in the result.
+fn pack(nodes: &mut [Node], faer_values: &[f64]) -> Vec<f64> {
+    let total: usize = nodes
+        .iter()
+        .map(|s| s.ncols * (s.ncols + 1) / 2 + s.ncols * s.rows)
+        .sum();
+    let mut out = Vec::with_capacity(total);
+    for nd in nodes.iter_mut() {
+        let (nc, r, ld) = (nd.ncols, nd.rows, nd.ncols + nd.rows);
+        let col = |j: usize| &faer_values[nd.val + j * ld..nd.val + (j + 1) * ld];
+        let val = out.len();
+        for j in 0..nc {
+            let c = col(j);
+            out.push(1.0 / c[j]);
+            out.extend_from_slice(&c[j + 1..nc]);
+        }
+        for g in (0..nc).step_by(4) {
+            let w = (nc - g).min(4);
+            for k in 0..r {
+                for l in 0..w {
+                    out.push(col(g + l)[nc + k]);
+                }
+            }
+        }
+        nd.val = val;
+    }
+    debug_assert_eq!(out.len(), total);
+    out
 }
 
 fn seg(own: &mut [f64], base: usize, limit: usize) -> Seg<'_, &mut [f64]> {
@@ -650,47 +690,42 @@ fn madd<const FMA: bool>(a: f64, b: f64, c: f64) -> f64 {
     if FMA { a.mul_add(b, c) } else { a * b + c }
 }
 
-/// `y = L_diag⁻¹ w_s`, then `w_pattern −= L_off y`.
+/// `y = L_diag⁻¹ w_s`, then `w_pattern −= L_off y` (layout of [`pack`]).
 #[inline(always)]
 fn forward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut Seg<'_, &mut [f64]>, tmp: &mut [f64]) {
-    let (nc, ld) = (s.ncols, s.ncols + s.rows);
-    let block = &values[s.val..s.val + ld * nc];
+    let (nc, r) = (s.ncols, s.rows);
+    let diag_len = nc * (nc + 1) / 2;
+    let diag = &values[s.val..s.val + diag_len];
     let top = &mut w.own[s.start - w.base..s.start - w.base + nc];
+    let mut p = 0;
     for j in 0..nc {
-        let col = &block[j * ld..j * ld + nc];
-        let yj = top[j] / col[j];
+        let col = &diag[p..p + nc - j];
+        let yj = top[j] * col[0];
         top[j] = yj;
-        for (t, &l) in top[j + 1..].iter_mut().zip(&col[j + 1..]) {
+        for (t, &l) in top[j + 1..].iter_mut().zip(&col[1..]) {
             *t = madd::<FMA>(-l, yj, *t);
         }
+        p += nc - j;
     }
-    if s.rows == 0 {
+    if r == 0 {
         return;
     }
-    // tmp = L_off y, four columns per pass.
-    let off = |j: usize| &block[j * ld + nc..(j + 1) * ld];
-    let mut j = 0;
+    // tmp = L_off y, one group of four columns per pass, each row's four values adjacent.
+    let off = &values[s.val + diag_len..s.val + diag_len + nc * r];
+    let tmp = &mut tmp[..r];
     tmp.fill(0.0);
-    while j + 4 <= nc {
-        let (y0, y1, y2, y3) = (top[j], top[j + 1], top[j + 2], top[j + 3]);
-        let r = tmp.len();
-        let (c0, c1, c2, c3) = (&off(j)[..r], &off(j + 1)[..r], &off(j + 2)[..r], &off(j + 3)[..r]);
-        for k in 0..r {
-            let mut t = tmp[k];
-            t = madd::<FMA>(c0[k], y0, t);
-            t = madd::<FMA>(c1[k], y1, t);
-            t = madd::<FMA>(c2[k], y2, t);
-            t = madd::<FMA>(c3[k], y3, t);
-            tmp[k] = t;
+    for g in (0..nc).step_by(4) {
+        let width = (nc - g).min(4);
+        let block = &off[g * r..(g + width) * r];
+        let y = &top[g..g + width];
+        // The width is a constant in each arm, so the per-row loop is unrolled (frames have
+        // three DOFs per node: groups of one to three columns are common, not a remainder).
+        match width {
+            4 => forward_group::<FMA, 4>(block, y, tmp),
+            3 => forward_group::<FMA, 3>(block, y, tmp),
+            2 => forward_group::<FMA, 2>(block, y, tmp),
+            _ => forward_group::<FMA, 1>(block, y, tmp),
         }
-        j += 4;
-    }
-    while j < nc {
-        let (y, c) = (top[j], off(j));
-        for (t, &l) in tmp.iter_mut().zip(c) {
-            *t = madd::<FMA>(l, y, *t);
-        }
-        j += 1;
     }
     for (&p, &t) in pat.iter().zip(tmp.iter()) {
         let p = p as usize;
@@ -702,13 +737,14 @@ fn forward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut 
     }
 }
 
-/// `w_s −= L_offᵀ w_pattern`, then `w_s = L_diag⁻ᵀ w_s`.
+/// `w_s −= L_offᵀ w_pattern`, then `w_s = L_diag⁻ᵀ w_s` (layout of [`pack`]).
 #[inline(always)]
 fn backward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut Seg<'_, &[f64]>, tmp: &mut [f64]) {
-    let (nc, ld) = (s.ncols, s.ncols + s.rows);
-    let block = &values[s.val..s.val + ld * nc];
+    let (nc, r) = (s.ncols, s.rows);
+    let diag_len = nc * (nc + 1) / 2;
     let at = s.start - w.base;
-    if s.rows > 0 {
+    if r > 0 {
+        let tmp = &mut tmp[..r];
         for (t, &p) in tmp.iter_mut().zip(pat) {
             let p = p as usize;
             *t = if p < w.limit {
@@ -717,50 +753,76 @@ fn backward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut
                 w.other[p - w.other_base]
             };
         }
-        let off = |j: usize| &block[j * ld + nc..(j + 1) * ld];
-        let mut j = 0;
-        while j + 4 <= nc {
-            let r = tmp.len();
-            let (c0, c1, c2, c3) = (&off(j)[..r], &off(j + 1)[..r], &off(j + 2)[..r], &off(j + 3)[..r]);
-            // Four lanes per column: independent chains that vectorise.
-            let (mut d0, mut d1, mut d2, mut d3) = ([0.0; 4], [0.0; 4], [0.0; 4], [0.0; 4]);
-            let full = r - r % 4;
-            for k in (0..full).step_by(4) {
-                for l in 0..4 {
-                    let t = tmp[k + l];
-                    d0[l] = madd::<FMA>(c0[k + l], t, d0[l]);
-                    d1[l] = madd::<FMA>(c1[k + l], t, d1[l]);
-                    d2[l] = madd::<FMA>(c2[k + l], t, d2[l]);
-                    d3[l] = madd::<FMA>(c3[k + l], t, d3[l]);
-                }
+        let off = &values[s.val + diag_len..s.val + diag_len + nc * r];
+        for g in (0..nc).step_by(4) {
+            let width = (nc - g).min(4);
+            let block = &off[g * r..(g + width) * r];
+            let acc = match width {
+                4 => backward_group::<FMA, 4>(block, tmp),
+                3 => backward_group::<FMA, 3>(block, tmp),
+                2 => backward_group::<FMA, 2>(block, tmp),
+                _ => backward_group::<FMA, 1>(block, tmp),
+            };
+            for (l, a) in acc.iter().take(width).enumerate() {
+                w.own[at + g + l] -= a;
             }
-            for k in full..r {
-                let t = tmp[k];
-                d0[0] = madd::<FMA>(c0[k], t, d0[0]);
-                d1[0] = madd::<FMA>(c1[k], t, d1[0]);
-                d2[0] = madd::<FMA>(c2[k], t, d2[0]);
-                d3[0] = madd::<FMA>(c3[k], t, d3[0]);
-            }
-            let sum = |d: [f64; 4]| (d[0] + d[1]) + (d[2] + d[3]);
-            let (d0, d1, d2, d3) = (sum(d0), sum(d1), sum(d2), sum(d3));
-            let top = &mut w.own[at + j..at + j + 4];
-            top[0] -= d0;
-            top[1] -= d1;
-            top[2] -= d2;
-            top[3] -= d3;
-            j += 4;
-        }
-        while j < nc {
-            w.own[at + j] -= dot::<FMA>(off(j), tmp);
-            j += 1;
         }
     }
+    let diag = &values[s.val..s.val + diag_len];
     let top = &mut w.own[at..at + nc];
     for j in (0..nc).rev() {
-        let col = &block[j * ld..j * ld + nc];
-        let d = dot::<FMA>(&col[j + 1..], &top[j + 1..]);
-        top[j] = (top[j] - d) / col[j];
+        let p = j * nc - j * j.saturating_sub(1) / 2;
+        let col = &diag[p..p + nc - j];
+        let d = dot::<FMA>(&col[1..], &top[j + 1..]);
+        top[j] = (top[j] - d) * col[0];
     }
+}
+
+/// `tmp += block · y` for a group of `W` columns stored row by row.
+#[inline(always)]
+fn forward_group<const FMA: bool, const W: usize>(block: &[f64], y: &[f64], tmp: &mut [f64]) {
+    let mut yw = [0.0; W];
+    yw.copy_from_slice(&y[..W]);
+    for (t, v) in tmp.iter_mut().zip(block.chunks_exact(W)) {
+        if W == 4 {
+            // Two short chains instead of one of four.
+            let a = madd::<FMA>(v[1], yw[1], v[0] * yw[0]);
+            let b = madd::<FMA>(v[3], yw[3], v[2] * yw[2]);
+            *t += a + b;
+        } else {
+            let mut acc = *t;
+            for l in 0..W {
+                acc = madd::<FMA>(v[l], yw[l], acc);
+            }
+            *t = acc;
+        }
+    }
+}
+
+/// `blockᵀ · tmp` for a group of `W ≤ 4` columns stored row by row (lanes `W..` are zero);
+/// even and odd rows in separate partial sums, so consecutive rows do not wait on each
+/// other's additions.
+#[inline(always)]
+fn backward_group<const FMA: bool, const W: usize>(block: &[f64], tmp: &[f64]) -> [f64; 4] {
+    let (mut even, mut odd) = ([0.0; W], [0.0; W]);
+    let r = tmp.len();
+    for (v, t) in block.chunks_exact(2 * W).zip(tmp.chunks_exact(2)) {
+        for l in 0..W {
+            even[l] = madd::<FMA>(v[l], t[0], even[l]);
+            odd[l] = madd::<FMA>(v[W + l], t[1], odd[l]);
+        }
+    }
+    if r % 2 == 1 {
+        let (v, t) = (&block[W * (r - 1)..W * r], tmp[r - 1]);
+        for l in 0..W {
+            even[l] = madd::<FMA>(v[l], t, even[l]);
+        }
+    }
+    let mut out = [0.0; 4];
+    for l in 0..W {
+        out[l] = even[l] + odd[l];
+    }
+    out
 }
 
 /// Dot product with eight partial sums (vectorises; the order is fixed, so reruns are

@@ -16,7 +16,7 @@ mod test_run;
 pub use compensation::{ErrorForceCompensation, ErrorForceSpec};
 pub use controller::{SubstepController, SubstepSettings};
 pub use estimation::{EstimationOutcome, EstimationStats};
-pub use safety::{LimitedSite, MAX_RAMP_SUBSTEPS, MAX_RAMP_TIME, SafetyLimits, StopLog};
+pub use safety::{LimitedSite, MAX_RAMP_SUBSTEPS, MAX_RAMP_TIME, RampClock, SafetyLimits, StopLog};
 pub(crate) use test_run::stopped_at;
 pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
 
@@ -79,6 +79,12 @@ pub trait ExperimentalSubstructure: Send {
     /// `reason`. `false` if this side has no [`LimitedSite`] to ramp with (default); wrappers
     /// forward it to the side they wrap.
     fn request_stop(&mut self, _reason: &str) -> bool {
+        false
+    }
+    /// Pace the ramp of a controlled stop with `clock` (a real-time runner's schedule; `None`:
+    /// as fast as the side runs, offline). `false` if this side has no [`LimitedSite`]
+    /// (default); wrappers forward it.
+    fn pace_ramp(&mut self, _clock: Option<Box<dyn RampClock>>) -> bool {
         false
     }
 }

@@ -10,6 +10,8 @@
 //! The stop is recorded in a [`StopLog`] (the tripping sub-step, if it was measured, and every
 //! ramp sub-step) that the driver takes with [`ExperimentalSubstructure::take_stop_log`] and
 //! hands to its [`SubstepObserver`] ([`StopLog::replay`]), so the ramp is in `substeps.csv`.
+//! Offline the ramp runs as fast as the side does; a real-time runner paces it with a
+//! [`RampClock`] ([`ExperimentalSubstructure::pace_ramp`]), one ramp sub-step per `Δτ`.
 //! The ramp is bounded: `ramp_time` ≤ [`MAX_RAMP_TIME`] and at most [`MAX_RAMP_SUBSTEPS`]
 //! sub-steps, so a stop always ends and its log has a fixed maximum size.
 
@@ -143,6 +145,14 @@ impl StopLog {
     }
 }
 
+/// Paces the ramp of a controlled stop (a real-time runner's clock; the numerical core keeps no
+/// clock of its own).
+pub trait RampClock: Send {
+    /// Called before ramp sub-step `s` (1-based) of length `dtau` \[s\] is sent: wait until it
+    /// is due (`s = 1` starts the ramp's schedule).
+    fn before_ramp_substep(&mut self, s: usize, dtau: f64);
+}
+
 pub struct LimitedSite {
     inner: Box<dyn ExperimentalSubstructure>,
     limits: SafetyLimits,
@@ -154,6 +164,7 @@ pub struct LimitedSite {
     log: Option<StopLog>,
     /// A stop asked for from outside ([`ExperimentalSubstructure::request_stop`]).
     requested: Option<String>,
+    clock: Option<Box<dyn RampClock>>,
 }
 
 impl LimitedSite {
@@ -170,6 +181,7 @@ impl LimitedSite {
             stopped: false,
             log: None,
             requested: None,
+            clock: None,
         })
     }
 
@@ -181,6 +193,9 @@ impl LimitedSite {
         // Allocated once, on the stop path (never in a running test's sub-steps).
         log.rows.reserve_exact(3 * self.inner.n_coupling() * steps);
         for s in 1..=steps {
+            if let Some(clock) = &mut self.clock {
+                clock.before_ramp_substep(s, dtau);
+            }
             let r = 1.0 - s as f64 / steps as f64;
             for (c, &l) in self.ramp_command.iter_mut().zip(&self.last_command) {
                 *c = r * l;
@@ -295,6 +310,10 @@ impl ExperimentalSubstructure for LimitedSite {
         if !self.stopped && self.requested.is_none() {
             self.requested = Some(reason.to_string());
         }
+        true
+    }
+    fn pace_ramp(&mut self, clock: Option<Box<dyn RampClock>>) -> bool {
+        self.clock = clock;
         true
     }
     fn true_force(&self) -> Option<&[f64]> {

@@ -93,6 +93,9 @@ impl ExperimentalSubstructure for ControlledSite {
     fn request_stop(&mut self, reason: &str) -> bool {
         self.inner.request_stop(reason)
     }
+    fn pace_ramp(&mut self, clock: Option<Box<dyn crate::substructure::RampClock>>) -> bool {
+        self.inner.pace_ramp(clock)
+    }
 
     fn is_linear(&self) -> Result<()> {
         self.inner.is_linear()

@@ -157,4 +157,7 @@ impl ExperimentalSubstructure for DelayRampSite {
     fn request_stop(&mut self, reason: &str) -> bool {
         self.inner.request_stop(reason)
     }
+    fn pace_ramp(&mut self, clock: Option<Box<dyn crate::substructure::RampClock>>) -> bool {
+        self.inner.pace_ramp(clock)
+    }
 }
