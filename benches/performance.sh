@@ -7,12 +7,18 @@
 # CHOLMOD: apt-get install libsuitesparse-dev && .venv/bin/pip install scikit-sparse==0.4.16 --
 # 0.5 needs SuiteSparse 7, Debian 12 ships 5.12).
 # Usage: bash benches/performance.sh   (from the repository root; takes about twenty minutes)
+#        BASELINE=path/to/older/substep bash benches/performance.sh   also sweeps the chain with an
+#        older build right after this one's (the no-regression check of the chain figures).
+# Then benches/performance_tables.py writes the tables of docs/performance.md from the JSON.
 set -euo pipefail
 cargo build --release -q
 bin=target/release/substep
 tmp=$(mktemp -d)
 load_before=$(cut -d' ' -f1-3 /proc/loadavg)
 $bin bench --model chain --sweep --steps 2000 --json > "$tmp/chain.json"
+if [ -n "${BASELINE:-}" ]; then
+    "$BASELINE" bench --model chain --sweep --steps 2000 --json > "$tmp/chain_base.json"
+fi
 $bin bench --model frame --sweep --steps 1000 --json > "$tmp/frame.json"
 $bin bench --model frame --sweep --sizes 10000,30000,100000 --steps 1000 --two-cores --json > "$tmp/frame2.json"
 $bin bench --model frame3d --dofs 10000 --steps 1000 --json > "$tmp/frame3d.json"
@@ -33,6 +39,7 @@ out = {
     "machine": {"cpu": cpu, "cores": os.cpu_count(), "kernel": platform.release(),
                 "load_average_before": before, "load_average_after": after},
     "command": "bash benches/performance.sh",
+    "date": __import__("datetime").datetime.now(__import__("datetime").timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
     "chain_sweep": json.load(open(f"{tmp}/chain.json")),
     "frame_sweep": json.load(open(f"{tmp}/frame.json")),
     "frame_sweep_two_cores": json.load(open(f"{tmp}/frame2.json")),
@@ -46,7 +53,10 @@ out = {
     "compare_frame_1e5_two_cores": json.load(open(f"{tmp}/compare_frame_1e5_2.json")),
     "compare_frame3d_1e4": json.load(open(f"{tmp}/compare_frame3d_1e4.json")),
 }
+if os.path.exists(f"{tmp}/chain_base.json"):
+    out["chain_sweep_baseline"] = json.load(open(f"{tmp}/chain_base.json"))
 print(json.dumps(out, indent=1))
 PY
 rm -rf "$tmp"
 echo "wrote docs/performance.json" >&2
+python3 benches/performance_tables.py docs/performance.json docs/performance.md
