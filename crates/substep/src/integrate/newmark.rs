@@ -3,7 +3,7 @@
 use super::{Integrator, Kinematics};
 use crate::error::{Error, Result};
 use crate::model::{ModelRef, StructuralModel};
-use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
+use crate::sparse::{CscMatrix, FactorKind, SparseOrdering, SymmetricFactor};
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 
 /// The constants `a0 … a7` of docs/theory.md §2.2.
@@ -133,7 +133,38 @@ impl NewmarkCore {
     pub fn enable_second_core(&mut self) -> bool {
         match &mut self.backend {
             Backend::Dense { .. } => false,
-            Backend::Sparse { k_hat, .. } => k_hat.enable_second_core(),
+            Backend::Sparse {
+                k_hat,
+                mass,
+                damping,
+                stiffness,
+                ..
+            } => {
+                if k_hat.enable_second_core() {
+                    return true;
+                }
+                if k_hat.ordering() != Some(SparseOrdering::Amd) {
+                    return false;
+                }
+                // `Auto` kept AMD (its factor was smaller), whose elimination tree rarely has
+                // two balanced halves; nested dissection's has them by construction. The same
+                // K̂ factorised again, so the gain columns computed from the first stay valid.
+                let k_eff = CscMatrix::linear_combination(&[
+                    (1.0, &*stiffness),
+                    (self.c.a[0], &*mass),
+                    (self.c.a[1], &*damping),
+                ]);
+                let Ok(mut nd) =
+                    SymmetricFactor::with_ordering(&k_eff, FactorKind::Sparse, SparseOrdering::NestedDissection, K_HAT)
+                else {
+                    return false;
+                };
+                if !nd.enable_second_core() {
+                    return false;
+                }
+                *k_hat = nd;
+                true
+            }
         }
     }
 

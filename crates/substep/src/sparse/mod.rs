@@ -13,3 +13,4 @@ mod supernodal;
 pub use csc::CscMatrix;
 pub use factor::{FactorKind, SparseOrdering, SymmetricFactor};
 pub use modes::lowest_frequencies;
+pub(crate) use supernodal::HugeBuf;

@@ -617,7 +617,7 @@ fn backward_sweep<const FMA: bool>(
 /// `f64` values in memory aligned to 2 MiB and, on Linux, advised to transparent huge pages:
 /// a solve streams tens of megabytes, and with 4 KiB pages every page is a TLB miss that also
 /// stops the hardware prefetcher.
-struct HugeBuf {
+pub(crate) struct HugeBuf {
     ptr: std::ptr::NonNull<f64>,
     len: usize,
     layout: std::alloc::Layout,
@@ -630,7 +630,7 @@ unsafe impl Sync for HugeBuf {}
 impl HugeBuf {
     const HUGE: usize = 2 << 20;
 
-    fn from_slice(v: &[f64]) -> Self {
+    pub(crate) fn from_slice(v: &[f64]) -> Self {
         // Small factors stay in the cache anyway: no 2 MiB rounding for them.
         let huge = v.len() * 8 >= 2 * Self::HUGE;
         let align = if huge { Self::HUGE } else { 64 };
