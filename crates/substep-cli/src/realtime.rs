@@ -97,6 +97,16 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             header.push_str(&format!(",{p}{k}"));
         }
     }
+    // The indicator's columns, as `substep::run::Layout::history_columns` names them offline.
+    let indicator_columns = live.indicator().is_some();
+    if indicator_columns {
+        header.push_str(",eta,margin");
+        for p in ["k_id", "c_id", "lag_id"] {
+            for k in 1..=n_c {
+                header.push_str(&format!(",{p}{k}"));
+            }
+        }
+    }
     writeln!(w, "{header}").context("history.csv")?;
     let mut line = String::new();
     let mut write_error = None;
@@ -136,6 +146,16 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             &r.measured_displacement,
         ] {
             for &x in group.iter() {
+                line.push(',');
+                num(&mut line, x);
+            }
+        }
+        if indicator_columns && let Some(m) = live.indicator() {
+            let id = m.identification();
+            for x in [m.eta(), m.margin()]
+                .into_iter()
+                .chain(id.stiffness().iter().chain(id.damping()).chain(id.lag()).copied())
+            {
                 line.push(',');
                 num(&mut line, x);
             }

@@ -146,6 +146,45 @@ stability_window = 1.0
         "real time stopped after step {rt_done}"
     );
     assert_eq!(rt["stopped_at_step"].as_u64(), Some(rt_done + 1));
+    // history.csv ends with the indicator's columns, as offline, and their extremes are the
+    // summary's worst values.
+    for (out, s) in [("offline", &off), ("rt", &rt)] {
+        let history = std::fs::read_to_string(dir.join(out).join("history.csv")).unwrap();
+        let mut lines = history.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        assert_eq!(
+            &header[header.len() - 5..],
+            ["eta", "margin", "k_id1", "c_id1", "lag_id1"],
+            "{out}"
+        );
+        let col = |name: &str| -> Vec<f64> {
+            let i = header.iter().position(|h| *h == name).unwrap();
+            history
+                .lines()
+                .skip(1)
+                .map(|l| l.split(',').nth(i).unwrap().parse::<f64>().unwrap())
+                .filter(|x| x.is_finite())
+                .collect()
+        };
+        // Worst finite value of a column (None when it never became known: null in summary.json).
+        let worst = |name: &str, pick: fn(f64, f64) -> f64| col(name).into_iter().reduce(pick);
+        let summary = |key: &str| s["stability"][key].as_f64();
+        let close = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(a), Some(b)) => (a - b).abs() <= 1e-9 * b.abs().max(1.0),
+            (a, b) => a.is_none() && b.is_none(),
+        };
+        let (eta, margin) = (worst("eta", f64::max), worst("margin", f64::min));
+        assert!(close(eta, summary("max_eta")), "{out}: {eta:?} vs {}", s["stability"]);
+        assert!(
+            close(margin, summary("min_margin")),
+            "{out}: {margin:?} vs {}",
+            s["stability"]
+        );
+        assert!(
+            margin.is_some(),
+            "{out}: the model view's margin is known before the alarm"
+        );
+    }
     let substeps = std::fs::read_to_string(dir.join("rt/substeps.csv")).unwrap();
     let last: Vec<f64> = substeps
         .lines()

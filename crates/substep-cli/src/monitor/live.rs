@@ -393,6 +393,12 @@ impl Live {
         msg
     }
 
+    /// The stability indicator of the run, when it runs (a real-time run's `history.csv` ends
+    /// with its columns, as an offline run's).
+    pub fn indicator(&self) -> Option<&StabilityMonitor> {
+        self.stability.as_ref()
+    }
+
     /// `summary.json`'s `stability` object of a real-time run (offline runs: the library's
     /// summary has it).
     pub fn summary(&self) -> Option<Value> {
