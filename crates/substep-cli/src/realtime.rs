@@ -97,14 +97,12 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             header.push_str(&format!(",{p}{k}"));
         }
     }
-    // The indicator's columns, as `substep::run::Layout::history_columns` names them offline.
+    // The indicator's columns, as an offline run's history has them.
     let indicator_columns = live.indicator().is_some();
     if indicator_columns {
-        header.push_str(",eta,margin");
-        for p in ["k_id", "c_id", "lag_id"] {
-            for k in 1..=n_c {
-                header.push_str(&format!(",{p}{k}"));
-            }
+        for c in substep::monitor::StabilityMonitor::history_columns(n_c) {
+            header.push(',');
+            header.push_str(&c);
         }
     }
     writeln!(w, "{header}").context("history.csv")?;
@@ -151,11 +149,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             }
         }
         if indicator_columns && let Some(m) = live.indicator() {
-            let id = m.identification();
-            for x in [m.eta(), m.margin()]
-                .into_iter()
-                .chain(id.stiffness().iter().chain(id.damping()).chain(id.lag()).copied())
-            {
+            for x in m.history_values() {
                 line.push(',');
                 num(&mut line, x);
             }

@@ -122,6 +122,23 @@ impl Drop for Driver {
     }
 }
 
+/// A headless Chromium session (`None` where chromedriver cannot start one) showing the monitor
+/// page at `port`, once the monitor answers (bounded wait).
+fn open_page(port: u16, profile: &Path) -> Option<Driver> {
+    let driver = start_driver(profile)?;
+    let t0 = Instant::now();
+    while http(port, "GET", "/state", None).is_err() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "monitor did not come up");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    driver.cmd(
+        "POST",
+        "/url",
+        Some(json!({ "url": format!("http://127.0.0.1:{port}/") })),
+    );
+    Some(driver)
+}
+
 fn start_driver(profile: &Path) -> Option<Driver> {
     let port = free_port();
     let child = Command::new(CHROMEDRIVER)
@@ -224,20 +241,10 @@ fn monitor_page_shows_live_data_and_stops_the_run_with_the_token() {
         .unwrap();
     // The run is 20 s of test time at wall-clock pace; kill it whatever happens below.
     let run = Kill(&mut run);
-    let Some(driver) = start_driver(&dir.join("profile")) else {
+    let Some(driver) = open_page(port, &dir.join("profile")) else {
         eprintln!("SKIPPED: chromedriver did not start a headless Chromium session");
         return;
     };
-    let t0 = Instant::now();
-    while http(port, "GET", "/state", None).is_err() {
-        assert!(t0.elapsed() < Duration::from_secs(20), "monitor did not come up");
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    driver.cmd(
-        "POST",
-        "/url",
-        Some(json!({ "url": format!("http://127.0.0.1:{port}/") })),
-    );
     driver.wait_for(Duration::from_secs(20), "live data on the page", |d| {
         d.text("#step") != "–"
     });
@@ -336,20 +343,10 @@ fn realtime_run_stops_from_the_page_with_the_token_and_cannot_hold() {
         .spawn()
         .unwrap();
     let run = Kill(&mut run);
-    let Some(driver) = start_driver(&dir.join("profile")) else {
+    let Some(driver) = open_page(port, &dir.join("profile")) else {
         eprintln!("SKIPPED: chromedriver did not start a headless Chromium session");
         return;
     };
-    let t0 = Instant::now();
-    while http(port, "GET", "/state", None).is_err() {
-        assert!(t0.elapsed() < Duration::from_secs(20), "monitor did not come up");
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    driver.cmd(
-        "POST",
-        "/url",
-        Some(json!({ "url": format!("http://127.0.0.1:{port}/") })),
-    );
     driver.wait_for(Duration::from_secs(15), "live data on the page", |d| {
         d.text("#step") != "–"
     });

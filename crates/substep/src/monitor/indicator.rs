@@ -354,6 +354,24 @@ impl StabilityMonitor {
         };
     }
 
+    /// Names of the indicator's history columns for `n_c` coupling DOFs: `eta, margin,
+    /// k_id1.., c_id1.., lag_id1..` (the order of [`history_values`](Self::history_values)).
+    pub fn history_columns(n_c: usize) -> impl Iterator<Item = String> {
+        ["eta".to_string(), "margin".to_string()].into_iter().chain(
+            ["k_id", "c_id", "lag_id"]
+                .into_iter()
+                .flat_map(move |p| (1..=n_c).map(move |k| format!("{p}{k}"))),
+        )
+    }
+
+    /// This step's values of [`history_columns`](Self::history_columns) (NaN until known).
+    pub fn history_values(&self) -> impl Iterator<Item = f64> + '_ {
+        let id = self.identification();
+        [self.eta(), self.margin()]
+            .into_iter()
+            .chain(id.stiffness().iter().chain(id.damping()).chain(id.lag()).copied())
+    }
+
     /// Energy ratio `η` of the last window (NaN until known).
     pub fn eta(&self) -> f64 {
         self.energy.eta()

@@ -3,27 +3,19 @@
 //! the safe position on the real-time thread.
 
 use crate::substructure::RampClock;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 /// Ask a running [`RealtimeRunner`](super::RealtimeRunner) for the controlled stop, from any
-/// thread. The real-time thread polls it once per step (one atomic load: no lock, no
-/// allocation, no system call); at the next step boundary it hands the reason to the safety
+/// thread. The real-time thread polls it once per step (`OnceLock::get`, one atomic load: no
+/// lock, no allocation, no system call); at the next step boundary it hands the reason to the safety
 /// ramp of the experimental side ([`ExperimentalSubstructure::request_stop`]), and the run ends
 /// with [`Error::Stopped`] and that reason, as after a tripped limit.
 ///
 /// [`ExperimentalSubstructure::request_stop`]: crate::substructure::ExperimentalSubstructure::request_stop
 /// [`Error::Stopped`]: crate::Error::Stopped
 #[derive(Debug, Clone, Default)]
-pub struct StopHandle(Arc<StopCell>);
-
-#[derive(Debug, Default)]
-struct StopCell {
-    requested: AtomicBool,
-    /// Set before `requested`, so a reader that sees the flag finds the reason.
-    reason: OnceLock<String>,
-}
+pub struct StopHandle(Arc<OnceLock<String>>);
 
 impl StopHandle {
     pub fn new() -> Self {
@@ -33,18 +25,12 @@ impl StopHandle {
     /// Ask for the stop. The first reason is kept (who stopped the run is recorded once);
     /// returns whether this call was the first.
     pub fn request(&self, reason: impl Into<String>) -> bool {
-        let first = self.0.reason.set(reason.into()).is_ok();
-        self.0.requested.store(true, Ordering::Release);
-        first
+        self.0.set(reason.into()).is_ok()
     }
 
     /// The reason, once a stop has been asked for.
     pub fn requested(&self) -> Option<&str> {
-        if self.0.requested.load(Ordering::Acquire) {
-            self.0.reason.get().map(String::as_str)
-        } else {
-            None
-        }
+        self.0.get().map(String::as_str)
     }
 }
 

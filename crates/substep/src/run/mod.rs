@@ -97,11 +97,7 @@ impl Layout {
             group(&mut c, "uref", self.n_dofs);
         }
         if self.indicator {
-            c.push("eta".into());
-            c.push("margin".into());
-            for p in ["k_id", "c_id", "lag_id"] {
-                group(&mut c, p, n_c);
-            }
+            c.extend(StabilityMonitor::history_columns(n_c));
         }
         c
     }
@@ -165,12 +161,7 @@ impl StepRow<'_> {
             }))
             .chain(self.extra.iter().copied())
             .chain(self.reference.into_iter().flatten().copied())
-            .chain(self.indicator.into_iter().flat_map(|m| {
-                let id = m.identification();
-                [m.eta(), m.margin()]
-                    .into_iter()
-                    .chain(id.stiffness().iter().chain(id.damping()).chain(id.lag()).copied())
-            }))
+            .chain(self.indicator.into_iter().flat_map(StabilityMonitor::history_values))
     }
 }
 
