@@ -75,6 +75,11 @@ enum Backend {
 
 const K_HAT: &str = "effective stiffness K + a0 M + a1 C";
 
+/// `K̂ = K + a0 M + a1 C` of sparse matrices.
+fn sparse_k_hat(stiffness: &CscMatrix, mass: &CscMatrix, damping: &CscMatrix, a: &[f64]) -> CscMatrix {
+    CscMatrix::linear_combination(&[(1.0, stiffness), (a[0], mass), (a[1], damping)])
+}
+
 impl NewmarkCore {
     pub fn new<'a>(model: impl Into<ModelRef<'a>>, dt: f64, beta: f64, gamma: f64) -> Result<Self> {
         let model = model.into();
@@ -93,11 +98,7 @@ impl NewmarkCore {
                 }
             }
             ModelRef::Sparse(model) => {
-                let k_eff = CscMatrix::linear_combination(&[
-                    (1.0, &model.stiffness),
-                    (c.a[0], &model.mass),
-                    (c.a[1], &model.damping),
-                ]);
+                let k_eff = sparse_k_hat(&model.stiffness, &model.mass, &model.damping, &c.a);
                 Backend::Sparse {
                     k_hat: SymmetricFactor::new(&k_eff, FactorKind::Auto, K_HAT)?,
                     mass_diag: model.mass.is_diagonal().then(|| model.mass.diagonal()),
@@ -149,11 +150,7 @@ impl NewmarkCore {
                 // `Auto` kept AMD (its factor was smaller), whose elimination tree rarely has
                 // two balanced halves; nested dissection's has them by construction. The same
                 // K̂ factorised again, so the gain columns computed from the first stay valid.
-                let k_eff = CscMatrix::linear_combination(&[
-                    (1.0, &*stiffness),
-                    (self.c.a[0], &*mass),
-                    (self.c.a[1], &*damping),
-                ]);
+                let k_eff = sparse_k_hat(stiffness, mass, damping, &self.c.a);
                 let Ok(mut nd) =
                     SymmetricFactor::with_ordering(&k_eff, FactorKind::Sparse, SparseOrdering::NestedDissection, K_HAT)
                 else {
