@@ -710,8 +710,22 @@ fn forward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut 
     if r == 0 {
         return;
     }
-    // tmp = L_off y, one group of four columns per pass, each row's four values adjacent.
     let off = &values[s.val + diag_len..s.val + diag_len + nc * r];
+    if nc <= 4 {
+        // One group (a frame node's three DOFs are the common supernode): each row's update
+        // straight into `w`, without the pass through `tmp` (same arithmetic, same order).
+        let y = &top[..nc];
+        let mut yw = [0.0; 4];
+        yw[..nc].copy_from_slice(y);
+        match nc {
+            4 => forward_direct::<FMA, 4>(off, &yw, pat, w),
+            3 => forward_direct::<FMA, 3>(off, &yw, pat, w),
+            2 => forward_direct::<FMA, 2>(off, &yw, pat, w),
+            _ => forward_direct::<FMA, 1>(off, &yw, pat, w),
+        }
+        return;
+    }
+    // tmp = L_off y, one group of four columns per pass, each row's four values adjacent.
     let tmp = &mut tmp[..r];
     tmp.fill(0.0);
     for g in (0..nc).step_by(4) {
@@ -743,7 +757,19 @@ fn backward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut
     let (nc, r) = (s.ncols, s.rows);
     let diag_len = nc * (nc + 1) / 2;
     let at = s.start - w.base;
-    if r > 0 {
+    if r > 0 && nc <= 4 {
+        // One group: gather `w` straight into the dot products (as in `forward_node`).
+        let off = &values[s.val + diag_len..s.val + diag_len + nc * r];
+        let acc = match nc {
+            4 => backward_direct::<FMA, 4>(off, pat, w),
+            3 => backward_direct::<FMA, 3>(off, pat, w),
+            2 => backward_direct::<FMA, 2>(off, pat, w),
+            _ => backward_direct::<FMA, 1>(off, pat, w),
+        };
+        for (l, a) in acc.iter().take(nc).enumerate() {
+            w.own[at + l] -= a;
+        }
+    } else if r > 0 {
         let tmp = &mut tmp[..r];
         for (t, &p) in tmp.iter_mut().zip(pat) {
             let p = p as usize;
@@ -776,6 +802,70 @@ fn backward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut
         let d = dot::<FMA>(&col[1..], &top[j + 1..]);
         top[j] = (top[j] - d) * col[0];
     }
+}
+
+/// `w[pat[k]] −= block_k · y` for a supernode of `W ≤ 4` columns (one group), the dot products
+/// formed as in [`forward_group`] from zero.
+#[inline(always)]
+fn forward_direct<const FMA: bool, const W: usize>(
+    block: &[f64],
+    y: &[f64; 4],
+    pat: &[u32],
+    w: &mut Seg<'_, &mut [f64]>,
+) {
+    for (&p, v) in pat.iter().zip(block.chunks_exact(W)) {
+        let t = if W == 4 {
+            let a = madd::<FMA>(v[1], y[1], v[0] * y[0]);
+            let b = madd::<FMA>(v[3], y[3], v[2] * y[2]);
+            0.0 + (a + b)
+        } else {
+            let mut acc = 0.0;
+            for l in 0..W {
+                acc = madd::<FMA>(v[l], y[l], acc);
+            }
+            acc
+        };
+        let p = p as usize;
+        if p < w.limit {
+            w.own[p - w.base] -= t;
+        } else {
+            w.other[p - w.other_base] -= t;
+        }
+    }
+}
+
+/// `blockᵀ · w[pat]` for a supernode of `W ≤ 4` columns, gathered row by row, with the even
+/// and odd partial sums of [`backward_group`].
+#[inline(always)]
+fn backward_direct<const FMA: bool, const W: usize>(block: &[f64], pat: &[u32], w: &Seg<'_, &[f64]>) -> [f64; 4] {
+    let get = |p: u32| {
+        let p = p as usize;
+        if p < w.limit {
+            w.own[p - w.base]
+        } else {
+            w.other[p - w.other_base]
+        }
+    };
+    let (mut even, mut odd) = ([0.0; W], [0.0; W]);
+    let r = pat.len();
+    for (v, p2) in block.chunks_exact(2 * W).zip(pat.chunks_exact(2)) {
+        let (t0, t1) = (get(p2[0]), get(p2[1]));
+        for l in 0..W {
+            even[l] = madd::<FMA>(v[l], t0, even[l]);
+            odd[l] = madd::<FMA>(v[W + l], t1, odd[l]);
+        }
+    }
+    if r % 2 == 1 {
+        let (v, t) = (&block[W * (r - 1)..W * r], get(pat[r - 1]));
+        for l in 0..W {
+            even[l] = madd::<FMA>(v[l], t, even[l]);
+        }
+    }
+    let mut out = [0.0; 4];
+    for l in 0..W {
+        out[l] = even[l] + odd[l];
+    }
+    out
 }
 
 /// `tmp += block · y` for a group of `W` columns stored row by row.
