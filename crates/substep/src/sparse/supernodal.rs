@@ -234,6 +234,30 @@ fn pack(nodes: &mut [Node], faer_values: &[f64]) -> Vec<f64> {
     out
 }
 
+impl Seg<'_, &mut [f64]> {
+    /// `x[p] −= t`.
+    #[inline(always)]
+    fn sub_at(&mut self, p: usize, t: f64) {
+        if p < self.limit {
+            self.own[p - self.base] -= t;
+        } else {
+            self.other[p - self.other_base] -= t;
+        }
+    }
+}
+
+impl Seg<'_, &[f64]> {
+    /// `x[p]`.
+    #[inline(always)]
+    fn at(&self, p: usize) -> f64 {
+        if p < self.limit {
+            self.own[p - self.base]
+        } else {
+            self.other[p - self.other_base]
+        }
+    }
+}
+
 fn seg(own: &mut [f64], base: usize, limit: usize) -> Seg<'_, &mut [f64]> {
     Seg {
         own,
@@ -742,12 +766,7 @@ fn forward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut 
         }
     }
     for (&p, &t) in pat.iter().zip(tmp.iter()) {
-        let p = p as usize;
-        if p < w.limit {
-            w.own[p - w.base] -= t;
-        } else {
-            w.other[p - w.other_base] -= t;
-        }
+        w.sub_at(p as usize, t);
     }
 }
 
@@ -772,12 +791,7 @@ fn backward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut
     } else if r > 0 {
         let tmp = &mut tmp[..r];
         for (t, &p) in tmp.iter_mut().zip(pat) {
-            let p = p as usize;
-            *t = if p < w.limit {
-                w.own[p - w.base]
-            } else {
-                w.other[p - w.other_base]
-            };
+            *t = w.at(p as usize);
         }
         let off = &values[s.val + diag_len..s.val + diag_len + nc * r];
         for g in (0..nc).step_by(4) {
@@ -805,7 +819,7 @@ fn backward_node<const FMA: bool>(s: &Node, pat: &[u32], values: &[f64], w: &mut
 }
 
 /// `w[pat[k]] −= block_k · y` for a supernode of `W ≤ 4` columns (one group), the dot products
-/// formed as in [`forward_group`] from zero.
+/// formed by [`row_dot`] from zero, as [`forward_group`] does for the first group.
 #[inline(always)]
 fn forward_direct<const FMA: bool, const W: usize>(
     block: &[f64],
@@ -814,23 +828,7 @@ fn forward_direct<const FMA: bool, const W: usize>(
     w: &mut Seg<'_, &mut [f64]>,
 ) {
     for (&p, v) in pat.iter().zip(block.chunks_exact(W)) {
-        let t = if W == 4 {
-            let a = madd::<FMA>(v[1], y[1], v[0] * y[0]);
-            let b = madd::<FMA>(v[3], y[3], v[2] * y[2]);
-            0.0 + (a + b)
-        } else {
-            let mut acc = 0.0;
-            for l in 0..W {
-                acc = madd::<FMA>(v[l], y[l], acc);
-            }
-            acc
-        };
-        let p = p as usize;
-        if p < w.limit {
-            w.own[p - w.base] -= t;
-        } else {
-            w.other[p - w.other_base] -= t;
-        }
+        w.sub_at(p as usize, row_dot::<FMA, W>(v, y, 0.0));
     }
 }
 
@@ -838,34 +836,7 @@ fn forward_direct<const FMA: bool, const W: usize>(
 /// and odd partial sums of [`backward_group`].
 #[inline(always)]
 fn backward_direct<const FMA: bool, const W: usize>(block: &[f64], pat: &[u32], w: &Seg<'_, &[f64]>) -> [f64; 4] {
-    let get = |p: u32| {
-        let p = p as usize;
-        if p < w.limit {
-            w.own[p - w.base]
-        } else {
-            w.other[p - w.other_base]
-        }
-    };
-    let (mut even, mut odd) = ([0.0; W], [0.0; W]);
-    let r = pat.len();
-    for (v, p2) in block.chunks_exact(2 * W).zip(pat.chunks_exact(2)) {
-        let (t0, t1) = (get(p2[0]), get(p2[1]));
-        for l in 0..W {
-            even[l] = madd::<FMA>(v[l], t0, even[l]);
-            odd[l] = madd::<FMA>(v[W + l], t1, odd[l]);
-        }
-    }
-    if r % 2 == 1 {
-        let (v, t) = (&block[W * (r - 1)..W * r], get(pat[r - 1]));
-        for l in 0..W {
-            even[l] = madd::<FMA>(v[l], t, even[l]);
-        }
-    }
-    let mut out = [0.0; 4];
-    for l in 0..W {
-        out[l] = even[l] + odd[l];
-    }
-    out
+    backward_rows::<FMA, W>(block, pat.len(), |k| w.at(pat[k] as usize))
 }
 
 /// `tmp += block · y` for a group of `W` columns stored row by row.
@@ -874,18 +845,24 @@ fn forward_group<const FMA: bool, const W: usize>(block: &[f64], y: &[f64], tmp:
     let mut yw = [0.0; W];
     yw.copy_from_slice(&y[..W]);
     for (t, v) in tmp.iter_mut().zip(block.chunks_exact(W)) {
-        if W == 4 {
-            // Two short chains instead of one of four.
-            let a = madd::<FMA>(v[1], yw[1], v[0] * yw[0]);
-            let b = madd::<FMA>(v[3], yw[3], v[2] * yw[2]);
-            *t += a + b;
-        } else {
-            let mut acc = *t;
-            for l in 0..W {
-                acc = madd::<FMA>(v[l], yw[l], acc);
-            }
-            *t = acc;
+        *t = row_dot::<FMA, W>(v, &yw, *t);
+    }
+}
+
+/// `init + v · y` over `W ≤ 4` values.
+#[inline(always)]
+fn row_dot<const FMA: bool, const W: usize>(v: &[f64], y: &[f64], init: f64) -> f64 {
+    if W == 4 {
+        // Two short chains instead of one of four.
+        let a = madd::<FMA>(v[1], y[1], v[0] * y[0]);
+        let b = madd::<FMA>(v[3], y[3], v[2] * y[2]);
+        init + (a + b)
+    } else {
+        let mut acc = init;
+        for l in 0..W {
+            acc = madd::<FMA>(v[l], y[l], acc);
         }
+        acc
     }
 }
 
@@ -894,16 +871,22 @@ fn forward_group<const FMA: bool, const W: usize>(block: &[f64], y: &[f64], tmp:
 /// other's additions.
 #[inline(always)]
 fn backward_group<const FMA: bool, const W: usize>(block: &[f64], tmp: &[f64]) -> [f64; 4] {
+    backward_rows::<FMA, W>(block, tmp.len(), |k| tmp[k])
+}
+
+/// `blockᵀ · x` over `r` rows, `x_k = x(k)`, with the partial sums of [`backward_group`].
+#[inline(always)]
+fn backward_rows<const FMA: bool, const W: usize>(block: &[f64], r: usize, x: impl Fn(usize) -> f64) -> [f64; 4] {
     let (mut even, mut odd) = ([0.0; W], [0.0; W]);
-    let r = tmp.len();
-    for (v, t) in block.chunks_exact(2 * W).zip(tmp.chunks_exact(2)) {
+    for (i, v) in block[..2 * W * (r / 2)].chunks_exact(2 * W).enumerate() {
+        let (t0, t1) = (x(2 * i), x(2 * i + 1));
         for l in 0..W {
-            even[l] = madd::<FMA>(v[l], t[0], even[l]);
-            odd[l] = madd::<FMA>(v[W + l], t[1], odd[l]);
+            even[l] = madd::<FMA>(v[l], t0, even[l]);
+            odd[l] = madd::<FMA>(v[W + l], t1, odd[l]);
         }
     }
     if r % 2 == 1 {
-        let (v, t) = (&block[W * (r - 1)..W * r], tmp[r - 1]);
+        let (v, t) = (&block[W * (r - 1)..W * r], x(r - 1));
         for l in 0..W {
             even[l] = madd::<FMA>(v[l], t, even[l]);
         }
