@@ -3,7 +3,7 @@
 use super::{Integrator, Kinematics};
 use crate::error::{Error, Result};
 use crate::model::{ModelRef, StructuralModel};
-use crate::sparse::{CscMatrix, FactorKind, SparseOrdering, SymmetricFactor};
+use crate::sparse::{CscMatrix, FactorKind, SparseOrdering, SymmetricFactor, SymmetricProduct};
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 
 /// The constants `a0 … a7` of docs/theory.md §2.2.
@@ -68,6 +68,9 @@ enum Backend {
         /// The diagonal of `M` when `M` is diagonal (lumped masses): `F̂` in one gather pass.
         mass_diag: Option<Vec<f64>>,
         damping: CscMatrix,
+        /// `C` stored once for the step's damping product (`None`: no damping, or too large
+        /// for `u32` indices, then `damping` is used).
+        damping_product: Option<Box<SymmetricProduct>>,
         stiffness: CscMatrix,
         k_hat: SymmetricFactor,
     },
@@ -78,6 +81,15 @@ const K_HAT: &str = "effective stiffness K + a0 M + a1 C";
 /// `K̂ = K + a0 M + a1 C` of sparse matrices.
 fn sparse_k_hat(stiffness: &CscMatrix, mass: &CscMatrix, damping: &CscMatrix, a: &[f64]) -> CscMatrix {
     CscMatrix::linear_combination(&[(1.0, stiffness), (a[0], mass), (a[1], damping)])
+}
+
+/// `out += C w`, by the once-stored lower half when there is one.
+fn add_damping(damping: &CscMatrix, product: Option<&SymmetricProduct>, w: &[f64], out: &mut [f64]) {
+    match product {
+        Some(p) => p.mul_add(w, out),
+        None if damping.nnz() > 0 => damping.sym_mul_add(1.0, w, 1.0, out),
+        None => {}
+    }
 }
 
 impl NewmarkCore {
@@ -104,6 +116,9 @@ impl NewmarkCore {
                     mass_diag: model.mass.is_diagonal().then(|| model.mass.diagonal()),
                     mass: model.mass.clone(),
                     damping: model.damping.clone(),
+                    damping_product: (model.damping.nnz() > 0)
+                        .then(|| SymmetricProduct::new(&model.damping).map(Box::new))
+                        .flatten(),
                     stiffness: model.stiffness.clone(),
                 }
             }
@@ -252,6 +267,7 @@ impl NewmarkCore {
         if let Backend::Sparse {
             mass_diag: Some(md),
             damping,
+            damping_product,
             ..
         } = &self.backend
         {
@@ -269,9 +285,7 @@ impl NewmarkCore {
                 *wc = a[1] * u + a[4] * v + a[5] * acc;
                 *oi = m * (a[0] * u + a[2] * v + a[3] * acc);
             }
-            if damping.nnz() > 0 {
-                damping.sym_mul_add(1.0, self.work_c.as_slice(), 1.0, o);
-            }
+            add_damping(damping, damping_product.as_deref(), self.work_c.as_slice(), o);
             return;
         }
         self.work_m.copy_from(&s.u);
@@ -287,12 +301,15 @@ impl NewmarkCore {
                 out.gemv(1.0, mass, &self.work_m, 0.0);
                 out.gemv(1.0, damping, &self.work_c, 1.0);
             }
-            Backend::Sparse { mass, damping, .. } => {
+            Backend::Sparse {
+                mass,
+                damping,
+                damping_product,
+                ..
+            } => {
                 let o = out.as_mut_slice();
                 mass.sym_mul_add(1.0, self.work_m.as_slice(), 0.0, o);
-                if damping.nnz() > 0 {
-                    damping.sym_mul_add(1.0, self.work_c.as_slice(), 1.0, o);
-                }
+                add_damping(damping, damping_product.as_deref(), self.work_c.as_slice(), o);
             }
         }
     }
