@@ -84,27 +84,22 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let file =
         std::fs::File::create(&history_path).with_context(|| format!("cannot write {}", history_path.display()))?;
     let mut w = std::io::BufWriter::new(file);
-    let n = def.model.n_dofs();
-    let n_c = sub.coupling_dofs.len();
-    let mut header = String::from("t");
-    for p in ["u", "v", "a"] {
-        for k in 1..=n {
-            header.push_str(&format!(",{p}{k}"));
-        }
-    }
-    for p in ["fc", "fe", "fu", "dm"] {
-        for k in 1..=n_c {
-            header.push_str(&format!(",{p}{k}"));
-        }
-    }
-    // The indicator's columns, as an offline run's history has them.
+    // The columns of an offline run's history (no reference, no extra groups: the real-time
+    // records carry neither), with the indicator's when it runs.
     let indicator_columns = live.indicator().is_some();
-    if indicator_columns {
-        for c in substep::monitor::StabilityMonitor::history_columns(n_c) {
-            header.push(',');
-            header.push_str(&c);
-        }
-    }
+    let layout = substep::run::Layout {
+        n_dofs: def.model.n_dofs(),
+        coupling_dofs: sub.coupling_dofs.clone(),
+        extra_groups: Vec::new(),
+        reference: false,
+        indicator: indicator_columns,
+        dt: def.integrator.dt,
+        substeps: Some(sub.substeps),
+        phase_lag: false,
+        ramp_column: false,
+        response_columns: None,
+    };
+    let header = layout.history_columns().join(",");
     writeln!(w, "{header}").context("history.csv")?;
     let mut line = String::new();
     let mut write_error = None;
@@ -181,8 +176,15 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let Some(((step, j), log)) = &stop {
         let path = out_dir.join("substeps.csv");
         let cannot = || format!("cannot write {}", path.display());
-        let mut w =
-            SubstepWriter::create(&path, n_c, def.integrator.dt, sub.substeps, false, true).with_context(cannot)?;
+        let mut w = SubstepWriter::create(
+            &path,
+            sub.coupling_dofs.len(),
+            def.integrator.dt,
+            sub.substeps,
+            false,
+            true,
+        )
+        .with_context(cannot)?;
         log.replay(*step, *j, &mut w);
         ramp_substeps = Some(w.ramp_rows());
         w.finish().with_context(cannot)?;

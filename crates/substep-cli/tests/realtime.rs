@@ -35,6 +35,19 @@ fn realtime_run_equals_offline_and_reports_latency() {
             .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
             .collect()
     };
+    let header = |p: &str| {
+        std::fs::read_to_string(dir.join(p))
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap()
+            .to_string()
+    };
+    // The offline columns, without the ideal error force and the reference the offline run adds.
+    assert_eq!(
+        format!("{},fei1,uref1", header("rt/history.csv")),
+        header("offline/history.csv")
+    );
     let (off, rt) = (read("offline/history.csv"), read("rt/history.csv"));
     assert_eq!(off.len(), rt.len());
     assert_eq!(rt.len(), 101);
