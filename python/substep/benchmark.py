@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import json
 import os
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Optional, Sequence
 
 from . import _substep
 
 __all__ = ["rths"]
+
+
+def _count(what: str, x, top: int = 2**63 - 1) -> int:
+    """A whole number >= 0 (the range checks after it are the library's, with its message)."""
+    if isinstance(x, bool) or int(x) != x or not 0 <= int(x) <= top:
+        raise _substep.ConfigError(f"{what}: must be a whole number in 0..={top}, got {x!r}")
+    return int(x)
 
 
 def rths(
@@ -17,17 +25,36 @@ def rths(
     controller: Optional[str] = None,
     config: Optional["os.PathLike[str] | str"] = None,
     algorithm: str = "benchmark",
+    record: Optional["os.PathLike[str] | str"] = None,
+    perturbed: Optional[int] = None,
+    seed: int = 1,
+    k_sub: Optional[Sequence[int]] = None,
 ) -> Dict[str, Any]:
-    """The virtual RTHS benchmark (Silva et al. 2020) with the nominal servo-hydraulic plant.
+    """The virtual RTHS benchmark (Silva et al. 2020): the servo-hydraulic plant with
+    control-structure interaction, J1-J9 against the exact reference.
 
-    ``case``: reference structure 1..4 (default: all four); ``intensity``: scale of the El Centro
-    record; ``controller``: none, sample, arx, polynomial, inverse_fir (default: the config's,
-    else sample); ``config``: a benchmark settings file (TOML, docs/benchmark.md);
-    ``algorithm``: ``benchmark`` (the original loop) or ``substep``.
+    ``case``: reference structure 1..4 (default: all four); ``intensity``: scale of the record;
+    ``controller``: none, sample, arx, polynomial, inverse_fir (default: the config's, else
+    sample); ``config``: a benchmark settings file (TOML, docs/benchmark.md); ``algorithm``:
+    ``benchmark`` (the original loop) or ``substep``; ``record``: a two-column ``t,a_g`` CSV in
+    m/s² (default: the shipped El Centro record); ``perturbed``: also run that many perturbed
+    plants per case (seed ``seed``), the benchmark's robustness study; ``k_sub``: with
+    ``algorithm="substep"``, one row per value.
 
-    Returns the dict of ``substep benchmark rths --json`` for those options: ``controller``,
-    ``record``, ``intensity``, ``algorithm`` and ``cases``, one dict per case with ``J1`` ... ``J9``
-    (None if it diverged), ``max_force``, ``stable``, ``capacity_exceeded``.
+    Returns the dict of ``substep benchmark rths --json`` for the same options: ``controller``,
+    ``record``, ``intensity``, ``algorithm`` (``dt``, ``error_force`` with substep, ``seed`` with
+    perturbed plants) and ``cases``, one dict per case (and ``k_sub``) with ``J1`` ... ``J9``
+    (None if it diverged), ``max_force``, ``stable``, ``capacity_exceeded`` and, with perturbed
+    plants, ``perturbed``: ``n``, ``stable``, ``under_capacity``, ``mean`` and ``max`` of each J
+    over the stable runs, ``max_force`` and every run's plant (``k_e``, ``beta1``, ``beta2``,
+    ``a3``) and J values. With a single row its fields are at the top level too.
     """
     cfg = None if config is None else os.fspath(config)
-    return _substep.rths(case, float(intensity), controller, cfg, algorithm)
+    rec = None if record is None else os.fspath(record)
+    if rec == "elcentro":
+        rec = None
+    ks = [] if k_sub is None else [_count("k_sub", k) for k in k_sub]
+    n = None if perturbed is None else _count("perturbed", perturbed)
+    c = None if case is None else _count("case", case, 255)
+    text = _substep.rths(c, float(intensity), controller, cfg, algorithm, rec, n, _count("seed", seed, 2**64 - 1), ks)
+    return json.loads(text)

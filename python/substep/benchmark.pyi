@@ -1,5 +1,5 @@
 import os
-from typing import Any, Dict, Optional, Union
+from typing import Any, Dict, Optional, Sequence, Union
 
 def rths(
     *,
@@ -8,4 +8,8 @@ def rths(
     controller: Optional[str] = None,
     config: Optional[Union[str, os.PathLike[str]]] = None,
     algorithm: str = "benchmark",
+    record: Optional[Union[str, os.PathLike[str]]] = None,
+    perturbed: Optional[int] = None,
+    seed: int = 1,
+    k_sub: Optional[Sequence[int]] = None,
 ) -> Dict[str, Any]: ...

@@ -59,6 +59,45 @@ def test_rths_equals_the_cli_json(cli):
         substep.benchmark.rths(case=1, intensity=-1)
 
 
+def test_rths_perturbed_plants_and_k_sub_series_equal_the_cli_json(cli, tmp_path):
+    # The robustness study: perturbed plants of a seed, J statistics over the stable runs.
+    p = run_cli(cli, "benchmark", "rths", "--case", "2", "--perturbed", "3", "--seed", "7", "--json")
+    assert p.returncode == 0, p.stderr
+    expected = json.loads(p.stdout)
+    got = substep.benchmark.rths(case=2, perturbed=3, seed=7)
+    assert got == expected
+    pert = got["cases"][0]["perturbed"]
+    assert pert["n"] == len(pert["runs"]) == 3 and got["seed"] == 7
+    stable = [r for r in pert["runs"] if r["stable"]]
+    assert pert["stable"] == len(stable)
+    # The statistics are those of the runs (the mean rounded to 0.01 as the CLI prints it).
+    if stable:
+        assert pert["mean"]["J4"] == pytest.approx(sum(r["J4"] for r in stable) / len(stable), abs=0.005)
+        assert pert["max"]["J4"] == pytest.approx(max(r["J4"] for r in stable), abs=0.005)
+    # Another seed draws other plants.
+    other = substep.benchmark.rths(case=2, perturbed=3, seed=8)["cases"][0]["perturbed"]["runs"]
+    assert [r["k_e"] for r in other] != [r["k_e"] for r in pert["runs"]]
+    # A k_sub series of the sub-step algorithm on a record of the user's (a 2 s, 1 Hz sine).
+    rec = tmp_path / "sine.csv"
+    rec.write_text("".join(f"{i * 0.005},{np.sin(2 * np.pi * i * 0.005)}\n" for i in range(401)))
+    p = run_cli(cli, "benchmark", "rths", "--case", "1", "--algorithm", "substep", "--k-sub", "2,4",
+                "--record", str(rec), "--json")
+    assert p.returncode == 0, p.stderr
+    got = substep.benchmark.rths(case=1, algorithm="substep", k_sub=[2, 4], record=rec)
+    assert got == json.loads(p.stdout)
+    assert [r["k_sub"] for r in got["cases"]] == [2, 4] and got["record"] == str(rec)
+    with pytest.raises(substep.ConfigError, match="^k_sub: needs algorithm substep"):
+        substep.benchmark.rths(case=1, k_sub=[2])
+    with pytest.raises(substep.ConfigError, match="^perturbed: must be in 1..=10000, got 0"):
+        substep.benchmark.rths(case=1, perturbed=0)
+    with pytest.raises(substep.ConfigError, match="^perturbed: must be a whole number"):
+        substep.benchmark.rths(case=1, perturbed=-2)
+    with pytest.raises(substep.ConfigError, match="^case: must be a whole number in 0..=255, got 300"):
+        substep.benchmark.rths(case=300)
+    with pytest.raises(substep.ConfigError, match="cannot read"):
+        substep.benchmark.rths(case=1, record=tmp_path / "missing.csv")
+
+
 def test_plan_equals_plan_csv(cli, root, tmp_path, monkeypatch):
     monkeypatch.chdir(root)
     p = run_cli(cli, "analyze", "plan", "examples/tmd_substructure.toml", "--out", str(tmp_path), "--quiet")

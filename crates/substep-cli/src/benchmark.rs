@@ -4,15 +4,11 @@
 
 use crate::plots::{Curve, line_chart};
 use anyhow::{Context, Result};
-use serde_json::{Map, Value, json};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use substep::benchmark::rths::{
-    Algorithm, BenchmarkConfig, Case, ControllerKind, ControllerSpec, GroundRecord, MAX_PERTURBED, PUBLISHED_SAMPLE,
-    RthsInput, RthsResult, RthsRow, SubstepSpec, Transfer, perturbed_stats, run, run_study,
+    Algorithm, Case, PUBLISHED_SAMPLE, RthsInput, RthsRow, StudyOptions, StudySetup, perturbed_stats, run,
 };
-use substep::transfer::servo::ServoParams;
 
 #[derive(Debug, clap::Args)]
 pub struct BenchmarkArgs {
@@ -73,173 +69,36 @@ pub fn benchmark(args: &BenchmarkArgs) -> Result<()> {
     }
 }
 
-struct Setup {
-    cases: Vec<Case>,
-    base: RthsInput,
-    k_subs: Vec<Option<usize>>,
-    kind: ControllerKind,
-}
-
-fn setup(args: &RthsArgs) -> Result<Setup> {
-    let cases = match args.case {
-        Some(c) => {
-            vec![Case::new(c).map_err(|e| substep::Error::invalid("--case", e.to_string().replace("case: ", "")))?]
-        }
-        None => Case::all().to_vec(),
-    };
-    if !(args.intensity.is_finite() && args.intensity >= 0.0) {
-        return Err(substep::Error::invalid(
-            "--intensity",
-            format!("must be a finite number >= 0, got {}", args.intensity),
-        )
-        .into());
-    }
-    let record = if args.record == "elcentro" {
-        GroundRecord::elcentro()
-    } else {
-        let text = std::fs::read_to_string(&args.record)
-            .map_err(|e| substep::Error::file(&args.record, format!("cannot read: {e}")))?;
-        GroundRecord::parse_csv(&args.record, &text)?
+/// The CLI's flags as the library's study options; files read here.
+fn setup(args: &RthsArgs) -> Result<StudySetup> {
+    let record = match args.record.as_str() {
+        "elcentro" => None,
+        path => Some((
+            path,
+            std::fs::read_to_string(path).map_err(|e| substep::Error::file(path, format!("cannot read: {e}")))?,
+        )),
     };
     let config = match &args.config {
         Some(path) => {
             let name = path.display().to_string();
             let text =
                 std::fs::read_to_string(path).map_err(|e| substep::Error::file(&name, format!("cannot read: {e}")))?;
-            BenchmarkConfig::parse(&text, &name)?
+            Some((name, text))
         }
-        None => BenchmarkConfig::default(),
+        None => None,
     };
-    let kind = match &args.controller {
-        Some(k) => Some(
-            ControllerKind::parse(k)
-                .map_err(|e| substep::Error::invalid("--controller", e.to_string().replace("controller: ", "")))?,
-        ),
-        None => config.kind()?,
-    };
-    let controller: ControllerSpec = config.controller(kind)?;
-    let kind = controller.kind;
-    let (noise, noise_seed) = config.noise()?;
-    let algorithm = match args.algorithm.as_str() {
-        "benchmark" => Algorithm::Benchmark,
-        "substep" => Algorithm::Substep(config.substep()?),
-        other => {
-            return Err(
-                substep::Error::invalid("--algorithm", format!("unknown `{other}` (benchmark, substep)")).into(),
-            );
-        }
-    };
-    let k_subs = if args.k_sub.is_empty() {
-        vec![None]
-    } else {
-        let Algorithm::Substep(spec) = &algorithm else {
-            return Err(substep::Error::invalid("--k-sub", "needs --algorithm substep").into());
-        };
-        for &k in &args.k_sub {
-            SubstepSpec {
-                k_sub: k,
-                ..spec.clone()
-            }
-            .samples_per_step()
-            .map_err(|e| substep::Error::invalid("--k-sub", e.to_string()))?;
-        }
-        args.k_sub.iter().map(|&k| Some(k)).collect()
-    };
-    if let Some(n) = args.perturbed
-        && !(1..=MAX_PERTURBED).contains(&n)
-    {
-        return Err(substep::Error::invalid("--perturbed", format!("must be in 1..={MAX_PERTURBED}, got {n}")).into());
-    }
-    let base = RthsInput {
-        case: cases[0],
-        record: Arc::new(record),
+    let options = StudyOptions {
+        case: args.case,
+        record: record.as_ref().map(|(n, t)| (*n, t.as_str())),
         intensity: args.intensity,
-        controller,
-        transfer: if config.ideal_plant()? {
-            Transfer::Ideal
-        } else {
-            Transfer::Plant {
-                params: ServoParams::benchmark(),
-                derivative: config.derivative()?,
-            }
-        },
-        noise,
-        noise_seed,
-        algorithm,
-        keep_history: false,
+        controller: args.controller.as_deref(),
+        config: config.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
+        algorithm: &args.algorithm,
+        perturbed: args.perturbed,
+        seed: args.seed,
+        k_sub: &args.k_sub,
     };
-    Ok(Setup {
-        cases,
-        base,
-        k_subs,
-        kind,
-    })
-}
-
-fn j_json(r: &RthsResult, obj: &mut Map<String, Value>) {
-    for i in 0..9 {
-        obj.insert(format!("J{}", i + 1), r.criteria.map_or(Value::Null, |c| json!(c.j[i])));
-    }
-    obj.insert("max_force".into(), json!(r.max_force));
-    obj.insert("stable".into(), json!(r.stable));
-    obj.insert("capacity_exceeded".into(), json!(r.capacity_exceeded));
-    if let Some(t) = r.diverged_at {
-        obj.insert("diverged_at".into(), json!(t));
-    }
-    if let Some(g) = &r.guard_trip {
-        obj.insert("guard_trip".into(), json!(g));
-    }
-}
-
-fn num_or_null(v: f64) -> Value {
-    if v.is_finite() {
-        json!((v * 100.0).round() / 100.0)
-    } else {
-        Value::Null
-    }
-}
-
-fn row_json(row: &RthsRow) -> Value {
-    let mut obj = Map::new();
-    obj.insert("case".into(), json!(row.case));
-    if let Some(k) = row.k_sub {
-        obj.insert("k_sub".into(), json!(k));
-    }
-    j_json(&row.nominal, &mut obj);
-    if !row.perturbed.is_empty() {
-        let runs: Vec<Value> = row
-            .perturbed
-            .iter()
-            .enumerate()
-            .map(|(i, (p, r))| {
-                let mut o = Map::new();
-                o.insert("run".into(), json!(i));
-                o.insert("k_e".into(), json!(p.k_e));
-                o.insert("beta1".into(), json!(p.beta1));
-                o.insert("beta2".into(), json!(p.beta2));
-                o.insert("a3".into(), json!(p.a3));
-                j_json(r, &mut o);
-                Value::Object(o)
-            })
-            .collect();
-        let st = perturbed_stats(&row.perturbed);
-        let named = |v: &[f64; 9]| -> Value {
-            Value::Object((0..9).map(|i| (format!("J{}", i + 1), num_or_null(v[i]))).collect())
-        };
-        obj.insert(
-            "perturbed".into(),
-            json!({
-                "n": row.perturbed.len(),
-                "stable": st.stable,
-                "under_capacity": st.under_capacity,
-                "mean": named(&st.mean),
-                "max": named(&st.max),
-                "max_force": st.max_force,
-                "runs": runs,
-            }),
-        );
-    }
-    Value::Object(obj)
+    Ok(options.setup(|name| format!("--{}", name.replace('_', "-")))?)
 }
 
 fn fmt_j(j: Option<[f64; 9]>) -> String {
@@ -249,7 +108,7 @@ fn fmt_j(j: Option<[f64; 9]>) -> String {
     }
 }
 
-fn table(setup: &Setup, rows: &[RthsRow]) -> String {
+fn table(setup: &StudySetup, rows: &[RthsRow]) -> String {
     let mut s = String::new();
     let alg = match &setup.base.algorithm {
         Algorithm::Benchmark => "benchmark loop (RK4 at 1/4096 s)".to_string(),
@@ -308,7 +167,7 @@ fn table(setup: &Setup, rows: &[RthsRow]) -> String {
     s
 }
 
-fn markdown(setup: &Setup, rows: &[RthsRow], command: &str, plots: &[PathBuf]) -> String {
+fn markdown(setup: &StudySetup, rows: &[RthsRow], command: &str, plots: &[PathBuf]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# RTHS benchmark results\n\nCommand: `{command}`\n");
     let _ = writeln!(
@@ -485,37 +344,10 @@ fn out(text: &str) {
 pub fn rths(args: &RthsArgs) -> Result<()> {
     let setup = setup(args)?;
     let t0 = std::time::Instant::now();
-    let rows = run_study(&setup.base, &setup.cases, &setup.k_subs, args.perturbed, args.seed)?;
+    let rows = setup.run()?;
     let elapsed = t0.elapsed().as_secs_f64();
     if args.json {
-        let mut obj = Map::new();
-        obj.insert("benchmark".into(), json!("rths"));
-        obj.insert("controller".into(), json!(setup.kind.name()));
-        obj.insert("record".into(), json!(setup.base.record.name));
-        obj.insert("intensity".into(), json!(setup.base.intensity));
-        obj.insert(
-            "algorithm".into(),
-            json!(match setup.base.algorithm {
-                Algorithm::Benchmark => "benchmark",
-                Algorithm::Substep(_) => "substep",
-            }),
-        );
-        if let Algorithm::Substep(sp) = &setup.base.algorithm {
-            obj.insert("dt".into(), json!(sp.dt));
-            obj.insert("error_force".into(), json!(sp.error_force.kind()));
-        }
-        if args.perturbed.is_some() {
-            obj.insert("seed".into(), json!(args.seed));
-        }
-        let cases: Vec<Value> = rows.iter().map(row_json).collect();
-        // One case (and one k_sub): its fields at the top level as well.
-        if let [Value::Object(only)] = cases.as_slice() {
-            for (k, v) in only {
-                obj.insert(k.clone(), v.clone());
-            }
-        }
-        obj.insert("cases".into(), Value::Array(cases));
-        out(&format!("{}\n", serde_json::to_string_pretty(&Value::Object(obj))?));
+        out(&format!("{}\n", serde_json::to_string_pretty(&setup.json(&rows))?));
         return Ok(());
     }
     out(&table(&setup, &rows));

@@ -51,6 +51,7 @@
 mod case;
 mod config;
 mod controller;
+mod options;
 mod perturb;
 mod run;
 mod study;
@@ -58,6 +59,7 @@ mod study;
 pub use case::{Case, ELCENTRO_CSV, GroundRecord, MAX_DURATION, Specimen, numerical_matrices};
 pub use config::{BenchmarkConfig, CONFIG_KEYS};
 pub use controller::{Controller, ControllerKind, ControllerSpec, arx_default, sample_feedback, sample_feedforward};
+pub use options::{StudyOptions, StudySetup};
 pub use perturb::{PERTURBATION_SIGMA, perturbed_plant, run_perturbed};
 pub use run::{
     Algorithm, Criteria, DIVERGENCE_LIMIT, FORCE_CAPACITY, MAX_LAG, NOISE_POWER_F, NOISE_POWER_X, RthsInput,
