@@ -124,12 +124,6 @@ pub fn prepare_dir(dir: &Path) -> substep::Result<()> {
 /// A number for CSV: shortest round-trip form, exponent notation for very small or large values.
 pub use substep::run::push_number as num;
 
-fn header_group(out: &mut String, prefix: &str, n: usize) {
-    for k in 1..=n {
-        let _ = write!(out, ",{prefix}{k}");
-    }
-}
-
 fn row_group(out: &mut String, values: &[f64]) {
     for &x in values {
         out.push(',');
@@ -196,37 +190,24 @@ pub struct SubstepWriter {
 }
 
 impl SubstepWriter {
-    pub fn create(
-        path: &Path,
-        n_c: usize,
-        dt: f64,
-        substeps: usize,
-        phase_lag: bool,
-        ramp_column: bool,
-    ) -> io::Result<Self> {
+    /// A file with the header [`substep::run::Layout::substep_columns`] (an error for a monolithic layout).
+    pub fn create(path: &Path, layout: &substep::run::Layout) -> io::Result<Self> {
+        let (Some(columns), Some(substeps)) = (layout.substep_columns(), layout.substeps) else {
+            return Err(io::Error::other("a monolithic run has no sub-step rows"));
+        };
         let mut w = BufWriter::new(File::create(path)?);
-        let mut line = String::from("step,substep,t");
-        for p in ["cmd", "fm", "dm"] {
-            header_group(&mut line, p, n_c);
-        }
-        if phase_lag {
-            for p in ["te", "du"] {
-                header_group(&mut line, p, n_c);
-            }
-        }
-        if ramp_column {
-            line.push_str(",ramp");
-        }
+        let mut line = columns.join(",");
         line.push('\n');
         w.write_all(line.as_bytes())?;
+        let n_c = layout.coupling_dofs.len();
         Ok(Self {
             w,
             line,
-            dt,
-            dtau: dt / substeps as f64,
+            dt: layout.dt,
+            dtau: layout.dt / substeps as f64,
             error: None,
-            phase_lag: phase_lag.then(|| (vec![0.0; n_c], vec![0.0; n_c])),
-            ramp_column,
+            phase_lag: layout.phase_lag.then(|| (vec![0.0; n_c], vec![0.0; n_c])),
+            ramp_column: layout.ramp_column,
             ramp_rows: 0,
         })
     }

@@ -95,8 +95,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         indicator: indicator_columns,
         dt: def.integrator.dt,
         substeps: Some(sub.substeps),
+        // What the stop's substeps.csv below holds: the ramp, no phase-lag columns.
         phase_lag: false,
-        ramp_column: false,
+        ramp_column: true,
         response_columns: None,
     };
     let header = layout.history_columns().join(",");
@@ -176,15 +177,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let Some(((step, j), log)) = &stop {
         let path = out_dir.join("substeps.csv");
         let cannot = || format!("cannot write {}", path.display());
-        let mut w = SubstepWriter::create(
-            &path,
-            sub.coupling_dofs.len(),
-            def.integrator.dt,
-            sub.substeps,
-            false,
-            true,
-        )
-        .with_context(cannot)?;
+        let mut w = SubstepWriter::create(&path, &layout).with_context(cannot)?;
         log.replay(*step, *j, &mut w);
         ramp_substeps = Some(w.ramp_rows());
         w.finish().with_context(cannot)?;

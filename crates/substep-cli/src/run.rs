@@ -472,17 +472,9 @@ impl CliObserver {
             .with_context(|| cannot_write(&history_path))?;
         let substeps_path = dir.join("substeps.csv");
         let substeps = match layout.substeps {
-            Some(k_sub) => Some(
-                SubstepWriter::create(
-                    &substeps_path,
-                    layout.coupling_dofs.len(),
-                    layout.dt,
-                    k_sub,
-                    layout.phase_lag,
-                    layout.ramp_column,
-                )
-                .with_context(|| cannot_write(&substeps_path))?,
-            ),
+            Some(_) => {
+                Some(SubstepWriter::create(&substeps_path, layout).with_context(|| cannot_write(&substeps_path))?)
+            }
             None => None,
         };
         let response = match &layout.response_columns {
