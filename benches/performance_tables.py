@@ -109,6 +109,7 @@ def main():
         if key in d:
             lines += sweep_table([d[key]], title)
     for key, title in [
+        ("compare_5000_dof_chain", "**Comparison, 5000-DOF chain, one core** (OpenSees, SciPy)"),
         ("compare_frame_1e4", "**Comparison, 10⁴ 2-D frame, one core**"),
         ("compare_frame_1e4_two_cores", "**Comparison, 10⁴ 2-D frame, substep on two cores**"),
         ("compare_frame_1e5", "**Comparison, 10⁵ 2-D frame, one core**"),
