@@ -86,7 +86,7 @@ def test_rths_perturbed_plants_and_k_sub_series_equal_the_cli_json(cli, tmp_path
     got = substep.benchmark.rths(case=1, algorithm="substep", k_sub=[2, 4], record=rec)
     assert got == json.loads(p.stdout)
     assert [r["k_sub"] for r in got["cases"]] == [2, 4] and got["record"] == str(rec)
-    with pytest.raises(substep.ConfigError, match="^k_sub: needs algorithm substep"):
+    with pytest.raises(substep.ConfigError, match="^k_sub: applies to the sub-step algorithm only; set algorithm to substep"):
         substep.benchmark.rths(case=1, k_sub=[2])
     with pytest.raises(substep.ConfigError, match="^perturbed: must be in 1..=10000, got 0"):
         substep.benchmark.rths(case=1, perturbed=0)

@@ -70,6 +70,13 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     };
     let stop = StopHandle::new();
     let runner = RealtimeRunner::new(&def.model, test, accel.clone(), options)?.with_stop_handle(stop.clone());
+    // The monolithic reference runs on this (the writer's) thread, as offline, when it is the
+    // exact one (at most EXACT_REFERENCE_MAX_DOFS DOFs: a dense step of microseconds). A larger
+    // model's Newmark reference would be a second full integration next to the real-time
+    // thread on the same cores; those runs record no reference (run offline for it).
+    let mut reference =
+        substep::io::Reference::new(def)?.filter(|r| r.n_dofs() <= substep::io::run::EXACT_REFERENCE_MAX_DOFS);
+    let mut reference_step = 0usize;
     // Everything above is validation; no output of an earlier run survives into this one.
     prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
@@ -84,14 +91,14 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let file =
         std::fs::File::create(&history_path).with_context(|| format!("cannot write {}", history_path.display()))?;
     let mut w = std::io::BufWriter::new(file);
-    // The columns of an offline run's history (no reference, no extra groups: the real-time
-    // records carry neither), with the indicator's when it runs.
+    // The columns of an offline run's history (no extra groups: the real-time records do not
+    // carry the ideal error force), with the reference's and the indicator's when they run.
     let indicator_columns = live.indicator().is_some();
     let layout = substep::run::Layout {
         n_dofs: def.model.n_dofs(),
         coupling_dofs: sub.coupling_dofs.clone(),
         extra_groups: Vec::new(),
-        reference: false,
+        reference: reference.is_some(),
         indicator: indicator_columns,
         dt: def.integrator.dt,
         substeps: Some(sub.substeps),
@@ -140,6 +147,17 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             &r.measured_displacement,
         ] {
             for &x in group.iter() {
+                line.push(',');
+                num(&mut line, x);
+            }
+        }
+        if let Some(reference) = reference.as_mut() {
+            // Records can be sparser than the steps (dropped when the writer falls behind).
+            while reference_step < r.step {
+                reference_step += 1;
+                reference.step(accel.get(reference_step).copied().unwrap_or(0.0));
+            }
+            for &x in reference.u() {
                 line.push(',');
                 num(&mut line, x);
             }

@@ -97,7 +97,10 @@ impl StudyOptions<'_> {
             let Algorithm::Substep(spec) = &algorithm else {
                 return Err(Error::invalid(
                     name("k_sub"),
-                    format!("needs {} substep", name("algorithm")),
+                    format!(
+                        "applies to the sub-step algorithm only; set {} to substep",
+                        name("algorithm")
+                    ),
                 ));
             };
             for &k in self.k_sub {
@@ -315,7 +318,10 @@ mod tests {
         let rec = sine();
         let cli = |n: &str| format!("--{}", n.replace('_', "-"));
         let err = |o: StudyOptions| o.setup(cli).unwrap_err().to_string();
-        assert_eq!(err(options(&rec, &[4])), "--k-sub: needs --algorithm substep");
+        assert_eq!(
+            err(options(&rec, &[4])),
+            "--k-sub: applies to the sub-step algorithm only; set --algorithm to substep"
+        );
         assert_eq!(
             err(StudyOptions {
                 perturbed: Some(0),
