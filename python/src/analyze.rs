@@ -447,3 +447,25 @@ pub fn plan<'py>(
     out.set_item("recommended", recommended.transpose()?)?;
     Ok(out)
 }
+
+/// The time-domain verification of the analysis (`substep analyze verify`, docs/theory.md §9.6)
+/// with its default checks; see `substep.analyze.verify`.
+#[pyfunction]
+pub fn verify<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    use substep::analysis::verification::{VerifySettings, verify_analysis};
+    let settings = VerifySettings::default();
+    let v = py.detach(|| verify_analysis(&settings)).map_err(|e| to_py(&e))?;
+    let rows = v.rows(&settings);
+    let out = PyDict::new(py);
+    out.set_item("check", rows.iter().map(|r| r.check.clone()).collect::<Vec<_>>())?;
+    out.set_item("case", rows.iter().map(|r| r.case.clone()).collect::<Vec<_>>())?;
+    out.set_item("k_sub", rows.iter().map(|r| r.k_sub).collect::<Vec<_>>())?;
+    out.set_item("Omega", rows.iter().map(|r| r.omega_dt).collect::<Vec<_>>())?;
+    out.set_item("eta_p", rows.iter().map(|r| r.eta_p).collect::<Vec<_>>())?;
+    out.set_item("quantity", rows.iter().map(|r| r.quantity.clone()).collect::<Vec<_>>())?;
+    out.set_item("frequency_domain", rows.iter().map(|r| r.frequency_domain).collect::<Vec<_>>())?;
+    out.set_item("time_domain", rows.iter().map(|r| r.time_domain).collect::<Vec<_>>())?;
+    out.set_item("agrees", rows.iter().map(|r| r.agrees).collect::<Vec<_>>())?;
+    out.set_item("all_agree", v.all_agree)?;
+    Ok(out)
+}

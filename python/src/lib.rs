@@ -191,6 +191,7 @@ fn _substep(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(analyze::accuracy, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::transfer_function, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::plan, m)?)?;
+    m.add_function(wrap_pyfunction!(analyze::verify, m)?)?;
     m.add_function(wrap_pyfunction!(benchmark::rths, m)?)?;
     m.add_function(wrap_pyfunction!(study::study_plan, m)?)?;
     m.add_function(wrap_pyfunction!(study::study_run, m)?)?;

@@ -141,3 +141,32 @@ def test_transfer_function_peaks_are_the_accuracy_peaks():
             assert col[near].max() == pytest.approx(hp, rel=1e-4)
     # Two peaks of a tuned mass damper, around r = 0.89 and 1.11, in both.
     assert len(a["peak"]) == 2
+
+
+def test_verify_equals_verify_csv(cli, tmp_path):
+    p = run_cli(cli, "analyze", "verify", "--out", str(tmp_path), "--quiet")
+    assert p.returncode == 0, p.stderr
+    import csv
+
+    with open(tmp_path / "verify.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    v = substep.analyze.verify()
+    assert v["all_agree"] is True
+    assert [k for k in v if k != "all_agree"] == list(rows[0])
+    assert len(v["check"]) == len(rows) > 10
+    for i, r in enumerate(rows):
+        for k in ("check", "case", "quantity"):
+            assert v[k][i] == r[k]
+        assert v["k_sub"][i] == int(r["k_sub"])
+        for k in ("Omega", "eta_p", "frequency_domain", "time_domain"):
+            assert v[k][i] == float(r[k]), (k, i)
+        assert bool(v["agrees"][i]) == (r["agrees"] == "true")
+    # What the checks mean: inside the boundary ρ < 1 and the free vibration decays, outside
+    # both grow; the PID compensation turns ρ > 1 into ρ < 1 at the same point.
+    check, rho, growth = v["check"], v["frequency_domain"], v["time_domain"]
+    inside, outside = check == "boundary_inside", check == "boundary_outside"
+    assert inside.any() and outside.any()
+    assert (rho[inside] < 1).all() and (growth[inside] < 1).all()
+    assert (rho[outside] > 1).all() and (growth[outside] > 1).all()
+    pid = rho[check == "pid"]
+    assert len(pid) == 2 and pid[0] > 1 > pid[1]

@@ -126,6 +126,17 @@ fn verify_agrees_with_the_time_domain() {
     assert!(!md.contains("| NO |"));
     let csv = read_lines(&dir.join("verify.csv"));
     assert!(csv.len() > 20);
+    // A CSV reader sees every row with the header's nine fields: the case names that hold a
+    // comma ("typical, ζ_s = 2 %") are quoted.
+    let mut reader = csv::Reader::from_path(dir.join("verify.csv")).unwrap();
+    let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+    assert_eq!(rows.len(), csv.len() - 1);
+    assert!(rows.iter().all(|r| r.len() == 9));
+    assert!(
+        rows.iter()
+            .any(|r| &r[1] == "typical, ζ_s = 2 %" && r[0].starts_with("boundary_"))
+    );
+    assert!(rows.iter().all(|r| &r[8] == "true"));
 }
 
 #[test]

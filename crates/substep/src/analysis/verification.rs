@@ -161,6 +161,80 @@ pub struct Verification {
     pub all_agree: bool,
 }
 
+/// One check as a row of `verify.csv` (and of `substep.analyze.verify()` in Python).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VerifyRow {
+    /// `sweep_peak`, `boundary_inside` / `boundary_on` / `boundary_outside`, or `pid` (the
+    /// compensation checks).
+    pub check: String,
+    /// The case's name (for `pid`: the compensation's label).
+    pub case: String,
+    pub k_sub: usize,
+    /// `Ω = ω Δt` of the point.
+    pub omega_dt: f64,
+    pub eta_p: f64,
+    /// `peak1_r`, `peak2_r`, … (the peak's frequency ratio) or `growth` (per step).
+    pub quantity: String,
+    /// Frequency-domain value: the peak's `r`, or the spectral radius `ρ`.
+    pub frequency_domain: f64,
+    /// Time-domain value: the sweep's peak `r`, or the free-vibration growth per step.
+    pub time_domain: f64,
+    pub agrees: bool,
+}
+
+impl Verification {
+    /// Every check as one row, in the order of the report: sweep peaks, boundary checks (none
+    /// for a case without a boundary), compensation checks (`settings` gives their point).
+    pub fn rows(&self, settings: &VerifySettings) -> Vec<VerifyRow> {
+        let mut rows = Vec::new();
+        for s in &self.sweeps {
+            for p in &s.peaks {
+                rows.push(VerifyRow {
+                    check: "sweep_peak".into(),
+                    case: s.name.clone(),
+                    k_sub: s.case.k_sub,
+                    omega_dt: s.case.omega_dt,
+                    eta_p: s.case.eta_p,
+                    quantity: format!("peak{}_r", p.peak),
+                    frequency_domain: p.frequency_domain.freq_ratio,
+                    time_domain: p.sweep.freq_ratio,
+                    agrees: p.agrees,
+                });
+            }
+        }
+        for b in &self.boundaries {
+            for g in &b.checks {
+                rows.push(VerifyRow {
+                    check: format!("boundary_{}", g.label),
+                    case: b.name.clone(),
+                    k_sub: b.case.k_sub,
+                    omega_dt: g.omega_dt,
+                    eta_p: b.case.eta_p,
+                    quantity: "growth".into(),
+                    frequency_domain: g.rho,
+                    time_domain: g.growth,
+                    agrees: g.agrees,
+                });
+            }
+        }
+        let c = &settings.compensated;
+        for g in &self.compensation {
+            rows.push(VerifyRow {
+                check: "pid".into(),
+                case: g.label.clone(),
+                k_sub: c.k_sub,
+                omega_dt: c.omega_dt,
+                eta_p: c.eta_p,
+                quantity: "growth".into(),
+                frequency_domain: g.rho,
+                time_domain: g.growth,
+                agrees: g.agrees,
+            });
+        }
+        rows
+    }
+}
+
 /// Run the checks of `settings`.
 ///
 /// ```
