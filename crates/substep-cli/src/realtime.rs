@@ -91,13 +91,16 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let file =
         std::fs::File::create(&history_path).with_context(|| format!("cannot write {}", history_path.display()))?;
     let mut w = std::io::BufWriter::new(file);
-    // The columns of an offline run's history (no extra groups: the real-time records do not
-    // carry the ideal error force), with the reference's and the indicator's when they run.
+    // The columns of an offline run's history: the ideal error force (local sites), the
+    // reference's and the indicator's when they run; no phase-lag columns (the real-time
+    // records do not carry them).
     let indicator_columns = live.indicator().is_some();
+    // As offline: a remote site reports no noise-free force, so no `fei`.
+    let ideal_column = sub.remote.is_none();
     let layout = substep::run::Layout {
         n_dofs: def.model.n_dofs(),
         coupling_dofs: sub.coupling_dofs.clone(),
-        extra_groups: Vec::new(),
+        extra_groups: if ideal_column { vec!["fei"] } else { Vec::new() },
         reference: reference.is_some(),
         indicator: indicator_columns,
         dt: def.integrator.dt,
@@ -147,6 +150,12 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             &r.measured_displacement,
         ] {
             for &x in group.iter() {
+                line.push(',');
+                num(&mut line, x);
+            }
+        }
+        if ideal_column {
+            for &x in &r.ideal_error_force {
                 line.push(',');
                 num(&mut line, x);
             }

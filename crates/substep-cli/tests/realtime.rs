@@ -43,13 +43,10 @@ fn realtime_run_equals_offline_and_reports_latency() {
             .unwrap()
             .to_string()
     };
-    // The offline columns, without the ideal error force (the real-time records do not carry
-    // it); the reference is there, computed on the writer thread.
-    assert_eq!(
-        header("rt/history.csv"),
-        header("offline/history.csv").replace(",fei1,", ",")
-    );
-    assert!(header("rt/history.csv").ends_with(",dm1,uref1"));
+    // The offline columns: the ideal error force from the real-time coupling loop, the
+    // reference computed on the writer thread.
+    assert_eq!(header("rt/history.csv"), header("offline/history.csv"));
+    assert!(header("rt/history.csv").ends_with(",dm1,fei1,uref1"));
     let (off, rt) = (read("offline/history.csv"), read("rt/history.csv"));
     assert_eq!(off.len(), rt.len());
     assert_eq!(rt.len(), 101);
@@ -58,7 +55,21 @@ fn realtime_run_equals_offline_and_reports_latency() {
     let uref_peak = off.iter().map(|r| r[9].abs()).fold(0.0, f64::max);
     assert!(uref_peak > 1e-4, "reference peak {uref_peak}");
     for (a, b) in off.iter().zip(&rt) {
-        assert_eq!(a[9], b[8], "uref at t = {}", a[0]);
+        assert_eq!(a[9], b[9], "uref at t = {}", a[0]);
+    }
+    // The ideal error force f°(k) − f°(k−1): as offline (to the rounding of the real-time
+    // arithmetic, as fc), 0 at step 0 and a response after it.
+    let fei_peak = off.iter().map(|r| r[8].abs()).fold(0.0, f64::max);
+    assert!(fei_peak > 1e-3, "fei peak {fei_peak}");
+    assert_eq!(rt[0][8], 0.0);
+    for (a, b) in off.iter().zip(&rt) {
+        assert!(
+            (a[8] - b[8]).abs() <= 1e-9 * (1.0 + a[8].abs()),
+            "fei at t = {}: {} vs {}",
+            a[0],
+            a[8],
+            b[8]
+        );
     }
     // columns t, u1, v1, a1, fc1 are the same in both files
     let peak = off.iter().map(|r| r[1].abs()).fold(0.0, f64::max);

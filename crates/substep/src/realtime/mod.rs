@@ -198,6 +198,9 @@ pub struct StepRecordOwned {
     /// Last command `d^{(k)}` and measured displacement at the end of the step (m).
     pub command: Vec<f64>,
     pub measured_displacement: Vec<f64>,
+    /// Ideal error force per coupling DOF (N, as an offline run's `fei`): 0 at step 0, NaN
+    /// where the site reports no noise-free force (a remote site).
+    pub ideal_error_force: Vec<f64>,
     /// Hold sub-steps inserted before this step's sub-steps (late policy).
     pub holds: usize,
 }
@@ -215,12 +218,14 @@ impl StepRecordOwned {
             compensation_force: vec![0.0; n_c],
             command: vec![0.0; n_c],
             measured_displacement: vec![0.0; n_c],
+            ideal_error_force: vec![0.0; n_c],
             ..Self::default()
         }
     }
 
-    /// Copy from a borrowed record (no allocation).
-    fn fill(&mut self, r: &StepRecord<'_>, command: &[f64], holds: usize) {
+    /// Copy from a borrowed record (no allocation); `ideal`: the controller's ideal error force
+    /// (`None`: 0 at step 0, else NaN, as an offline history has it).
+    fn fill(&mut self, r: &StepRecord<'_>, command: &[f64], ideal: Option<&[f64]>, holds: usize) {
         self.step = r.step;
         self.time = r.time;
         for (k, &d) in self.dofs.iter().enumerate() {
@@ -233,6 +238,10 @@ impl StepRecordOwned {
         self.compensation_force.copy_from_slice(r.compensation_force);
         self.command.copy_from_slice(command);
         self.measured_displacement.copy_from_slice(r.measured_displacement);
+        match ideal {
+            Some(f) if r.step > 0 => self.ideal_error_force.copy_from_slice(f),
+            _ => self.ideal_error_force.fill(if r.step == 0 { 0.0 } else { f64::NAN }),
+        }
         self.holds = holds;
     }
 }

@@ -198,6 +198,9 @@ impl RealtimeRunner {
             last: vec![0.0; n_c],
             command: vec![0.0; n_c],
             displacement: vec![0.0; n_c],
+            true_before: vec![0.0; n_c],
+            true_last: vec![0.0; n_c],
+            true_seen: false,
             holds: 0,
         });
         let (mut record_tx, mut record_rx) = records.split();
@@ -207,7 +210,8 @@ impl RealtimeRunner {
         if opts.record_every > 0 {
             let initial = self.test.record();
             let command = self.test.controller.command().to_vec();
-            record_tx.push_or_drop(|slot| slot.fill(&initial, &command, 0));
+            let ideal = self.test.controller.ideal_error_force();
+            record_tx.push_or_drop(|slot| slot.fill(&initial, &command, ideal, 0));
         }
 
         // Step 0's predictor the plain way; the overlap starts with step 1.
@@ -217,6 +221,8 @@ impl RealtimeRunner {
         self.test.controller.begin_step(&load);
         let overlap = OverlapPredictor::new(&mut self.test.controller);
         let coupling = CouplingLoop::new(&self.test.controller, &overlap);
+        // Where the noise-free bookkeeping stands (a run that continues a test).
+        let true_last0 = self.test.controller.true_force_last().to_vec();
 
         let memory_lock = if opts.lock_memory {
             os::lock_memory()
@@ -277,6 +283,9 @@ impl RealtimeRunner {
                 opts,
                 force: vec![0.0; n_c],
                 displacement: vec![0.0; n_c],
+                true_before: vec![0.0; n_c],
+                true_last: true_last0,
+                true_seen: false,
                 stats: RtStats {
                     wake: hist(),
                     completion: hist(),
@@ -414,6 +423,10 @@ struct EndMsg {
     last: Vec<f64>,
     command: Vec<f64>,
     displacement: Vec<f64>,
+    /// Noise-free forces of the last two sub-steps, if the site reported them.
+    true_before: Vec<f64>,
+    true_last: Vec<f64>,
+    true_seen: bool,
     holds: usize,
 }
 
@@ -473,6 +486,8 @@ impl Numerical<'_> {
                 let got = self.end_rx.try_pop_with(|m| {
                     debug_assert_eq!(m.step, n);
                     self.controller.set_substep_results(&m.before, &m.last, &m.command);
+                    self.controller
+                        .set_true_results(m.true_seen.then_some((&m.true_before[..], &m.true_last[..])));
                     self.before.copy_from_slice(&m.before);
                     self.command.copy_from_slice(&m.command);
                     self.displacement.copy_from_slice(&m.displacement);
@@ -507,7 +522,9 @@ impl Numerical<'_> {
                     measured_displacement: &self.displacement,
                 };
                 let command = &self.command;
-                self.record_tx.push_or_drop(|slot| slot.fill(&record, command, holds));
+                let ideal = c.ideal_error_force();
+                self.record_tx
+                    .push_or_drop(|slot| slot.fill(&record, command, ideal, holds));
             }
             if n + 1 < self.n_steps {
                 let x = self.overlap.predictor(self.controller, &self.before);
@@ -580,6 +597,11 @@ struct RealTime<'a> {
     opts: &'a RealtimeOptions,
     force: Vec<f64>,
     displacement: Vec<f64>,
+    /// Noise-free forces of the last two algorithm sub-steps (as the controller keeps them
+    /// offline through `feedback_true`), for the ideal error force.
+    true_before: Vec<f64>,
+    true_last: Vec<f64>,
+    true_seen: bool,
     stats: RtStats,
 }
 
@@ -681,6 +703,14 @@ impl RealTime<'_> {
                     return Err(self.site_failed(n, j, e));
                 }
                 self.coupling.feedback(&self.force);
+                match self.site.true_force() {
+                    Some(f) => {
+                        std::mem::swap(&mut self.true_before, &mut self.true_last);
+                        self.true_last.copy_from_slice(f);
+                        self.true_seen = true;
+                    }
+                    None => self.true_seen = false,
+                }
                 self.stats.substeps += 1;
                 if j == k {
                     self.end_step(n, holds)?;
@@ -705,12 +735,16 @@ impl RealTime<'_> {
         self.coupling.end_step();
         let c = &self.coupling;
         let d = &self.displacement;
+        let (tb, tl, seen) = (&self.true_before, &self.true_last, self.true_seen);
         let msg = |m: &mut EndMsg| {
             m.step = n;
             m.before.copy_from_slice(c.force_before());
             m.last.copy_from_slice(c.force_last());
             m.command.copy_from_slice(c.command());
             m.displacement.copy_from_slice(d);
+            m.true_before.copy_from_slice(tb);
+            m.true_last.copy_from_slice(tl);
+            m.true_seen = seen;
             m.holds = holds;
         };
         // Never full by the protocol (at most two steps in flight); wait rather than lose it.

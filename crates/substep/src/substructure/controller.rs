@@ -353,6 +353,27 @@ impl SubstepController {
         self.substep = self.k_sub;
     }
 
+    /// The noise-free forces `f°^{(k−1)}`, `f°^{(k)}` of the step's last two sub-steps when the
+    /// sub-steps ran elsewhere (the real-time runner's coupling loop; `None`: the site reported
+    /// none) — what [`feedback_true`](Self::feedback_true) leaves behind offline, for the
+    /// [ideal error force](Self::ideal_error_force) of [`finish_step`](Self::finish_step).
+    pub fn set_true_results(&mut self, before_and_last: Option<(&[f64], &[f64])>) {
+        match before_and_last {
+            Some((before, last)) => {
+                self.est.true_before.copy_from_slice(before);
+                self.est.true_last.copy_from_slice(last);
+                self.est.true_seen = true;
+            }
+            None => self.est.true_seen = false,
+        }
+        self.est.true_pending = false;
+    }
+
+    /// The last noise-free force the controller was given (zeros before any).
+    pub fn true_force_last(&self) -> &[f64] {
+        &self.est.true_last
+    }
+
     /// Step 1 with a predictor assembled elsewhere (`x̂ = W + H f^{(k−1)} + G_{:,c} f_u`, see the
     /// comment above this `impl`); otherwise as [`SubstepController::begin_step`].
     pub fn begin_step_with_predictor(&mut self, predictor: &DVector<f64>) {
