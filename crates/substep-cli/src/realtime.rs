@@ -77,6 +77,10 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let mut reference =
         substep::io::Reference::new(def)?.filter(|r| r.n_dofs() <= substep::io::run::EXACT_REFERENCE_MAX_DOFS);
     let mut reference_step = 0usize;
+    // Errors against it, as offline: per DOF, peak |test − reference| over the peak |reference|.
+    let n_c = sub.coupling_dofs.len();
+    let mut err_u = substep::run::ErrorTracker::new(def.model.n_dofs());
+    let mut err_f = substep::run::ErrorTracker::new(n_c);
     // Everything above is validation; no output of an earlier run survives into this one.
     prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
@@ -170,6 +174,10 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
                 line.push(',');
                 num(&mut line, x);
             }
+            if r.u.len() == reference.u().len() {
+                err_u.update(&r.u, reference.u());
+            }
+            err_f.update(&r.coupling_force, reference.coupling_force());
         }
         if indicator_columns && let Some(m) = live.indicator() {
             for x in m.history_values() {
@@ -245,6 +253,29 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let (Some(s), Some(obj)) = (stopped_by, summary.as_object_mut()) {
         obj.insert("stopped_by".into(), s.into());
     }
+    // The largest errors against the reference (the offline summary's keys; its per-DOF
+    // details are in the offline run's summary).
+    let max = |t: &substep::run::ErrorTracker, n: usize| {
+        (0..n)
+            .map(|k| t.stats(k).peak_error)
+            .filter(|x| x.is_finite())
+            .fold(0.0, f64::max)
+    };
+    let reference_errors = reference.as_ref().map(|r| {
+        (
+            r.scheme(),
+            r.n_dofs(),
+            max(&err_u, def.model.n_dofs()),
+            max(&err_f, n_c),
+        )
+    });
+    if let (Some((scheme, n_dofs, u, f)), Some(obj)) = (reference_errors, summary.as_object_mut()) {
+        obj.insert(
+            "reference".into(),
+            serde_json::json!({ "scheme": scheme, "n_dofs": n_dofs,
+                "max_displacement_error": u, "max_force_error": f }),
+        );
+    }
     write_json(&summary_path, &summary)?;
     // The full report with the latency histogram goes to a file; stdout gets the statistics.
     let text = report.to_string();
@@ -266,6 +297,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             sub.coupling_dofs.get(peak_f.1).map_or(0, |d| d + 1),
             peak_f.2
         );
+        if let Some((scheme, _, u, f)) = reference_errors {
+            crate::run::print_reference_error(scheme, u, f);
+        }
         if let Some(n) = ramp_substeps.filter(|&n| n > 0) {
             println!("  the {n} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)");
         }

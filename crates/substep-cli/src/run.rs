@@ -87,6 +87,21 @@ fn plotted_dofs(n: usize, coupling: &[usize]) -> Vec<usize> {
 }
 
 /// A ratio as a percentage, exponent notation when it is huge (a diverged run).
+/// The summary's line on the error against the reference (offline and real-time runs).
+pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, max_force_error: f64) {
+    let what = if scheme == "exact" {
+        "exact solution"
+    } else {
+        "monolithic Newmark solution"
+    };
+    println!(
+        "  max error vs {what}: {} % (displacement), {} % (coupling force)",
+        percent(max_displacement_error),
+        percent(max_force_error)
+    );
+    println!("    (largest |test − reference| over the run and all DOFs, relative to that DOF's peak |reference|)");
+}
+
 fn percent(ratio: f64) -> String {
     let p = 100.0 * ratio;
     if p.abs() < 1e4 {
@@ -714,19 +729,7 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
             println!("  warning: {w}");
         }
         if let Some(r) = &summary.reference {
-            let what = if r.scheme == "exact" {
-                "exact solution"
-            } else {
-                "monolithic Newmark solution"
-            };
-            println!(
-                "  max error vs {what}: {} % (displacement), {} % (coupling force)",
-                percent(r.max_displacement_error),
-                percent(r.max_force_error)
-            );
-            println!(
-                "    (largest |test − reference| over the run and all DOFs, relative to that DOF's peak |reference|)"
-            );
+            print_reference_error(r.scheme, r.max_displacement_error, r.max_force_error);
         }
         if let Some(e) = &summary.engineering {
             for line in crate::engineering::lines(e) {

@@ -91,6 +91,20 @@ fn realtime_run_equals_offline_and_reports_latency() {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("rt/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["completed"], true);
+    // The errors against the reference, as the offline summary has them.
+    let offline: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("offline/summary.json")).unwrap()).unwrap();
+    for key in ["max_displacement_error", "max_force_error"] {
+        let (a, b) = (
+            offline["reference"][key].as_f64().unwrap(),
+            summary["reference"][key].as_f64().unwrap(),
+        );
+        assert!(
+            a > 1e-4 && (a - b).abs() <= 1e-6 * a,
+            "{key}: offline {a}, real time {b}"
+        );
+    }
+    assert_eq!(summary["reference"]["scheme"], offline["reference"]["scheme"]);
 }
 
 /// `stability = "stop"` in a real-time run: the indicator on the writer thread raises the same
