@@ -86,7 +86,6 @@ fn plotted_dofs(n: usize, coupling: &[usize]) -> Vec<usize> {
     dofs
 }
 
-/// A ratio as a percentage, exponent notation when it is huge (a diverged run).
 /// The summary's line on the error against the reference (offline and real-time runs).
 pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, max_force_error: f64) {
     let what = if scheme == "exact" {
@@ -102,6 +101,7 @@ pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, m
     println!("    (largest |test − reference| over the run and all DOFs, relative to that DOF's peak |reference|)");
 }
 
+/// A ratio as a percentage, exponent notation when it is huge (a diverged run).
 fn percent(ratio: f64) -> String {
     let p = 100.0 * ratio;
     if p.abs() < 1e4 {
