@@ -62,7 +62,9 @@ pub enum ErrorPairing {
 pub struct ArxPhaseLagSpec {
     /// Number of lags `n_u` (1..=12; default 5).
     pub n_u: usize,
-    /// Identification interval `k_lag` in sub-steps (≥ 1; about the delay in sub-steps).
+    /// Identification interval `k_lag` in sub-steps (≥ 1; about the delay in sub-steps): `θ` is
+    /// updated every `k_lag` sub-steps, and the delayed pairing attributes an error to the
+    /// correction sent `k_lag` sub-steps before.
     pub k_lag: usize,
     /// Forgetting factor `λ ∈ (0, 1]` (default 0.99).
     pub lambda: f64,
@@ -78,11 +80,35 @@ pub struct ArxPhaseLagSpec {
     pub regressor: Regressor,
     /// Which regressor the observed tracking error updates (default [`ErrorPairing::Delayed`]).
     pub pairing: ErrorPairing,
+    /// `S`: sub-steps over which each velocity sample is taken, `v_j = d̄_j − d̄_{j−S}`, and
+    /// between two lags of the regressor (≥ 1; default `k_lag`; test definitions: one time step,
+    /// `k_sub`).
+    pub span: usize,
+    /// `T_s`: time constant [sub-steps] of each of the two first-order low-pass stages that give
+    /// the smoothed target `d̄` the velocities are taken from (≥ 0; 0: `d̄ = d`; default
+    /// `span / 2`).
+    pub smoothing: f64,
+    /// The first lag of the regressor is the current sample `j` (`true`, default) or
+    /// `j − k_lag` (`false`, as written in the dissertation). Only with [`Regressor::Velocity`]:
+    /// the other blocks hold corrections not yet computed at `j`.
+    pub from_current: bool,
+    /// Start from the pure-delay predictor `θ₀` (a lead of `k_lag` sub-steps, see
+    /// [`ArxPhaseLag::prior`]) instead of `θ = 0` (default `true`; only with
+    /// [`Regressor::Velocity`]).
+    pub prior: bool,
+    /// Supervisor bound `ℓ_max` [sub-steps] on the lead the correction amounts to (see
+    /// [`ArxPhaseLag`]); `None`: no supervisor. Default `4 k_lag + span`.
+    pub max_lead: Option<f64>,
+    /// Updates are skipped while the normalised regressor is shorter than this (the excitation
+    /// is too low to identify anything; default 0.01).
+    pub min_excitation: f64,
 }
 
 impl ArxPhaseLagSpec {
     /// Defaults for an interval `k_lag`: `n_u = 5`, `λ = 0.99`, `p0 = 100`, full covariance,
-    /// [`Regressor::Velocity`], [`ErrorPairing::Delayed`], guard factor 10.
+    /// [`Regressor::Velocity`], [`ErrorPairing::Delayed`], guard factor 10, `span = k_lag`,
+    /// `smoothing = span/2`, lags from the current sample, the pure-delay prior, the
+    /// supervisor with `ℓ_max = 4 k_lag + span`, minimum excitation 0.01.
     pub fn new(k_lag: usize) -> Self {
         Self {
             n_u: 5,
@@ -94,15 +120,48 @@ impl ArxPhaseLagSpec {
             guard_factor: 10.0,
             regressor: Regressor::default(),
             pairing: ErrorPairing::default(),
+            span: k_lag,
+            smoothing: 0.0,
+            from_current: true,
+            prior: true,
+            max_lead: None,
+            min_excitation: 0.01,
         }
+        .with_span(k_lag)
     }
 
-    /// The dissertation's method as written (docs/theory.md §6.4): [`Regressor::Full`], [`ErrorPairing::Current`].
+    /// Set the velocity span `S` and the defaults that follow it: `smoothing = S/2`,
+    /// `max_lead = 4 k_lag + S`.
+    pub fn with_span(mut self, span: usize) -> Self {
+        self.span = span;
+        self.smoothing = span as f64 / 2.0;
+        self.max_lead = Some((4 * self.k_lag + 2 * span) as f64);
+        self
+    }
+
+    /// The dissertation's method as written (docs/theory.md §6.4): [`Regressor::Full`],
+    /// [`ErrorPairing::Current`], velocities of the raw target over `k_lag`, lags from `j − k_lag`,
+    /// `θ = 0` at the start, no supervisor, every update applied.
     pub fn as_written(k_lag: usize) -> Self {
         Self {
             regressor: Regressor::Full,
             pairing: ErrorPairing::Current,
-            ..Self::new(k_lag)
+            ..Self::new(k_lag).project_v1()
+        }
+    }
+
+    /// The form of project version 1 (before docs/theory.md §6.4's robust parameterisation): the
+    /// default regressor and pairing with velocities of the raw target over `k_lag`, lags from
+    /// `j − k_lag`, `θ = 0` at the start, no supervisor, every update applied. Kept to compare.
+    pub fn project_v1(self) -> Self {
+        Self {
+            span: self.k_lag,
+            smoothing: 0.0,
+            from_current: false,
+            prior: false,
+            max_lead: None,
+            min_excitation: 0.0,
+            ..self
         }
     }
 
@@ -121,14 +180,44 @@ impl ArxPhaseLagSpec {
         if self.k_lag == 0 {
             return Err(Error::invalid("phase_lag.k_lag", "must be at least 1 sub-step"));
         }
-        if self.k_lag.saturating_mul(self.n_u + 1) > MAX_HISTORY {
+        if self.span == 0 {
+            return Err(Error::invalid("phase_lag.span", "must be at least 1 sub-step"));
+        }
+        if self.history_len() > MAX_HISTORY {
             return Err(Error::invalid(
                 "phase_lag.k_lag",
                 format!(
-                    "k_lag larger than the history: k_lag·(n_u + 1) = {}·{} exceeds {MAX_HISTORY} sub-steps",
-                    self.k_lag,
-                    self.n_u + 1
+                    "k_lag and span larger than the history: 2·k_lag + n_u·span = 2·{} + {}·{} exceeds \
+                     {MAX_HISTORY} sub-steps",
+                    self.k_lag, self.n_u, self.span
                 ),
+            ));
+        }
+        if !(self.smoothing.is_finite() && (0.0..=MAX_HISTORY as f64).contains(&self.smoothing)) {
+            return Err(Error::invalid(
+                "phase_lag.smoothing",
+                format!("must be in 0..={MAX_HISTORY} sub-steps, got {}", self.smoothing),
+            ));
+        }
+        if self.regressor != Regressor::Velocity && (self.from_current || self.prior) {
+            return Err(Error::invalid(
+                "phase_lag.regressor",
+                "lags from the current sample and the pure-delay prior need the velocity regressor \
+                 (the other blocks hold corrections not yet computed)",
+            ));
+        }
+        if let Some(l) = self.max_lead
+            && !(l.is_finite() && l > 0.0)
+        {
+            return Err(Error::invalid(
+                "phase_lag.max_lead",
+                format!("must be a finite number > 0 of sub-steps, got {l}"),
+            ));
+        }
+        if !(self.min_excitation.is_finite() && self.min_excitation >= 0.0) {
+            return Err(Error::invalid(
+                "phase_lag.min_excitation",
+                format!("must be a finite number >= 0, got {}", self.min_excitation),
             ));
         }
         if !(self.lambda.is_finite() && self.lambda > 0.0 && self.lambda <= 1.0) {
@@ -155,19 +244,30 @@ impl ArxPhaseLagSpec {
         Ok(())
     }
 
+    /// Samples of the correction, velocity and error histories: the oldest lag of the regressor
+    /// of a delayed update, `2 k_lag + (n_u − 1) span`, plus the newest.
+    fn history_len(&self) -> usize {
+        self.k_lag
+            .saturating_mul(2)
+            .saturating_add(self.n_u.saturating_mul(self.span))
+            .saturating_add(1)
+    }
+
     pub fn build(&self) -> Result<ArxPhaseLag> {
         ArxPhaseLag::new(*self)
     }
 }
 
 /// Phase-lag compensation by on-line identification (docs/theory.md §6.4); see the module docs of
-/// [`crate::compensate`] for the timing. Per sub-step `j`, with `L = k_lag`:
+/// [`crate::compensate`] for the timing. Per sub-step `j`, with `L = k_lag`, `S = span`:
 ///
 /// ```text
-/// v_j  = d_j − d_{j−L}                           command velocity × identification interval
-/// ε_n  = (d_n − y_n) − (1 − h_m) Δu_m            tracking error (m = n, or n − L: ErrorPairing)
-/// φ_j  = [−Δu_{j−lL}, v_{j−lL}, ε_{j−lL}]_{l=1…n_u}   (blocks as chosen by Regressor)
-/// Δu_j = φ_jᵀ θ_j
+/// d̄_j  = F(q) d_j                                    two first-order low-pass stages, T_s each
+/// v_j  = d̄_j − d̄_{j−S}                               smoothed command velocity × span
+/// ε_n  = (d_n − y_n) − (1 − h_m) Δu_m                tracking error (m = n, or n − L: ErrorPairing)
+/// φ_j  = [−Δu_{j−o−lS}, v_{j−o−lS}, ε_{j−o−lS}]_{l=0…n_u−1}   (blocks as chosen by Regressor;
+///                                                     o = 0 from the current sample, else L)
+/// Δu_j = g_j φ_jᵀ θ_j
 /// ```
 ///
 /// Every `L` sub-steps (`j ≡ 0 mod L`) `θ` is updated by the RLS law
@@ -175,45 +275,44 @@ impl ArxPhaseLagSpec {
 /// error: `(φ, e) = (φ_{j−1}, ε_{j−1})` as written in the dissertation ([`ErrorPairing::Current`]), or
 /// the delayed pairing of [`ErrorPairing::Delayed`]. Regressor and error are scaled by `1/s`
 /// (`s` = running maximum of `|v|` and `|d − y|`), which keeps `p0` meaningful in any unit and
-/// cancels in `Δu = φᵀθ`. The `θ_j` in use is blended linearly from its value at the update to
-/// the new estimate over the `L` sub-steps of the interval (no jumps in the command). `θ = 0`
-/// at the start: no pre-test.
+/// cancels in `Δu = φᵀθ`; updates whose scaled regressor is shorter than `min_excitation` are
+/// skipped (too little excitation to identify anything). The `θ_j` in use is blended linearly
+/// from its value at the update to the new estimate over the `L` sub-steps of the interval (no
+/// jumps in the command). At the start `θ` is the pure-delay prior [`ArxPhaseLag::prior`] (or 0).
 ///
-/// **Deviations from the dissertation (the defaults), and why.** Measured with the virtual lab at
-/// Δτ = 1 ms (`tests/compensate.rs`; the survey of all 8 regressor/pairing combinations on
-/// 1 Hz, 1 + 3.7 Hz and 5 Hz commands, a 10 ms delay or a 20 Hz second-order actuator with 5 ms
-/// delay, 0 or 1 % displacement noise and three `k_lag` each is the ignored test
-/// `arx_variant_survey`):
+/// **Supervisor.** With `max_lead = Some(ℓ_max)`, the compensator watches the lead its
+/// correction amounts to, `ℓ_j = RMS(Δu) / RMS(v/S)` over an exponential window of
+/// `4 (L + S)` sub-steps: how many sub-steps of the smoothed command's motion the correction
+/// adds. A compensator that leads by a delay has `ℓ ≈ L`; one that has turned the loop unstable
+/// drives corrections far beyond the command's own motion. When `ℓ > ℓ_max` (evaluated once
+/// the command has moved), the supervisor backs off: the gain `g` falls linearly from 1 to 0
+/// over `S` sub-steps (no jump in the command), the estimate stops adapting, and the test
+/// continues uncompensated; [`PhaseLagCompensator::trip`] reports
+/// [`GuardTrip::Unstable`].
+///
+/// **Deviations from the dissertation (the defaults), and why** (docs/theory.md §6.4 has the
+/// measurements):
 ///
 /// 1. *Regressor.* As written, `[−Δu, v, ε]` is nearly collinear in closed loop: with delay
 ///    `D ≈ L` and `h = 1`, `ε_n = (d_n − d_{n−D}) − Δu_{n−D}`, so each `ε` entry is minus the
-///    next `−Δu` entry plus a command difference the `v` entries span. Along that direction the
-///    data do not constrain `θ`; the covariance stays large there, and any disturbance
-///    (displacement noise, `k_lag ≠ D`) lets `θ` drift until the loop `Δu → y → ε → Δu` that
-///    the `−Δu` and `ε` coefficients parameterise turns unstable ("bursting"; the guard then
-///    disables the compensator). The dissertation's form converges noise-free with `k_lag = D` (1 Hz
-///    sine: ≈ 4500×) but bursts with 1 % displacement noise or `k_lag ≠ D` (in 58 of the
-///    survey's 72 runs with either pairing it bursts). Dropping the `ε` or the `−Δu` block
-///    removes the collinearity, but each keeps a recursive loop whose polynomial the fit drives
-///    towards the unit circle (it models the sinusoids); they still burst on two-sine or 5 Hz
-///    commands in some runs. The default [`Regressor::Velocity`] keeps only `v`: `Δu` is a FIR
-///    filter of the command, there is no internal feedback and the identification is an
-///    ordinary least-squares problem. It never burst in the survey. It keeps the spirit of the
-///    method: an RLS-identified linear predictor of the needed command lead, learned from the
-///    tracking-error history. The other forms stay available.
+///    next `−Δu` entry plus a command difference the `v` entries span; the data do not
+///    constrain `θ` along that direction and it drifts until the loop `Δu → y → ε → Δu` bursts.
+///    The default [`Regressor::Velocity`] keeps only `v`: `Δu` is a FIR filter of the command
+///    and the identification an ordinary least-squares problem. The other forms stay available.
 /// 2. *Error pairing.* As written, the error observed at `n` updates the regressor `φ_n`, but
 ///    the correction that caused it was computed from `φ_{n−D}`. [`ErrorPairing::Delayed`]
-///    attributes the error to `φ_{n−L}`, with the correction that would have cancelled it as
-///    the target. With the `v` regressor both pairings are stable; the delayed one is more
-///    accurate when the actuator has dynamics (5 Hz, second-order actuator, `k_lag` = 16:
-///    50 000× against 97× noise-free, 1 200× against 99× with noise). With the recursive
-///    regressors the dissertation's pairing bursts in most two-sine and 5 Hz runs.
-/// 3. *Velocity.* `v_j = d_j − d_{j−L}` (the mean command velocity over one interval, times the
-///    interval) rather than a one-sub-step difference: the same signal with `L`-fold less
-///    amplification of noise carried by the command.
-///
-/// With the defaults on a 1 Hz sine through a 10 ms delay: ≈ 1500× noise-free, ≈ 160× with 1 %
-/// displacement noise (50–110× with `k_lag` = 8 or 13).
+///    attributes it to `φ_{n−L}`, with the correction that would have cancelled it as the target.
+/// 3. *Smoothed velocities over a time step.* Inside the sub-step algorithm the command carries
+///    the sub-step iteration (`G_cc f^{(j−1)}`, a ripple at the sub-step and step rates) on
+///    top of the structure's motion. Velocities of the raw command over `L` sub-steps let the
+///    predictor extrapolate that ripple: its gain at high frequencies grows with the collinear,
+///    large coefficients of a predictor of a smooth signal, and the loop through the specimen's
+///    force closes at a frequency the structure does not have (the 50 Hz bursts of a damper
+///    test at `Δt` = 10 ms). `d̄` (two stages, `T_s = S/2`) and `S` = one time step keep the
+///    correction in the band the structure responds in.
+/// 4. *Lags from the current sample, a prior, a supervisor, excitation monitoring*: the
+///    predictor extrapolates `L` sub-steps rather than `2L`; it starts from a pure delay rather
+///    than from no compensation; and no estimate can run away unnoticed.
 pub struct ArxPhaseLag {
     spec: ArxPhaseLagSpec,
     est: Box<dyn Estimator>,
@@ -227,12 +326,88 @@ pub struct ArxPhaseLag {
     applied: History,
     v: History,
     eps: History,
-    /// Targets `d_{j−1} … d_{j−L}`.
-    targets: History,
+    /// Smoothed targets `d̄_{j−1} … d̄_{j−S}`.
+    smoothed: History,
+    /// The two low-pass stages and their coefficient `1 − e^{−1/T_s}`.
+    stage1: f64,
+    stage2: f64,
+    alpha: f64,
+    /// The last target `d_{j−1}`.
+    target_prev: f64,
     count: usize,
     scale: f64,
     frozen: bool,
     guard: Guard,
+    supervisor: Supervisor,
+}
+
+/// The lead watch of [`ArxPhaseLag`]: exponentially weighted mean squares of the correction and
+/// of the smoothed command velocity per sub-step.
+#[derive(Debug, Clone)]
+struct Supervisor {
+    max_lead: Option<f64>,
+    weight: f64,
+    ms_correction: f64,
+    ms_velocity: f64,
+    /// Largest `ms_velocity` seen (the lead is judged once the command moves).
+    ms_velocity_peak: f64,
+    /// Sub-steps the command has moved for (the lead is judged after one window of motion).
+    moving_for: usize,
+    window: usize,
+    /// Largest lead seen while judged (for reports).
+    lead_peak: f64,
+    /// Output gain `g` and its decrement per sub-step once backing off.
+    gain: f64,
+    fade_step: f64,
+    trip: Option<GuardTrip>,
+}
+
+impl Supervisor {
+    fn new(spec: &ArxPhaseLagSpec) -> Self {
+        let window = 4 * (spec.k_lag + spec.span);
+        Self {
+            max_lead: spec.max_lead,
+            weight: 1.0 / window as f64,
+            ms_correction: 0.0,
+            ms_velocity: 0.0,
+            ms_velocity_peak: 0.0,
+            moving_for: 0,
+            window,
+            lead_peak: 0.0,
+            gain: 1.0,
+            fade_step: 1.0 / spec.span as f64,
+            trip: None,
+        }
+    }
+
+    /// Record one sub-step (`correction` before the gain, `velocity` per sub-step); returns
+    /// whether the compensator may keep adapting.
+    fn observe(&mut self, correction: f64, velocity: f64) -> bool {
+        if self.trip.is_some() {
+            self.gain = (self.gain - self.fade_step).max(0.0);
+            return false;
+        }
+        let Some(max_lead) = self.max_lead else {
+            return true;
+        };
+        let w = self.weight;
+        self.ms_correction += w * (correction * correction - self.ms_correction);
+        self.ms_velocity += w * (velocity * velocity - self.ms_velocity);
+        self.ms_velocity_peak = self.ms_velocity_peak.max(self.ms_velocity);
+        // Judged only while the command moves (not at rest, not in the decay of a record).
+        if self.ms_velocity > 0.0 {
+            self.moving_for += 1;
+        }
+        if self.moving_for > self.window && self.ms_velocity > 1e-4 * self.ms_velocity_peak {
+            let lead = (self.ms_correction / self.ms_velocity).sqrt();
+            self.lead_peak = self.lead_peak.max(lead);
+            if lead > max_lead {
+                self.trip = Some(GuardTrip::Unstable { lead, bound: max_lead });
+                return false;
+            }
+        }
+        true
+    }
 }
 
 impl ArxPhaseLag {
@@ -240,28 +415,70 @@ impl ArxPhaseLag {
         spec.validate()?;
         let n = spec.n_params();
         let p_max = spec.p_max.unwrap_or(spec.p0);
-        let est: Box<dyn Estimator> = if spec.scalar_covariance {
+        let mut est: Box<dyn Estimator> = if spec.scalar_covariance {
             Box::new(ScalarRls::new(n, spec.lambda, spec.p0)?.with_covariance_bound(p_max)?)
         } else {
             Box::new(Rls::new(n, spec.lambda, spec.p0)?.with_covariance_bound(p_max)?)
         };
-        let len = (spec.n_u + 1) * spec.k_lag + 1;
+        let prior = if spec.prior { Self::prior(&spec) } else { vec![0.0; n] };
+        est.set_theta(&prior);
+        let len = spec.history_len();
+        let alpha = if spec.smoothing > 0.0 {
+            1.0 - (-1.0 / spec.smoothing).exp()
+        } else {
+            1.0
+        };
         Ok(Self {
             spec,
             est,
-            theta_old: vec![0.0; n],
-            theta: vec![0.0; n],
+            theta_old: prior.clone(),
+            theta: prior,
             phi: vec![0.0; n],
             du: History::new(len),
             applied: History::new(len),
             v: History::new(len),
             eps: History::new(len),
-            targets: History::new(spec.k_lag),
+            smoothed: History::new(spec.span),
+            stage1: 0.0,
+            stage2: 0.0,
+            alpha,
+            target_prev: 0.0,
             count: 0,
             scale: 0.0,
             frozen: false,
             guard: Guard::new(spec.guard_factor, 1e-6)?,
+            supervisor: Supervisor::new(&spec),
         })
+    }
+
+    /// The pure-delay prior `θ₀` of the velocity regressor: the correction `Δu_j ≈ d_{j+L} − d_j`
+    /// of a delay of `L = k_lag` sub-steps for a command whose velocity changes linearly.
+    /// `v_{j−o}` is `S` times the velocity at the age `a = o + S/2 + 2 τ_s` sub-steps (`τ_s` the
+    /// group delay `(1 − α)/α` of one smoothing stage); extrapolating the velocity from the
+    /// first two lags to the middle of the lead, `j + L/2`, gives
+    /// `θ₀ = [L (1 + c)/S, −L c/S, 0, …]` with `c = (L/2 + a)/S` (`[L/S]` for `n_u = 1`).
+    pub fn prior(spec: &ArxPhaseLagSpec) -> Vec<f64> {
+        let mut theta = vec![0.0; spec.n_params()];
+        if spec.regressor != Regressor::Velocity {
+            return theta;
+        }
+        let (l, s) = (spec.k_lag as f64, spec.span as f64);
+        let tau_s = if spec.smoothing > 0.0 {
+            let alpha = 1.0 - (-1.0 / spec.smoothing).exp();
+            (1.0 - alpha) / alpha
+        } else {
+            0.0
+        };
+        let origin = if spec.from_current { 0.0 } else { spec.k_lag as f64 };
+        let age = origin + s / 2.0 + 2.0 * tau_s;
+        if spec.n_u == 1 {
+            theta[0] = l / s;
+        } else {
+            let c = (l / 2.0 + age) / s;
+            theta[0] = l * (1.0 + c) / s;
+            theta[1] = -l * c / s;
+        }
+        theta
     }
 
     pub fn spec(&self) -> &ArxPhaseLagSpec {
@@ -274,25 +491,40 @@ impl ArxPhaseLag {
     pub fn covariance_trace(&self) -> f64 {
         self.est.covariance_trace()
     }
+    /// The largest lead [sub-steps] the supervisor has seen (0 before the command moved).
+    pub fn peak_lead(&self) -> f64 {
+        self.supervisor.lead_peak
+    }
+    /// The supervisor's output gain `g` (1 until it backs off, then falling to 0).
+    pub fn gain(&self) -> f64 {
+        self.supervisor.gain
+    }
 
-    /// Fill `self.phi` with the regressor whose entries `l = 1…n_u` are at history ages
-    /// `newest_age + (l − 1)·k_lag` (age 0 = sub-step `j − 1` during call `j`).
-    fn regressor(&mut self, newest_age: usize) {
-        let k = self.spec.k_lag;
+    /// First lag of the regressor: 0 (the current sample) or `k_lag`.
+    fn origin(&self) -> usize {
+        if self.spec.from_current { 0 } else { self.spec.k_lag }
+    }
+
+    /// Fill `self.phi` with the regressor whose entries `l = 0…n_u−1` are the samples
+    /// `newest_age + l·S` pushes old (age 0 = sub-step `j − 1` during call `j`); age `−1` is the
+    /// current sample, whose velocity `v_now` is not in the history yet (velocity block only).
+    fn regressor(&mut self, newest_age: isize, v_now: f64) {
+        let span = self.spec.span as isize;
         let (has_du, has_v, has_eps) = self.spec.regressor.blocks();
         let mut i = 0;
-        for l in 0..self.spec.n_u {
-            let age = newest_age + l * k;
+        for l in 0..self.spec.n_u as isize {
+            let age = newest_age + l * span;
+            let at = |h: &History| if age < 0 { 0.0 } else { h.get(age as usize) };
             if has_du {
-                self.phi[i] = -self.du.get(age);
+                self.phi[i] = -at(&self.du);
                 i += 1;
             }
             if has_v {
-                self.phi[i] = self.v.get(age);
+                self.phi[i] = if age < 0 { v_now } else { self.v.get(age as usize) };
                 i += 1;
             }
             if has_eps {
-                self.phi[i] = self.eps.get(age);
+                self.phi[i] = at(&self.eps);
                 i += 1;
             }
         }
@@ -305,7 +537,7 @@ impl PhaseLagCompensator for ArxPhaseLag {
             return 0.0;
         }
         let k = self.spec.k_lag;
-        let lag = self.targets.get(0) - measured_prev;
+        let lag = self.target_prev - measured_prev;
         // Age of the correction the error of sub-step j − 1 is attributed to.
         let cause = match self.spec.pairing {
             ErrorPairing::Current => 0,
@@ -314,40 +546,51 @@ impl PhaseLagCompensator for ArxPhaseLag {
         // ε_{j−1}: the tracking error less the part of that correction that was not sent.
         let eps = lag - (self.du.get(cause) - self.applied.get(cause));
         self.eps.set(0, eps);
-        let v = target - self.targets.get(k - 1);
+        self.stage1 += self.alpha * (target - self.stage1);
+        self.stage2 += self.alpha * (self.stage1 - self.stage2);
+        let v = self.stage2 - self.smoothed.get(self.spec.span - 1);
         self.scale = self.scale.max(v.abs()).max(lag.abs());
+        let origin = self.origin() as isize;
 
-        if !self.frozen && self.count > 0 && self.count.is_multiple_of(k) {
+        let adapting = !self.frozen && self.supervisor.trip.is_none();
+        if adapting && self.count > 0 && self.count.is_multiple_of(k) {
             if self.scale > 0.0 {
                 let s = self.scale;
-                // φ_{j−1} (ages k − 1 + 1 …) or φ_{j−1−k}, normalised.
-                self.regressor(k + cause);
+                // The regressor of the correction sent at j − 1 − cause, normalised.
+                self.regressor(cause as isize + origin, v);
                 self.phi.iter_mut().for_each(|p| *p /= s);
-                let e = match self.spec.pairing {
-                    ErrorPairing::Current => eps,
-                    ErrorPairing::Delayed => (self.applied.get(k) + lag) - self.est.predict(&self.phi) * s,
-                };
-                self.est.update_with_error(&self.phi, e / s);
+                let excited = self.phi.iter().map(|p| p * p).sum::<f64>().sqrt() >= self.spec.min_excitation;
+                if excited {
+                    let e = match self.spec.pairing {
+                        ErrorPairing::Current => eps,
+                        ErrorPairing::Delayed => (self.applied.get(k) + lag) - self.est.predict(&self.phi) * s,
+                    };
+                    self.est.update_with_error(&self.phi, e / s);
+                }
             }
             self.theta_old.copy_from_slice(&self.theta);
         }
-        if !self.frozen {
+        if adapting {
             let r = ((self.count % k) + 1) as f64 / k as f64;
             let new = self.est.theta();
             for ((t, old), new) in self.theta.iter_mut().zip(&self.theta_old).zip(new) {
                 *t = old + r * (new - old);
             }
         }
-        // φ_j: samples j − lL are ages lL − 1 now.
-        self.regressor(k - 1);
+        // φ_j: sample j − o − lS is age o + lS − 1 now.
+        self.regressor(origin - 1, v);
         let du: f64 = self.phi.iter().zip(&self.theta).map(|(p, t)| p * t).sum();
-        let du = self.guard.output(du, h);
+        if !self.frozen {
+            self.supervisor.observe(du, v / self.spec.span as f64);
+        }
+        let du = self.guard.output(self.supervisor.gain * du, h);
 
         self.du.push(du);
         self.applied.push(h * du);
         self.v.push(v);
         self.eps.push(0.0);
-        self.targets.push(target);
+        self.smoothed.push(self.stage2);
+        self.target_prev = target;
         self.count += 1;
         du
     }
@@ -355,7 +598,7 @@ impl PhaseLagCompensator for ArxPhaseLag {
         "arx"
     }
     fn is_adaptive(&self) -> bool {
-        !self.frozen
+        !self.frozen && self.supervisor.trip.is_none()
     }
     fn set_frozen(&mut self, frozen: bool) {
         if self.frozen && !frozen {
@@ -365,30 +608,37 @@ impl PhaseLagCompensator for ArxPhaseLag {
         self.guard.set_frozen(frozen);
     }
     fn trip(&self) -> Option<GuardTrip> {
-        self.guard.trip()
+        self.guard.trip().or(self.supervisor.trip)
     }
     fn parameters(&self) -> &[f64] {
         &self.theta
     }
-    /// `[target history (L), Δu history, h Δu history, v history, ε history]`, newest first.
+    /// `[d_{j−1}, low-pass stages (2), d̄ history (S), Δu history, h Δu history, v history,
+    /// ε history]`, newest first.
     fn state_len(&self) -> usize {
-        self.targets.len() + 4 * self.du.len()
+        3 + self.smoothed.len() + 4 * self.du.len()
     }
     fn write_state(&self, out: &mut [f64]) {
-        let (t, l) = (self.targets.len(), self.du.len());
-        self.targets.write(&mut out[..t]);
+        let (t, l) = (self.smoothed.len(), self.du.len());
+        out[0] = self.target_prev;
+        out[1] = self.stage1;
+        out[2] = self.stage2;
+        self.smoothed.write(&mut out[3..3 + t]);
         for (k, h) in [&self.du, &self.applied, &self.v, &self.eps].into_iter().enumerate() {
-            h.write(&mut out[t + k * l..t + (k + 1) * l]);
+            h.write(&mut out[3 + t + k * l..3 + t + (k + 1) * l]);
         }
     }
     fn read_state(&mut self, s: &[f64]) {
-        let (t, l) = (self.targets.len(), self.du.len());
-        self.targets.read(&s[..t]);
+        let (t, l) = (self.smoothed.len(), self.du.len());
+        self.target_prev = s[0];
+        self.stage1 = s[1];
+        self.stage2 = s[2];
+        self.smoothed.read(&s[3..3 + t]);
         for (k, h) in [&mut self.du, &mut self.applied, &mut self.v, &mut self.eps]
             .into_iter()
             .enumerate()
         {
-            h.read(&s[t + k * l..t + (k + 1) * l]);
+            h.read(&s[3 + t + k * l..3 + t + (k + 1) * l]);
         }
     }
 }

@@ -105,6 +105,9 @@ pub enum GuardTrip {
     NonFiniteCorrection,
     /// `|h Δu|` exceeded the bound.
     Bound { correction: f64, bound: f64 },
+    /// The supervisor of an identified compensator saw its correction amount to a lead of
+    /// `lead` sub-steps, more than `bound`: the compensated loop was going unstable.
+    Unstable { lead: f64, bound: f64 },
 }
 
 impl std::fmt::Display for GuardTrip {
@@ -115,6 +118,12 @@ impl std::fmt::Display for GuardTrip {
             GuardTrip::Bound { correction, bound } => {
                 write!(f, "correction {correction:.3e} exceeded the bound {bound:.3e}")
             }
+            GuardTrip::Unstable { lead, bound } => write!(
+                f,
+                "the correction amounted to a lead of {lead:.1} sub-steps, more than the {bound:.1} \
+                 a delay can need: the compensated loop was going unstable, so the compensator \
+                 backed off"
+            ),
         }
     }
 }

@@ -90,6 +90,31 @@ impl ActuatorSpec {
         }
     }
 
+    /// The lag \[s\] of the command at low frequency: the pure delay plus the group delay of the
+    /// dynamics at `ω → 0` (`τ` of a first-order actuator, `2ζ/ω_a` of a second-order one,
+    /// `−G′(0)/G(0)` of an LTI model); the default lead of phase-lag compensation. A servo-hydraulic
+    /// plant (whose specimen is part of it) and a non-finite or negative result count the
+    /// delay only.
+    pub fn low_frequency_lag(&self) -> f64 {
+        let dynamics = match &self.dynamics {
+            Dynamics::Ideal | Dynamics::ServoHydraulic(_) => 0.0,
+            Dynamics::FirstOrder { time_constant } => *time_constant,
+            Dynamics::SecondOrder { frequency_hz, zeta } => 2.0 * zeta / (2.0 * std::f64::consts::PI * frequency_hz),
+            Dynamics::Lti(ss) => {
+                // G(s) = C (sI − A)⁻¹ B + D: G(0) = D − C A⁻¹ B, G′(0) = −C A⁻² B.
+                match ss.a.clone().lu().solve(&ss.b) {
+                    Some(x) => {
+                        let g0 = ss.d - ss.c.dot(&x);
+                        let dg0 = ss.a.clone().lu().solve(&x).map_or(f64::NAN, |y| -ss.c.dot(&y));
+                        -dg0 / g0
+                    }
+                    None => 0.0,
+                }
+            }
+        };
+        self.delay + if dynamics.is_finite() && dynamics > 0.0 { dynamics } else { 0.0 }
+    }
+
     pub fn validate(&self) -> Result<()> {
         require_non_negative("actuator.delay", self.delay)?;
         match self.dynamics {

@@ -22,6 +22,10 @@
 //! guard_factor = 10.0
 //! regressor = "velocity"        # full | correction_velocity | velocity_error | velocity
 //! pairing = "delayed"           # current | delayed
+//! span = 96                     # samples per velocity difference and between lags (k_lag)
+//! smoothing = 48.0              # low-pass time constant of each of two stages [samples] (span/2)
+//! max_lead = 480.0              # supervisor bound on the correction's lead [samples] (4 k_lag + 2 span)
+//! supervisor = true             # false: no supervisor
 //!
 //! [controller.polynomial]
 //! order = 2
@@ -54,7 +58,7 @@
 
 use super::controller::{ControllerKind, ControllerSpec};
 use super::run::SubstepSpec;
-use crate::compensate::{ErrorPairing, PhaseLagSpec, Ramp, Regressor};
+use crate::compensate::{ArxPhaseLagSpec, ErrorPairing, PhaseLagSpec, Ramp, Regressor};
 use crate::error::{Error, Result};
 use crate::substructure::ErrorForceSpec;
 use crate::transfer::lti::TransferFunction;
@@ -109,6 +113,10 @@ struct RawArx {
     guard_factor: Option<f64>,
     regressor: Option<String>,
     pairing: Option<String>,
+    span: Option<usize>,
+    smoothing: Option<f64>,
+    max_lead: Option<f64>,
+    supervisor: Option<bool>,
 }
 
 #[derive(Debug, Clone, Default, Deserialize)]
@@ -244,7 +252,18 @@ impl BenchmarkConfig {
         match (&mut spec.phase_lag, kind) {
             (Some(PhaseLagSpec::Arx(a)), ControllerKind::Arx) => {
                 if let Some(r) = &c.arx {
-                    a.k_lag = r.k_lag.unwrap_or(a.k_lag);
+                    if let Some(k) = r.k_lag {
+                        // The defaults that follow k_lag: the span, smoothing and lead bound.
+                        *a = ArxPhaseLagSpec { k_lag: k, ..*a }.with_span(k);
+                    }
+                    if let Some(s) = r.span {
+                        *a = a.with_span(s);
+                    }
+                    a.smoothing = r.smoothing.unwrap_or(a.smoothing);
+                    a.max_lead = r.max_lead.map(Some).unwrap_or(a.max_lead);
+                    if r.supervisor == Some(false) {
+                        a.max_lead = None;
+                    }
                     a.n_u = r.n_u.unwrap_or(a.n_u);
                     a.lambda = r.forgetting_factor.unwrap_or(a.lambda);
                     a.p0 = r.p0.unwrap_or(a.p0);

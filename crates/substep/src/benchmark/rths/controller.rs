@@ -93,6 +93,8 @@ pub fn arx_default() -> ArxPhaseLagSpec {
     ArxPhaseLagSpec {
         n_u: 6,
         lambda: 0.999,
+        smoothing: 16.0,
+        max_lead: Some(600.0),
         ..ArxPhaseLagSpec::new(8)
     }
 }

@@ -56,6 +56,10 @@ pub(crate) struct RawPhaseLag {
     pub(crate) forgetting_factor: Option<f64>,
     pub(crate) taps: Option<usize>,
     pub(crate) guard_factor: Option<f64>,
+    pub(crate) span: Option<usize>,
+    pub(crate) smoothing: Option<f64>,
+    pub(crate) max_lead: Option<f64>,
+    pub(crate) supervisor: Option<bool>,
     pub(crate) ramp_start: Option<usize>,
     pub(crate) ramp_steps: Option<usize>,
     pub(crate) fade_out: Option<[usize; 2]>,
@@ -85,8 +89,9 @@ pub(crate) const DEFAULT_RAMP_STEPS: usize = 100;
 
 impl RawPhaseLag {
     /// `None` for `kind = "none"`. `dt` time step, `k_sub` sub-steps, `delay` the actuator's pure
-    /// delay [s] (the default lead and `k_lag`).
-    pub(crate) fn build(&self, dt: f64, k_sub: usize, delay: f64) -> Result<Option<PhaseLagDefinition>> {
+    /// delay [s] (the default lead), `lag` its low-frequency lag [s] (delay plus dynamics: the
+    /// default `k_lag`).
+    pub(crate) fn build(&self, dt: f64, k_sub: usize, delay: f64, lag: f64) -> Result<Option<PhaseLagDefinition>> {
         let p = "substructure.phase_lag.";
         let dtau = dt / k_sub as f64;
         let keys = |names: &[&'static str]| -> Vec<(&'static str, bool)> {
@@ -102,6 +107,10 @@ impl RawPhaseLag {
                         "forgetting_factor" => self.forgetting_factor.is_some(),
                         "taps" => self.taps.is_some(),
                         "guard_factor" => self.guard_factor.is_some(),
+                        "span" => self.span.is_some(),
+                        "smoothing" => self.smoothing.is_some(),
+                        "max_lead" => self.max_lead.is_some(),
+                        "supervisor" => self.supervisor.is_some(),
                         "ramp_start" => self.ramp_start.is_some(),
                         "ramp_steps" => self.ramp_steps.is_some(),
                         "fade_out" => self.fade_out.is_some(),
@@ -145,6 +154,10 @@ impl RawPhaseLag {
                         "forgetting_factor",
                         "taps",
                         "guard_factor",
+                        "span",
+                        "smoothing",
+                        "max_lead",
+                        "supervisor",
                         "ramp_start",
                         "ramp_steps",
                         "fade_out",
@@ -154,7 +167,11 @@ impl RawPhaseLag {
                 return Ok(None);
             }
             "polynomial" => {
-                forbid(p, &keys(&["k_lag", "n_u", "forgetting_factor", "taps"]), &unused)?;
+                forbid(
+                    p,
+                    &keys(&["k_lag", "n_u", "forgetting_factor", "taps", "span", "smoothing", "max_lead", "supervisor"]),
+                    &unused,
+                )?;
                 PhaseLagSpec::Polynomial {
                     order: self.order.unwrap_or(3),
                     lead: lead()?,
@@ -163,8 +180,24 @@ impl RawPhaseLag {
             }
             "arx" => {
                 forbid(p, &keys(&["order", "lead", "lead_substeps", "taps"]), &unused)?;
-                let k_lag = self.k_lag.unwrap_or_else(|| ((delay / dtau).round() as usize).max(1));
-                let mut spec = ArxPhaseLagSpec::new(k_lag);
+                let k_lag = self.k_lag.unwrap_or_else(|| ((lag / dtau).round() as usize).max(1));
+                // Velocities over one time step (the sub-step ripple repeats every step).
+                let mut spec = ArxPhaseLagSpec::new(k_lag).with_span(self.span.unwrap_or(k_sub));
+                if let Some(t) = self.smoothing {
+                    spec.smoothing = t;
+                }
+                if let Some(l) = self.max_lead {
+                    spec.max_lead = Some(l);
+                }
+                if self.supervisor == Some(false) {
+                    if self.max_lead.is_some() {
+                        return Err(Error::invalid(
+                            format!("{p}max_lead"),
+                            "is not used with supervisor = false",
+                        ));
+                    }
+                    spec.max_lead = None;
+                }
                 if let Some(n) = self.n_u {
                     spec.n_u = n;
                 }
@@ -175,7 +208,11 @@ impl RawPhaseLag {
                 PhaseLagSpec::Arx(spec)
             }
             "inverse_fir" => {
-                forbid(p, &keys(&["k_lag", "n_u", "guard_factor"]), &unused)?;
+                forbid(
+                    p,
+                    &keys(&["k_lag", "n_u", "guard_factor", "span", "smoothing", "max_lead", "supervisor"]),
+                    &unused,
+                )?;
                 let mut spec = InverseFirSpec::new(lead()?);
                 if let Some(o) = self.order {
                     spec.order = o;
