@@ -102,6 +102,12 @@ pub struct ArxPhaseLagSpec {
     /// Updates are skipped while the normalised regressor is shorter than this (the excitation
     /// is too low to identify anything; default 0.01).
     pub min_excitation: f64,
+    /// The expected lead [sub-steps], fractional (default `k_lag`): the prior's lead and, with
+    /// `period`, the ripple's.
+    pub lead: f64,
+    /// Sub-steps per time step `k` when the commands come from the sub-step algorithm, whose
+    /// ripple repeats every step (default 1: no ripple term).
+    pub period: usize,
 }
 
 impl ArxPhaseLagSpec {
@@ -126,6 +132,8 @@ impl ArxPhaseLagSpec {
             prior: true,
             max_lead: None,
             min_excitation: 0.01,
+            lead: k_lag as f64,
+            period: 1,
         }
         .with_span(k_lag)
     }
@@ -161,6 +169,7 @@ impl ArxPhaseLagSpec {
             prior: false,
             max_lead: None,
             min_excitation: 0.0,
+            period: 1,
             ..self
         }
     }
@@ -334,6 +343,8 @@ pub struct ArxPhaseLag {
     alpha: f64,
     /// The last target `d_{j−1}`.
     target_prev: f64,
+    /// Targets `d_{j−1} … d_{j−k}` (ripple term).
+    targets: History,
     count: usize,
     scale: f64,
     frozen: bool,
@@ -443,6 +454,7 @@ impl ArxPhaseLag {
             stage2: 0.0,
             alpha,
             target_prev: 0.0,
+            targets: History::new(spec.period + 1),
             count: 0,
             scale: 0.0,
             frozen: false,
@@ -462,7 +474,7 @@ impl ArxPhaseLag {
         if spec.regressor != Regressor::Velocity {
             return theta;
         }
-        let (l, s) = (spec.k_lag as f64, spec.span as f64);
+        let (l, s) = (spec.lead, spec.span as f64);
         let tau_s = if spec.smoothing > 0.0 {
             let alpha = 1.0 - (-1.0 / spec.smoothing).exp();
             (1.0 - alpha) / alpha
@@ -498,6 +510,24 @@ impl ArxPhaseLag {
     /// The supervisor's output gain `g` (1 until it backs off, then falling to 0).
     pub fn gain(&self) -> f64 {
         self.supervisor.gain
+    }
+
+    /// The lead of the step-periodic ripple by the fractional part `r = lead mod k` of the lead
+    /// (0 without a period): `(d_{j+r−k} − d_j) + (k − r)/k (d_j − d_{j−k})`, exact for a ripple
+    /// of period `k` on a linear trend; `d_{j+r−k}` interpolated linearly.
+    fn ripple(&self, target: f64) -> f64 {
+        let k = self.spec.period;
+        let r = self.spec.lead % k as f64;
+        if k < 2 || r < 1e-9 || self.count < k {
+            return 0.0;
+        }
+        let at = |age: isize| if age < 0 { target } else { self.targets.get(age as usize) };
+        // d_{j+r−k} is age k − r − 1 (age 0 = d_{j−1}, −1 = d_j).
+        let age = k as f64 - r - 1.0;
+        let a0 = age.floor();
+        let frac = age - a0;
+        let d_shift = (1.0 - frac) * at(a0 as isize) + frac * at(a0 as isize + 1);
+        (d_shift - target) + (k as f64 - r) / k as f64 * (target - self.targets.get(k - 1))
     }
 
     /// First lag of the regressor: 0 (the current sample) or `k_lag`.
@@ -579,7 +609,7 @@ impl PhaseLagCompensator for ArxPhaseLag {
         }
         // φ_j: sample j − o − lS is age o + lS − 1 now.
         self.regressor(origin - 1, v);
-        let du: f64 = self.phi.iter().zip(&self.theta).map(|(p, t)| p * t).sum();
+        let du: f64 = self.phi.iter().zip(&self.theta).map(|(p, t)| p * t).sum::<f64>() + self.ripple(target);
         if !self.frozen {
             self.supervisor.observe(du, v / self.spec.span as f64);
         }
@@ -591,6 +621,7 @@ impl PhaseLagCompensator for ArxPhaseLag {
         self.eps.push(0.0);
         self.smoothed.push(self.stage2);
         self.target_prev = target;
+        self.targets.push(target);
         self.count += 1;
         du
     }
