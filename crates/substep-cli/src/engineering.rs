@@ -12,6 +12,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use substep::io::TestDefinition;
+use substep::io::format::{percent, sig};
 use substep::run::{EngineeringRow, EngineeringSummary, InputMotion, round_time};
 
 /// Rows kept for the figures.
@@ -151,14 +152,16 @@ impl ResponseWriter {
 /// One-line summaries for stdout.
 pub fn lines(s: &EngineeringSummary) -> Vec<String> {
     let e = &s.energy;
+    // Significant digits, so that a diverged run's 10¹⁵⁰ J prints as such (not as 150 digits).
+    let n = |x: f64| sig(x, 4);
     let mut out = vec![format!(
-        "  energy at the end [J]: input {:.3}, kinetic {:.3}, strain {:.3}, damping {:.3}, coupling {:.3}; balance error max {:.3} % of the energy put in",
-        e.input,
-        e.kinetic,
-        e.strain,
-        e.damping,
-        e.coupling,
-        100.0 * s.energy_error_relative_max
+        "  energy at the end [J]: input {}, kinetic {}, strain {}, damping {}, coupling {}; balance error max {} of the energy put in",
+        n(e.input),
+        n(e.kinetic),
+        n(e.strain),
+        n(e.damping),
+        n(e.coupling),
+        percent(s.energy_error_relative_max)
     )];
     let (k, a) = s
         .peak_absolute_acceleration_m_s2
@@ -169,12 +172,12 @@ pub fn lines(s: &EngineeringSummary) -> Vec<String> {
             |b, (k, p)| if p.peak > b.1.0 { (k, (p.peak, p.t)) } else { b },
         );
     out.push(format!(
-        "  peak absolute acceleration {:.3} m/s² ({:.3} g, DOF {}, t = {:.3} s); peak base shear {:.1} N (t = {:.3} s)",
-        a.0,
-        a.0 / substep::excitation::G,
+        "  peak absolute acceleration {} m/s² ({} g, DOF {}, t = {:.3} s); peak base shear {} N (t = {:.3} s)",
+        n(a.0),
+        n(a.0 / substep::excitation::G),
         k + 1,
         a.1,
-        s.peak_base_shear.peak,
+        n(s.peak_base_shear.peak),
         s.peak_base_shear.t
     ));
     if let Some((k, d)) = s
@@ -184,8 +187,8 @@ pub fn lines(s: &EngineeringSummary) -> Vec<String> {
         .max_by(|x, y| x.1.peak.total_cmp(&y.1.peak))
     {
         out.push(format!(
-            "  peak inter-storey drift {:.3} mm (storey {}, t = {:.3} s)",
-            1e3 * d.peak,
+            "  peak inter-storey drift {} mm (storey {}, t = {:.3} s)",
+            n(1e3 * d.peak),
             k + 1,
             d.t
         ));

@@ -7,6 +7,7 @@ use crate::monitor::live::{Live, LiveObserver};
 use crate::output::{Decimated, HistoryWriter, SubstepWriter, prepare_dir, write_atomic};
 use crate::plots::{Curve, Figure, Panel, line_chart, output_path};
 use crate::{DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, RunArgs};
+use substep::io::format::percent;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::ops::ControlFlow;
@@ -94,22 +95,13 @@ pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, m
         "monolithic Newmark solution"
     };
     println!(
-        "  max error vs {what}: {} % (displacement), {} % (coupling force)",
+        "  max error vs {what}: {} (displacement), {} (coupling force)",
         percent(max_displacement_error),
         percent(max_force_error)
     );
     println!("    (largest |test − reference| over the run and all DOFs, relative to that DOF's peak |reference|)");
 }
 
-/// A ratio as a percentage, exponent notation when it is huge (a diverged run).
-fn percent(ratio: f64) -> String {
-    let p = 100.0 * ratio;
-    if p.abs() < 1e4 {
-        format!("{p:.3}")
-    } else {
-        format!("{p:.3e}")
-    }
-}
 
 /// The series kept for the plots: a decimated table `t, u(sel), a(sel), [fc, fe, dm, uref] per
 /// coupling DOF`.

@@ -98,11 +98,16 @@ impl Live {
     /// [`SafetyLimits`] so that a stop from the page or the indicator can ramp.
     pub fn start(args: &RunArgs, def: &mut TestDefinition, config: &str, realtime: bool) -> Result<Self> {
         let n_c = def.substructure.as_ref().map_or(0, |s| s.coupling_dofs.len());
-        let from_config = def
-            .substructure
-            .as_ref()
-            .and_then(|s| s.limits.as_ref())
-            .and_then(|l| l.stability.clone());
+        // Offline the indicator runs by default (`SubstructureDefinition::stability_settings`); a
+        // real-time run gets it only when asked for (its writer thread shares the cores with
+        // the real-time threads).
+        let from_config = def.substructure.as_ref().and_then(|s| {
+            if realtime {
+                s.limits.as_ref().and_then(|l| l.stability.clone())
+            } else {
+                s.stability_settings()
+            }
+        });
         // The command-line action overrides the config's (keeping its thresholds).
         let configured = match (args.stability, from_config) {
             (None, c) => c,

@@ -5,6 +5,7 @@
 //! library types; every error is one line naming the file and line or the config key.
 
 pub mod config;
+pub mod format;
 pub mod limits;
 pub mod matrix_market;
 pub mod results;

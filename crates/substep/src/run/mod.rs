@@ -35,7 +35,7 @@ pub use table::{HistoryTable, Table, push_number};
 
 use crate::analysis::tracking::{ErrorAccumulator, TrackingMetrics};
 use crate::error::{Error, Result};
-use crate::io::{Reference, Simulation, TestDefinition};
+use crate::io::{Reference, Simulation, SubstructureDefinition, TestDefinition};
 use crate::monitor::{StabilityAction, StabilityMonitor, StabilitySettings};
 use crate::substructure::{StepRecord, SubstepObserver};
 use std::ops::ControlFlow;
@@ -339,6 +339,28 @@ impl SummaryRecorder {
     }
 }
 
+/// A run whose largest displacement error against its reference exceeds this share of the
+/// reference's peak (100 %) has diverged from the structure it simulates (docs/config.md, "Exit
+/// codes").
+pub const DIVERGED_ERROR: f64 = 1.0;
+
+/// A displacement beyond this \[m\] is a runaway response whatever the structure (no test moves a
+/// kilometre): the run ends as diverged at once (after the controlled ramp-down where it has one).
+pub const RUNAWAY_DISPLACEMENT: f64 = 1.0e3;
+
+/// Why `u` is a runaway response, if it is.
+fn runaway(u: &[f64]) -> Option<String> {
+    let (k, v) = u
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !(v.abs() <= RUNAWAY_DISPLACEMENT))?;
+    Some(format!(
+        "runaway response: |u| = {} m on DOF {} exceeds {RUNAWAY_DISPLACEMENT} m",
+        crate::io::format::sig(v.abs(), 4),
+        k + 1
+    ))
+}
+
 /// A validated run, ready to execute: the simulation, its reference and the engineering
 /// recorder are built (all input errors are reported here, before a front end writes anything).
 pub struct Run<'d> {
@@ -369,10 +391,7 @@ impl<'d> Run<'d> {
         let reference = Reference::new(def)?;
         let engineering = EngineeringRecorder::new(def);
         let sub = def.substructure.as_ref();
-        let stability = stability_monitor(
-            def,
-            sub.and_then(|s| s.limits.as_ref()).and_then(|l| l.stability.clone()),
-        )?;
+        let stability = stability_monitor(def, sub.and_then(SubstructureDefinition::stability_settings))?;
         let layout = Layout {
             n_dofs: def.model.n_dofs(),
             coupling_dofs: sub.map_or_else(Vec::new, |s| s.coupling_dofs.clone()),
@@ -454,6 +473,7 @@ impl<'d> Run<'d> {
         let mut stop_sent = false;
         let mut stopped_by: Option<&'static str> = None;
         let mut pending_stop: Option<String> = None;
+        let mut diverging = false;
         let started = Instant::now();
         let mut compute = Duration::ZERO;
         let mut failure: Option<Error> = None;
@@ -500,6 +520,22 @@ impl<'d> Run<'d> {
                 indicator: stability.as_ref(),
             });
             recorder.record(sim, reference.as_ref());
+            if let Some(reason) = runaway(s.u.as_slice())
+                && !diverging
+            {
+                // A runaway response: ramp the actuators down where the run can, else end here.
+                diverging = true;
+                if stop_sent || !sim.request_stop(&format!("diverged: {reason}")) {
+                    failure = Some(Error::Diverged {
+                        step: i,
+                        time: def.time(i),
+                        reason,
+                    });
+                    break;
+                }
+                stop_sent = true;
+                stopped_by = Some("divergence");
+            }
             let asked = observer.stop_request();
             if let Some(reason) = asked
                 && !stop_sent
@@ -568,6 +604,23 @@ impl<'d> Run<'d> {
             }
         };
         let done = sim.steps_done();
+        let reference_summary = reference.as_ref().map(|r| recorder.reference_summary(r));
+        if failure.is_none()
+            && let Some(r) = &reference_summary
+            && !(r.max_displacement_error <= DIVERGED_ERROR)
+        {
+            failure = Some(Error::Diverged {
+                step: done,
+                time: def.time(done),
+                reason: format!(
+                    "the error against the reference reached {} of its peak (more than {} %): the test \
+                     diverged from the structure it simulates",
+                    crate::io::format::percent(r.max_displacement_error),
+                    100.0 * DIVERGED_ERROR
+                ),
+            });
+        }
+        let diverged = matches!(failure, Some(Error::Diverged { .. })) || stopped_by == Some("divergence");
         let (stopped_at_step, reason) = match &failure {
             Some(Error::Diverged { step, reason, .. } | Error::Stopped { step, reason, .. }) => {
                 (Some(*step), Some(reason.clone()))
@@ -588,6 +641,7 @@ impl<'d> Run<'d> {
             ground_motion: def.ground_motion.description.clone(),
             substructure: sub.map(summary::substructure_json),
             completed: failure.is_none(),
+            diverged,
             steps_done: done,
             stopped_at_step,
             reason,
@@ -631,7 +685,7 @@ impl<'d> Run<'d> {
                     })
                     .collect()
             }),
-            reference: reference.as_ref().map(|r| recorder.reference_summary(r)),
+            reference: reference_summary,
             estimation,
             phase_lag,
             stability: stability.as_ref().map(StabilityMonitor::summary),

@@ -88,6 +88,9 @@ pub struct RunSummary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub substructure: Option<Value>,
     pub completed: bool,
+    /// The run diverged: a non-finite or runaway response, or an error against the reference
+    /// beyond [`super::DIVERGED_ERROR`] (then `completed` is false and `reason` says which).
+    pub diverged: bool,
     pub steps_done: usize,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stopped_at_step: Option<usize>,

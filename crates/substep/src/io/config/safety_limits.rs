@@ -25,17 +25,24 @@ pub(crate) struct RawLimits {
 }
 
 impl RawLimits {
+    /// `stability = "off"`: no indicator (it runs by default, docs/config.md).
+    pub(crate) fn stability_off(&self) -> bool {
+        self.stability.as_deref() == Some("off")
+    }
+
     fn stability(&self) -> Result<Option<StabilitySettings>> {
-        let Some(action) = &self.stability else {
+        let Some(action) = self.stability.as_ref().filter(|a| a.as_str() != "off") else {
             if self.stability_energy.is_some()
                 || self.stability_margin.is_some()
                 || self.stability_window.is_some()
                 || self.stability_refresh.is_some()
             {
-                return Err(Error::invalid(
-                    "substructure.limits.stability",
-                    "the stability_* thresholds need stability = \"warn\" or \"stop\"",
-                ));
+                if self.stability_off() {
+                    return Err(Error::invalid(
+                        "substructure.limits.stability",
+                        "the stability_* thresholds are not used with stability = \"off\"",
+                    ));
+                }
             }
             return Ok(None);
         };
@@ -45,7 +52,7 @@ impl RawLimits {
             other => {
                 return Err(Error::invalid(
                     "substructure.limits.stability",
-                    format!("unknown action '{other}' (expected \"warn\" or \"stop\")"),
+                    format!("unknown action '{other}' (expected \"warn\", \"stop\" or \"off\")"),
                 ));
             }
         };

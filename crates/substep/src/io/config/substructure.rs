@@ -10,6 +10,7 @@ use super::sensors::RawSensors;
 use super::specimens::RawSpecimen;
 use super::{dof_index, prefixed};
 use crate::compensate::PhaseLagDefinition;
+use crate::monitor::{StabilityAction, StabilitySettings};
 use crate::error::{Error, Result};
 use crate::integrate::Scheme;
 use crate::io::limits::Limits;
@@ -55,6 +56,9 @@ pub struct SubstructureDefinition {
     pub remote: Option<RemoteDefinition>,
     /// Safety limits with a controlled stop.
     pub limits: Option<SafetyLimits>,
+    /// `[substructure.limits] stability = "off"`: no on-line stability indicator (see
+    /// [`Self::stability_settings`]).
+    pub stability_off: bool,
     /// `[substructure.delay_ramp]`: a growing extra command delay (virtual tests), if any.
     pub delay_ramp: Option<DelayRamp>,
     /// D/A converter on the commands and how the lab builds the force (`[substructure] force`).
@@ -68,6 +72,23 @@ pub struct SubstructureDefinition {
 }
 
 impl SubstructureDefinition {
+    /// The on-line stability indicator of this test (docs/theory.md §15): the config's
+    /// `[substructure.limits] stability`; without it the indicator still runs, with the default
+    /// thresholds, to warn, or to stop (the controlled ramp-down) where safety limits are set;
+    /// `None` for `stability = "off"`.
+    pub fn stability_settings(&self) -> Option<StabilitySettings> {
+        if self.stability_off {
+            return None;
+        }
+        match &self.limits {
+            None => Some(StabilitySettings::default()),
+            Some(l) => Some(l.stability.clone().unwrap_or(StabilitySettings {
+                action: StabilityAction::Stop,
+                ..StabilitySettings::default()
+            })),
+        }
+    }
+
     /// The experimental side for `controller`: the virtual lab or the remote site (per
     /// sub-step), wrapped in the safety limits when given.
     pub fn build_site(&self, controller: &SubstepController, dt: f64) -> Result<Box<dyn ExperimentalSubstructure>> {
@@ -454,6 +475,7 @@ impl RawSubstructure {
                 .as_ref()
                 .map(|l| l.build(coupling.len(), dt / self.substeps as f64))
                 .transpose()?,
+            stability_off: self.limits.as_ref().is_some_and(RawLimits::stability_off),
             coupling_dofs: coupling,
             remote,
             phase_lag,

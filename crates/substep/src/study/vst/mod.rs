@@ -252,6 +252,7 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
         }),
         remote: None,
         limits: None,
+        stability_off: false,
         lab: Default::default(),
         controller: None,
         controller_feedforward: None,
