@@ -109,8 +109,8 @@ pub struct RunArgs {
     /// With --monitor: seconds the page keeps showing the final state after the run
     #[arg(long, requires = "monitor", value_name = "SECONDS", default_value_t = 30.0)]
     pub monitor_linger: f64,
-    /// On-line stability indicator: warn, or stop with the controlled ramp-down (overrides
-    /// `[substructure.limits] stability`)
+    /// On-line stability indicator: warn, stop with the controlled ramp-down, or off (overrides
+    /// `[substructure.limits] stability`; offline it runs by default)
     #[arg(long, value_enum, value_name = "ACTION")]
     pub stability: Option<StabilityArg>,
     /// Pace an offline run at FACTOR × real time (1 = wall clock)
@@ -122,6 +122,8 @@ pub struct RunArgs {
 pub enum StabilityArg {
     Warn,
     Stop,
+    /// No indicator (it runs by default offline).
+    Off,
 }
 
 /// Exit code of a failed command: 1 for a diverged or stopped run and for runtime failures

@@ -7,7 +7,6 @@ use crate::monitor::live::{Live, LiveObserver};
 use crate::output::{Decimated, HistoryWriter, SubstepWriter, prepare_dir, write_atomic};
 use crate::plots::{Curve, Figure, Panel, line_chart, output_path};
 use crate::{DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, RunArgs};
-use substep::io::format::percent;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::ops::ControlFlow;
@@ -15,6 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use substep::io::TestDefinition;
+use substep::io::format::percent;
 use substep::run::{Layout, Run, RunObserver, RunSummary, StepRow, largest};
 use substep::substructure::ErrorForceSpec;
 use substep::substructure::SubstepObserver;
@@ -101,7 +101,6 @@ pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, m
     );
     println!("    (largest |test − reference| over the run and all DOFs, relative to that DOF's peak |reference|)");
 }
-
 
 /// The series kept for the plots: a decimated table `t, u(sel), a(sel), [fc, fe, dm, uref] per
 /// coupling DOF`.

@@ -98,7 +98,14 @@ fn a_delay_that_ramps_up_is_warned_about_before_the_response_doubles_and_stop_st
     let stable_peak = u_stable.iter().fold(0.0f64, |m, (_, u)| m.max(u.abs()));
 
     let (code, ramped, u) = run("warn", &format!("{BASE}{RAMP}{warn}"), &[]);
-    assert_eq!(code, 0, "warn does not stop the run");
+    // Warn does not stop the run; the run that diverges still ends as a failure (exit 1,
+    // diverged, its error against the reference beyond 100 % or a runaway response).
+    assert!(ramped["stopped_by"].is_null(), "{}", ramped["stopped_by"]);
+    assert_eq!(code, 1, "{}", ramped["reason"]);
+    assert_eq!(
+        (&ramped["completed"], &ramped["diverged"]),
+        (&Value::Bool(false), &Value::Bool(true))
+    );
     let alarm = &ramped["stability"]["alarm"];
     let t_alarm = alarm["time"]
         .as_f64()

@@ -32,7 +32,11 @@ fn summary_statistics_agree_with_the_recorded_rows() {
     assert_eq!(h.rows(), 201, "one row per step from t = 0");
     assert_eq!(
         h.names,
-        ["t", "u1", "v1", "a1", "fc1", "fe1", "fu1", "dm1", "fei1", "uref1"]
+        // The stability indicator runs by default: its columns close the row.
+        [
+            "t", "u1", "v1", "a1", "fc1", "fe1", "fu1", "dm1", "fei1", "uref1", "eta", "margin", "k_id1", "c_id1",
+            "lag_id1"
+        ]
     );
     let t = h.column("t").unwrap();
     assert_eq!((t[0], t[1], t[200]), (0.0, 0.01, 2.0));

@@ -109,17 +109,20 @@ impl Live {
             }
         });
         // The command-line action overrides the config's (keeping its thresholds).
+        let off = args.stability == Some(crate::StabilityArg::Off);
         let configured = match (args.stability, from_config) {
             (None, c) => c,
+            (Some(crate::StabilityArg::Off), _) => None,
             (Some(a), c) => Some(StabilitySettings {
                 action: match a {
-                    crate::StabilityArg::Warn => StabilityAction::Warn,
                     crate::StabilityArg::Stop => StabilityAction::Stop,
+                    _ => StabilityAction::Warn,
                 },
                 ..c.unwrap_or_default()
             }),
         };
         let settings = match (&configured, &args.monitor) {
+            _ if off => None,
             (Some(s), _) => Some(s.clone()),
             // Offline, the page shows the indicator by default; a real-time run gets it only
             // when asked for (its writer thread shares the cores with the real-time threads).

@@ -7,6 +7,7 @@
 
 pub mod accuracy;
 pub mod amplification;
+pub mod converged;
 pub mod energy;
 pub mod frequency;
 pub mod metrics;

@@ -33,9 +33,10 @@
 //! If none is accurate enough, the most accurate feasible one, and the advice names the dominant
 //! error source and its remedy.
 
+use super::converged::converged_parameters;
 use super::frequency::{Peak, continuous_response, find_peaks};
 use super::{FrequencyResponse, StepMap};
-use crate::compensate::{PhaseLagDefinition, PhaseLagSpec, Ramp};
+use crate::compensate::{ArxPhaseLagSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use crate::error::{Error, Result};
 use crate::io::SubstructureDefinition;
 use crate::model::StructuralModel;
@@ -250,9 +251,13 @@ fn newmark_response(m: &StructuralModel, beta: f64, gamma: f64, dt: f64, output:
 }
 
 /// The phase-lag compensation of `def` re-derived for the scanned `dt`, `k_sub` and `delay`,
-/// fully ramped in.
-fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64) -> PhaseLagDefinition {
-    let lead = delay / (dt / k_sub as f64);
+/// fully ramped in: the lead of polynomial and inverse-FIR compensation is the delay in
+/// sub-steps; an ARX compensator gets the config's defaults for the setting (`k_lag` and its
+/// lead from the actuator's low-frequency lag `lag` (delay plus dynamics), velocities over a
+/// step; the form of project version 1 keeps its own).
+fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64, lag: f64) -> PhaseLagDefinition {
+    let dtau = dt / k_sub as f64;
+    let lead = delay / dtau;
     let spec = match def.spec {
         PhaseLagSpec::Polynomial {
             order, guard_factor, ..
@@ -261,9 +266,25 @@ fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64) ->
             lead,
             guard_factor,
         },
-        PhaseLagSpec::Arx(mut s) => {
-            s.k_lag = (lead.round() as usize).max(1);
-            PhaseLagSpec::Arx(s)
+        PhaseLagSpec::Arx(s) => {
+            let k_lag = ((lag / dtau).round() as usize).max(1);
+            let v1 = !s.from_current && s.smoothing == 0.0;
+            PhaseLagSpec::Arx(if v1 {
+                ArxPhaseLagSpec {
+                    k_lag,
+                    span: k_lag,
+                    lead: k_lag as f64,
+                    ..s
+                }
+            } else {
+                ArxPhaseLagSpec {
+                    k_lag,
+                    lead: (lag / dtau).max(1.0),
+                    period: k_sub,
+                    ..s
+                }
+                .with_span(k_sub)
+            })
         }
         PhaseLagSpec::InverseFir(mut s) => {
             s.lead = lead;
@@ -276,9 +297,15 @@ fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64) ->
     }
 }
 
-/// The step map of `sub` at one setting (ideal sensors, frozen phase-lag compensation).
-fn probe(sub: &SubstructureDefinition, model: &StructuralModel, dt: f64) -> Result<(StepMap, f64, usize)> {
-    let mut test = sub.build_frozen_test(model, dt)?;
+/// The step map of `sub` at one setting (ideal sensors, frozen phase-lag compensation at
+/// `parameters`, or its starting ones).
+fn probe(
+    sub: &SubstructureDefinition,
+    model: &StructuralModel,
+    dt: f64,
+    parameters: Option<&[f64]>,
+) -> Result<(StepMap, f64, usize)> {
+    let mut test = sub.build_frozen_test_at(model, dt, parameters)?;
     let map = StepMap::probe(&mut test)?;
     let rho = map.spectral_radius();
     Ok((map, rho, test.state_len()))
@@ -306,6 +333,17 @@ impl SubstructureDefinition {
     /// and quantisation do not change the linear map), phase-lag compensation (if any) frozen
     /// and fully ramped in, no safety limits, the virtual lab even if a remote site is set.
     pub fn build_frozen_test(&self, model: &StructuralModel, dt: f64) -> Result<crate::substructure::SubstructureTest> {
+        self.build_frozen_test_at(model, dt, None)
+    }
+
+    /// As [`Self::build_frozen_test`], with the phase-lag compensators frozen at `parameters`
+    /// (e.g. [`super::converged::converged_parameters`]) instead of their starting ones.
+    pub fn build_frozen_test_at(
+        &self,
+        model: &StructuralModel,
+        dt: f64,
+        parameters: Option<&[f64]>,
+    ) -> Result<crate::substructure::SubstructureTest> {
         use crate::compensate::CompensatedSite;
         use crate::substructure::{ExperimentalSubstructure, SubstepController, SubstructureTest};
         use crate::transfer::VirtualLab;
@@ -324,6 +362,9 @@ impl SubstructureDefinition {
             None => Box::new(lab),
             Some(p) => {
                 let mut site: CompensatedSite = p.wrap(Box::new(lab))?;
+                if let Some(theta) = parameters {
+                    site.set_parameters(theta);
+                }
                 site.set_frozen(true);
                 Box::new(site)
             }
@@ -347,6 +388,8 @@ pub fn plan(sub: &SubstructureDefinition, model: &StructuralModel, settings: &Pl
         .first()
         .ok_or_else(|| Error::invalid("plan", "the assembled model has no flexible mode"))?;
     let w_top = flexible.iter().copied().take(3).fold(w1, f64::max);
+    // What an adaptive compensator converges on: the structure's first modes.
+    let mode_hz: Vec<f64> = flexible.iter().take(3).map(|w| w / (2.0 * PI)).collect();
     let output = sub.coupling_dofs[0];
     let band = |dt: f64| (0.3 * w1, (1.5 * w_top).min(0.95 * PI / dt));
     let exact_h = |w: f64| continuous_response(&assembled, output, w).norm();
@@ -412,8 +455,13 @@ pub fn plan(sub: &SubstructureDefinition, model: &StructuralModel, settings: &Pl
             let mut s = sub.clone();
             s.substeps = k;
             s.actuator.delay = delay;
-            s.phase_lag = sub.phase_lag.as_ref().map(|pl| phase_lag_for(pl, dt, k, delay));
-            let (map, rho, _) = probe(&s, model, dt)?;
+            let lag = s.actuator.low_frequency_lag();
+            s.phase_lag = sub.phase_lag.as_ref().map(|pl| phase_lag_for(pl, dt, k, delay, lag));
+            let theta = match &s.phase_lag {
+                Some(pl) => converged_parameters(pl, &s.actuator, dt / k as f64, s.inner_steps, &mode_hz)?,
+                None => None,
+            };
+            let (map, rho, _) = probe(&s, model, dt, theta.as_deref())?;
             let fr = FrequencyResponse::new(&map, output)?;
             let (lo, hi) = band(dt);
             let exact = &per_dt[i].exact;
@@ -451,10 +499,11 @@ pub fn plan(sub: &SubstructureDefinition, model: &StructuralModel, settings: &Pl
         let mut s = sub.clone();
         s.substeps = pt.k_sub;
         s.actuator.delay = pt.delay;
+        let lag = s.actuator.low_frequency_lag();
         s.phase_lag = sub
             .phase_lag
             .as_ref()
-            .map(|pl| phase_lag_for(pl, pt.dt, pt.k_sub, pt.delay));
+            .map(|pl| phase_lag_for(pl, pt.dt, pt.k_sub, pt.delay, lag));
         pt.cost = cost(&s, model, pt.dt, settings.cost_steps, w1)?;
     }
     Ok(recommend(sub, model, settings, points))
@@ -569,11 +618,21 @@ fn recommend(
             "every setting is unstable: error-force compensation ([substructure.error_force] kind = \"pid\", p = 1) or phase-lag compensation usually restores stability".into(),
         );
     }
-    let phase_lag_note = sub.phase_lag.as_ref().map(|pl| {
-        format!(
+    let phase_lag_note = sub.phase_lag.as_ref().map(|pl| match pl.spec {
+        PhaseLagSpec::Arx(_) | PhaseLagSpec::InverseFir(_)
+            if !matches!(sub.actuator.dynamics, crate::transfer::Dynamics::ServoHydraulic(_)) =>
+        {
+            format!(
+                "phase-lag compensation ({}) analysed frozen at the parameters it converges to in front of this actuator \
+                 (identified on line under a multi-sine at the first modes; lead / k_lag = the scanned delay in \
+                 sub-steps), fully ramped in",
+                pl.spec.kind()
+            )
+        }
+        _ => format!(
             "phase-lag compensation ({}) analysed frozen: lead / k_lag = the scanned delay in sub-steps, starting parameters, fully ramped in",
             pl.spec.kind()
-        )
+        ),
     });
     Plan {
         points,
@@ -597,7 +656,7 @@ fn what_if_polynomial(sub: &SubstructureDefinition, model: &StructuralModel, p: 
         },
         ramp: Ramp::full(),
     };
-    s.phase_lag = Some(phase_lag_for(&base, p.dt, p.k_sub, p.delay));
+    s.phase_lag = Some(phase_lag_for(&base, p.dt, p.k_sub, p.delay, p.delay));
     let single = PlanSettings {
         dts: vec![p.dt],
         k_subs: vec![p.k_sub],

@@ -518,10 +518,16 @@ impl ArxPhaseLag {
     fn ripple(&self, target: f64) -> f64 {
         let k = self.spec.period;
         let r = self.spec.lead % k as f64;
-        if k < 2 || r < 1e-9 || self.count < k {
+        if k < 2 || r < 1e-9 || (!self.frozen && self.count < k) {
             return 0.0;
         }
-        let at = |age: isize| if age < 0 { target } else { self.targets.get(age as usize) };
+        let at = |age: isize| {
+            if age < 0 {
+                target
+            } else {
+                self.targets.get(age as usize)
+            }
+        };
         // d_{j+r−k} is age k − r − 1 (age 0 = d_{j−1}, −1 = d_j).
         let age = k as f64 - r - 1.0;
         let a0 = age.floor();
@@ -644,26 +650,42 @@ impl PhaseLagCompensator for ArxPhaseLag {
     fn parameters(&self) -> &[f64] {
         &self.theta
     }
-    /// `[d_{j−1}, low-pass stages (2), d̄ history (S), Δu history, h Δu history, v history,
-    /// ε history]`, newest first.
+    /// Also re-arms the supervisor (gain 1): the analysis judges the parameters themselves.
+    fn set_parameters(&mut self, parameters: &[f64]) {
+        if parameters.len() == self.theta.len() && parameters.iter().all(|p| p.is_finite()) {
+            self.theta.copy_from_slice(parameters);
+            self.theta_old.copy_from_slice(parameters);
+            self.est.set_theta(parameters);
+            self.supervisor.gain = 1.0;
+            self.supervisor.trip = None;
+        }
+    }
+    /// `[d_{j−1}, low-pass stages (2), d history (k + 1), d̄ history (S), Δu history,
+    /// h Δu history, v history, ε history]`, newest first.
     fn state_len(&self) -> usize {
-        3 + self.smoothed.len() + 4 * self.du.len()
+        3 + self.targets.len() + self.smoothed.len() + 4 * self.du.len()
     }
     fn write_state(&self, out: &mut [f64]) {
-        let (t, l) = (self.smoothed.len(), self.du.len());
+        let p = self.targets.len();
         out[0] = self.target_prev;
         out[1] = self.stage1;
         out[2] = self.stage2;
+        self.targets.write(&mut out[3..3 + p]);
+        let out = &mut out[p..];
+        let (t, l) = (self.smoothed.len(), self.du.len());
         self.smoothed.write(&mut out[3..3 + t]);
         for (k, h) in [&self.du, &self.applied, &self.v, &self.eps].into_iter().enumerate() {
             h.write(&mut out[3 + t + k * l..3 + t + (k + 1) * l]);
         }
     }
     fn read_state(&mut self, s: &[f64]) {
-        let (t, l) = (self.smoothed.len(), self.du.len());
+        let p = self.targets.len();
         self.target_prev = s[0];
         self.stage1 = s[1];
         self.stage2 = s[2];
+        self.targets.read(&s[3..3 + p]);
+        let s = &s[p..];
+        let (t, l) = (self.smoothed.len(), self.du.len());
         self.smoothed.read(&s[3..3 + t]);
         for (k, h) in [&mut self.du, &mut self.applied, &mut self.v, &mut self.eps]
             .into_iter()

@@ -72,6 +72,10 @@ pub trait PhaseLagCompensator: Send {
     fn parameters(&self) -> &[f64] {
         &[]
     }
+    /// Set the parameter vector (for the analysis at converged parameters, with
+    /// [`set_frozen`](Self::set_frozen)); a slice of the wrong length is ignored, as is any
+    /// slice for a compensator without parameters.
+    fn set_parameters(&mut self, _parameters: &[f64]) {}
     /// History state (for the amplification-matrix analysis with frozen parameters); the layout
     /// is fixed at construction.
     fn state_len(&self) -> usize;

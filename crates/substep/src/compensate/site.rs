@@ -66,6 +66,13 @@ impl<S: ExperimentalSubstructure + ?Sized> CompensatedSite<S> {
     pub fn compensators(&self) -> &[Box<dyn PhaseLagCompensator>] {
         &self.compensators
     }
+    /// Set every compensator's parameters (the analysis at converged parameters; see
+    /// [`PhaseLagCompensator::set_parameters`]).
+    pub fn set_parameters(&mut self, parameters: &[f64]) {
+        for c in &mut self.compensators {
+            c.set_parameters(parameters);
+        }
+    }
     /// `d − y` of the last sub-step per coupling DOF (target minus measured displacement).
     pub fn tracking_error(&self) -> &[f64] {
         &self.tracking_error

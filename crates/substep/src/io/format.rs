@@ -49,7 +49,13 @@ mod tests {
         // Never more than the digits asked for, whatever the magnitude.
         for e in -300..300 {
             let s = sig(1.234_567_890_123 * 10f64.powi(e), 12);
-            let digits = s.split('e').next().unwrap().chars().filter(char::is_ascii_digit).count();
+            let digits = s
+                .split('e')
+                .next()
+                .unwrap()
+                .chars()
+                .filter(char::is_ascii_digit)
+                .count();
             assert!(digits <= 12 + 3, "{s}");
         }
     }

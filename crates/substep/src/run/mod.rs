@@ -350,12 +350,9 @@ pub const RUNAWAY_DISPLACEMENT: f64 = 1.0e3;
 
 /// Why `u` is a runaway response, if it is.
 fn runaway(u: &[f64]) -> Option<String> {
-    let (k, v) = u
-        .iter()
-        .enumerate()
-        .find(|(_, v)| !(v.abs() <= RUNAWAY_DISPLACEMENT))?;
+    let (k, v) = u.iter().enumerate().find(|(_, v)| !(v.abs() <= RUNAWAY_DISPLACEMENT))?;
     Some(format!(
-        "runaway response: |u| = {} m on DOF {} exceeds {RUNAWAY_DISPLACEMENT} m",
+        "runaway response: |u| = {} m on DOF {} exceeded {RUNAWAY_DISPLACEMENT} m at the step before",
         crate::io::format::sig(v.abs(), 4),
         k + 1
     ))
@@ -526,9 +523,10 @@ impl<'d> Run<'d> {
                 // A runaway response: ramp the actuators down where the run can, else end here.
                 diverging = true;
                 if stop_sent || !sim.request_stop(&format!("diverged: {reason}")) {
+                    // Step i is recorded; the run ends before step i + 1 (as a non-finite step).
                     failure = Some(Error::Diverged {
-                        step: i,
-                        time: def.time(i),
+                        step: i + 1,
+                        time: def.time(i + 1),
                         reason,
                     });
                     break;

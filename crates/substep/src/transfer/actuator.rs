@@ -112,7 +112,12 @@ impl ActuatorSpec {
                 }
             }
         };
-        self.delay + if dynamics.is_finite() && dynamics > 0.0 { dynamics } else { 0.0 }
+        self.delay
+            + if dynamics.is_finite() && dynamics > 0.0 {
+                dynamics
+            } else {
+                0.0
+            }
     }
 
     pub fn validate(&self) -> Result<()> {

@@ -169,7 +169,16 @@ impl RawPhaseLag {
             "polynomial" => {
                 forbid(
                     p,
-                    &keys(&["k_lag", "n_u", "forgetting_factor", "taps", "span", "smoothing", "max_lead", "supervisor"]),
+                    &keys(&[
+                        "k_lag",
+                        "n_u",
+                        "forgetting_factor",
+                        "taps",
+                        "span",
+                        "smoothing",
+                        "max_lead",
+                        "supervisor",
+                    ]),
                     &unused,
                 )?;
                 PhaseLagSpec::Polynomial {
@@ -183,7 +192,11 @@ impl RawPhaseLag {
                 let k_lag = self.k_lag.unwrap_or_else(|| ((lag / dtau).round() as usize).max(1));
                 // Velocities over one time step (the sub-step ripple repeats every step).
                 let mut spec = ArxPhaseLagSpec::new(k_lag).with_span(self.span.unwrap_or(k_sub));
-                spec.lead = if self.k_lag.is_some() { k_lag as f64 } else { (lag / dtau).max(1.0) };
+                spec.lead = if self.k_lag.is_some() {
+                    k_lag as f64
+                } else {
+                    (lag / dtau).max(1.0)
+                };
                 spec.period = k_sub;
                 if let Some(t) = self.smoothing {
                     spec.smoothing = t;
@@ -212,7 +225,15 @@ impl RawPhaseLag {
             "inverse_fir" => {
                 forbid(
                     p,
-                    &keys(&["k_lag", "n_u", "guard_factor", "span", "smoothing", "max_lead", "supervisor"]),
+                    &keys(&[
+                        "k_lag",
+                        "n_u",
+                        "guard_factor",
+                        "span",
+                        "smoothing",
+                        "max_lead",
+                        "supervisor",
+                    ]),
                     &unused,
                 )?;
                 let mut spec = InverseFirSpec::new(lead()?);

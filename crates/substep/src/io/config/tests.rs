@@ -436,7 +436,8 @@ fn phase_lag_kinds_and_defaults() {
             1,
         )
     };
-    // Δτ = 2.5 ms, delay 5 ms: default lead 2 sub-steps, default k_lag 2.
+    // Δτ = 2.5 ms, delay 5 ms: default lead 2 sub-steps; the ARX compensator's k_lag is the
+    // actuator's low-frequency lag, delay + 2ζ/ω (50 Hz, ζ = 0.7: 4.456 ms), 3.78 → 4 sub-steps.
     let def = parse(&delayed("kind = \"polynomial\"")).unwrap();
     let pl = def.substructure.as_ref().unwrap().phase_lag.unwrap();
     assert_eq!(
@@ -454,7 +455,14 @@ fn phase_lag_kinds_and_defaults() {
     .unwrap();
     let pl = def.substructure.as_ref().unwrap().phase_lag.unwrap();
     match pl.spec {
-        PhaseLagSpec::Arx(a) => assert_eq!((a.k_lag, a.n_u, a.lambda), (2, 3, 0.99)),
+        PhaseLagSpec::Arx(a) => {
+            assert_eq!((a.k_lag, a.n_u, a.lambda), (4, 3, 0.99));
+            let lag = 0.005 + 2.0 * 0.7 / (2.0 * std::f64::consts::PI * 50.0);
+            assert!((a.lead - lag / 0.0025).abs() < 1e-12, "{}", a.lead);
+            // Velocities over one step (k_sub = 4), smoothed over half of it, the step's ripple,
+            // the supervisor's bound 4 k_lag + 2 span.
+            assert_eq!((a.span, a.smoothing, a.period, a.max_lead), (4, 2.0, 4, Some(24.0)));
+        }
         other => panic!("{other:?}"),
     }
     assert_eq!(pl.ramp, Ramp::new(40, 80).with_fade_out(360, 20));
@@ -495,7 +503,27 @@ fn phase_lag_bad_values_name_the_key() {
             "forgetting_factor: must be in (0, 1]",
         ),
         ("kind = \"arx\"\nk_lag = 0", "k_lag: must be at least 1"),
-        ("kind = \"arx\"\nk_lag = 100000", "k_lag: k_lag larger than the history"),
+        (
+            "kind = \"arx\"\nk_lag = 100000",
+            "k_lag: k_lag and span larger than the history",
+        ),
+        ("kind = \"arx\"\nspan = 0", "span: must be at least 1 sub-step"),
+        (
+            "kind = \"arx\"\nsmoothing = -1.0",
+            "smoothing: must be in 0..=16384 sub-steps",
+        ),
+        (
+            "kind = \"arx\"\nmax_lead = 0.0",
+            "max_lead: must be a finite number > 0",
+        ),
+        (
+            "kind = \"arx\"\nsupervisor = false\nmax_lead = 10.0",
+            "max_lead: is not used with supervisor = false",
+        ),
+        (
+            "kind = \"polynomial\"\nspan = 4",
+            "span: is not used with kind = \"polynomial\"",
+        ),
         ("kind = \"arx\"\norder = 2", "order: is not used with kind = \"arx\""),
         (
             "kind = \"arx\"\nguard_factor = 0.0",
