@@ -277,10 +277,11 @@ fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64, la
                     ..s
                 }
             } else {
+                let d = ArxPhaseLagSpec::for_substeps(lag / dtau, k_sub);
                 ArxPhaseLagSpec {
-                    k_lag,
-                    lead: (lag / dtau).max(1.0),
-                    period: k_sub,
+                    k_lag: d.k_lag,
+                    lead: d.lead,
+                    period: d.period,
                     ..s
                 }
                 .with_span(k_sub)

@@ -138,6 +138,20 @@ impl ArxPhaseLagSpec {
         .with_span(k_lag)
     }
 
+    /// The defaults inside the sub-step algorithm (what `[substructure.phase_lag] kind = "arx"`
+    /// gives): `lag` the actuator's low-frequency lag in sub-steps (delay plus dynamics,
+    /// [`crate::transfer::ActuatorSpec::low_frequency_lag`]` / Δτ`), `k_sub` sub-steps per step:
+    /// `k_lag = round(lag)` (at least 1), the prior's lead `lag` (at least 1), velocities over one
+    /// step (`span = k_sub`, the step's ripple cancels in them), the ripple's period `k_sub`.
+    pub fn for_substeps(lag: f64, k_sub: usize) -> Self {
+        let k_lag = (lag.round() as usize).max(1);
+        Self {
+            lead: lag.max(1.0),
+            period: k_sub,
+            ..Self::new(k_lag).with_span(k_sub)
+        }
+    }
+
     /// Set the velocity span `S` and the defaults that follow it: `smoothing = S/2`,
     /// `max_lead = 4 k_lag + S`.
     pub fn with_span(mut self, span: usize) -> Self {

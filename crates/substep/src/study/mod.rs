@@ -81,7 +81,7 @@ pub struct Row {
 pub type Runner = dyn Fn(&TestDefinition) -> Result<serde_json::Value> + Sync;
 
 /// Records nothing: a study keeps only the summary of each run.
-struct SummaryOnly;
+pub(crate) struct SummaryOnly;
 
 impl crate::substructure::SubstepObserver for SummaryOnly {}
 

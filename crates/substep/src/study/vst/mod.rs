@@ -26,6 +26,7 @@
 //! assert!(study.sigma > 0.0 && study.ref_peak_u > 0.0);
 //! ```
 
+pub mod grid;
 mod run;
 
 pub use run::{RunResult, Series, Study, acceptance, run_study};
@@ -129,7 +130,8 @@ fn arx_ef(order: usize) -> ErrorForceSpec {
 pub fn methods(s: &VstSettings) -> Vec<Method> {
     let lead = s.delay_substeps();
     let total_lag = (s.delay + 2.0 * ACTUATOR_ZETA / (2.0 * std::f64::consts::PI * ACTUATOR_HZ)) / s.dtau();
-    let arx_pl = PhaseLagSpec::Arx(ArxPhaseLagSpec::new((lead.round() as usize).max(1)));
+    // What `[substructure.phase_lag] kind = "arx"` gives for this actuator.
+    let arx_pl = PhaseLagSpec::Arx(ArxPhaseLagSpec::for_substeps(total_lag, s.k_sub));
     let pid = ErrorForceSpec::Pid { p: 1.0, i: 0.0, d: 0.0 };
     let poly = |order, lead| PhaseLagSpec::Polynomial {
         order,
