@@ -146,6 +146,10 @@ pub struct Plan {
     pub advice: Vec<String>,
     /// How phase-lag compensation was analysed (`None` without one).
     pub phase_lag_note: Option<String>,
+    /// When no scanned setting is usable with the configured phase-lag compensation: the
+    /// recommended setting with `[substructure.phase_lag] kind = "arx"` at its defaults (the
+    /// robust identification of docs/theory.md §6.4), if that has one.
+    pub alternative: Option<PlanPoint>,
 }
 
 /// Peaks `(rad/s, |H|)` of `h(ω)` on `[w_lo, w_hi]`.
@@ -507,7 +511,38 @@ pub fn plan(sub: &SubstructureDefinition, model: &StructuralModel, settings: &Pl
             .map(|pl| phase_lag_for(pl, pt.dt, pt.k_sub, pt.delay, lag));
         pt.cost = cost(&s, model, pt.dt, settings.cost_steps, w1)?;
     }
-    Ok(recommend(sub, model, settings, points))
+    let mut result = recommend(sub, model, settings, points);
+    // Nothing usable with the configured compensator: is the default ARX compensation?
+    let default_arx = PhaseLagSpec::Arx(ArxPhaseLagSpec::for_substeps(1.0, 1));
+    // The configured compensator is the default one if both re-derive to the same at a setting.
+    let same = |a: &PhaseLagDefinition, b: PhaseLagSpec| {
+        let b = PhaseLagDefinition { spec: b, ramp: a.ramp };
+        phase_lag_for(a, 0.01, 2, 0.01, 0.01).spec == phase_lag_for(&b, 0.01, 2, 0.01, 0.01).spec
+    };
+    if result.recommended.is_none()
+        && let Some(pl) = &sub.phase_lag
+        && !same(pl, default_arx)
+    {
+        let mut alt = sub.clone();
+        alt.phase_lag = Some(PhaseLagDefinition {
+            spec: default_arx,
+            ramp: pl.ramp,
+        });
+        let other = plan(&alt, model, settings)?;
+        if let Some(i) = other.recommended {
+            let p = other.points[i].clone();
+            result.advice.push(format!(
+                "with [substructure.phase_lag] kind = \"arx\" at its defaults (the robust identification) instead: \
+                 dt = {} s, k_sub = {} is stable (1 − ρ = {:.2e}) with a peak error of {}",
+                p.dt,
+                p.k_sub,
+                p.margin(),
+                percent(p.error)
+            ));
+            result.alternative = Some(p);
+        }
+    }
+    Ok(result)
 }
 
 fn percent(x: f64) -> String {
@@ -602,12 +637,38 @@ fn recommend(
                     "remedy: phase-lag compensation, [substructure.phase_lag] kind = \"polynomial\" (lead = the actuator delay){what_if}"
                 )
             }
+            ErrorSource::Delay if matches!(sub.phase_lag.as_ref().map(|pl| pl.spec), Some(PhaseLagSpec::Arx(_))) => format!(
+                "remedy: the ARX compensation at the parameters it converges to still leaves {}; a smaller dt (the \
+                 lead it must predict shrinks with the step) or a faster actuator",
+                percent(p.error_delay)
+            ),
             ErrorSource::Delay => format!(
                 "remedy: the frozen {} compensation still leaves {}; check the lead against the measured delay (summary.json tracking.delay_s) or try kind = \"arx\"",
                 sub.phase_lag.as_ref().map_or("", |pl| pl.spec.kind()),
                 percent(p.error_delay)
             ),
-            ErrorSource::SubStepping => "remedy: more sub-steps (a larger k_sub) at this dt".to_string(),
+            ErrorSource::SubStepping => {
+                // More sub-steps only where the table shows the error falling with k_sub.
+                let better = points
+                    .iter()
+                    .filter(|q| q.dt == p.dt && q.delay == p.delay && q.k_sub > p.k_sub && stable(q))
+                    .min_by(|a, b| a.error.total_cmp(&b.error))
+                    .filter(|q| q.error < p.error);
+                match better {
+                    Some(q) => format!(
+                        "remedy: more sub-steps at this dt: k_sub = {} gives a peak error of {}",
+                        q.k_sub,
+                        percent(q.error)
+                    ),
+                    None if has_ef => {
+                        "remedy: not more sub-steps (at this dt the error does not fall with k_sub in the table): a smaller dt"
+                            .to_string()
+                    }
+                    None => "remedy: not more sub-steps (at this dt the error does not fall with k_sub in the table): \
+                             a smaller dt, or error-force compensation ([substructure.error_force] kind = \"pid\", p = 1)"
+                        .to_string(),
+                }
+            }
             ErrorSource::TimeStep => {
                 "remedy: a smaller dt (the Newmark integration error itself dominates)".to_string()
             }
@@ -641,6 +702,7 @@ fn recommend(
         meets_tolerance: meets,
         advice,
         phase_lag_note,
+        alternative: None,
     }
 }
 
