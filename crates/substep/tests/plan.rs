@@ -158,7 +158,9 @@ fn plan_predicts_the_instability_of_the_arx_compensation_as_it_stood() {
     // As it stood.
     let mut old = sub.clone();
     let pl = old.phase_lag.as_mut().unwrap();
-    let PhaseLagSpec::Arx(a) = &mut pl.spec else { panic!("arx") };
+    let PhaseLagSpec::Arx(a) = &mut pl.spec else {
+        panic!("arx")
+    };
     *a = a.project_v1();
     let then = plan(&old, &model, &at_k5).unwrap();
     let q = &then.points[0];
@@ -174,12 +176,18 @@ fn plan_predicts_the_instability_of_the_arx_compensation_as_it_stood() {
     };
     let then = plan(&old, &model, &scan).unwrap();
     for pt in &then.points {
-        println!("  as it stood, k_sub {}: rho {:.6}, error {:.4}", pt.k_sub, pt.rho, pt.error);
+        println!(
+            "  as it stood, k_sub {}: rho {:.6}, error {:.4}",
+            pt.k_sub, pt.rho, pt.error
+        );
     }
     // Every scanned setting is unstable with it (the open-loop convergence is conservative:
     // the runs at k_sub = 1 and 2 stayed bounded); the plan recommends the default compensator.
     assert!(then.points.iter().all(|pt| pt.rho > 1.0));
-    let r = then.alternative.as_ref().expect("a stable setting with the default compensator");
+    let r = then
+        .alternative
+        .as_ref()
+        .expect("a stable setting with the default compensator");
     println!("  advice: {}", then.advice.join("\n          "));
     assert!(r.rho < 1.0 - 1e-3, "{r:?}");
     assert!(then.advice.iter().any(|a| a.contains("kind = \"arx\" at its defaults")));

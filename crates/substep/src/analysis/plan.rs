@@ -637,11 +637,13 @@ fn recommend(
                     "remedy: phase-lag compensation, [substructure.phase_lag] kind = \"polynomial\" (lead = the actuator delay){what_if}"
                 )
             }
-            ErrorSource::Delay if matches!(sub.phase_lag.as_ref().map(|pl| pl.spec), Some(PhaseLagSpec::Arx(_))) => format!(
-                "remedy: the ARX compensation at the parameters it converges to still leaves {}; a smaller dt (the \
+            ErrorSource::Delay if matches!(sub.phase_lag.as_ref().map(|pl| pl.spec), Some(PhaseLagSpec::Arx(_))) => {
+                format!(
+                    "remedy: the ARX compensation at the parameters it converges to still leaves {}; a smaller dt (the \
                  lead it must predict shrinks with the step) or a faster actuator",
-                percent(p.error_delay)
-            ),
+                    percent(p.error_delay)
+                )
+            }
             ErrorSource::Delay => format!(
                 "remedy: the frozen {} compensation still leaves {}; check the lead against the measured delay (summary.json tracking.delay_s) or try kind = \"arx\"",
                 sub.phase_lag.as_ref().map_or("", |pl| pl.spec.kind()),

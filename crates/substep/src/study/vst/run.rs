@@ -34,7 +34,11 @@ pub struct Series {
 #[derive(Debug, Clone)]
 pub struct RunResult {
     pub method: Method,
+    /// Ran to the end without diverging.
     pub completed: bool,
+    /// Diverged: a non-finite or runaway response, or a displacement error beyond
+    /// [`crate::run::DIVERGED_ERROR`] of the reference peak (as `substep run` judges a run).
+    pub diverged: bool,
     /// Normalised by the reference peaks: RMS and peak error of the top-floor displacement and
     /// of the (noise-free) coupling force; the same for the measured force.
     pub disp_rms: f64,
@@ -199,6 +203,10 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
         (rms(&d) / peak, max / peak)
     };
     let (disp_rms, disp_peak) = err(&ser.u, &reference.u);
+    let diverged = !completed
+        || !(disp_peak <= crate::run::DIVERGED_ERROR)
+        || ser.u.iter().any(|u| !(u.abs() <= crate::run::RUNAWAY_DISPLACEMENT));
+    let completed = completed && !diverged;
     let (force_rms, force_peak) = err(&ser.f_true, &reference.f_true);
     let (force_meas_rms, _) = err(&ser.f_meas, &reference.f_true);
     let from = ((s.settle / s.dt).ceil() as usize).min(n);
@@ -215,6 +223,7 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
     Ok(RunResult {
         method: *method,
         completed,
+        diverged,
         disp_rms,
         disp_peak,
         force_rms,
