@@ -11,11 +11,13 @@ fn quick_study_meets_the_acceptance_lines() {
     assert!(st.runs.iter().all(|r| r.completed && r.warnings.is_empty()));
     let (none, pl, both, pid) = (st.run("none"), st.run("pl_arx"), st.run("both"), st.run("pid"));
     // 1. Phase-lag identification: ≥ 5× less tracking error than none after ramp-in, and
-    //    better than polynomial extrapolation with the lead = the delay (the default). Against
-    //    a polynomial whose lead is tuned to the actuator's total lag it tracks worse but gives
-    //    the smaller coupling-force error (see docs/vst.md).
+    //    better than polynomial extrapolation with the lead = the delay (the default), and than
+    //    a polynomial whose lead is tuned to the actuator's total lag, in tracking and in the
+    //    coupling force (see docs/vst.md; the tuned polynomial tracked better before the robust
+    //    parameterisation of docs/theory.md §6.4).
     assert!(none.tracking_rms > 5.0 * pl.tracking_rms);
     assert!(pl.tracking_rms < st.run("poly_delay").tracking_rms);
+    assert!(pl.tracking_rms < st.run("poly_lag").tracking_rms);
     assert!(pl.force_rms < st.run("poly_lag").force_rms);
     // 2. Error-force estimation: lower residual error force than PID P = 1, and closer to its
     //    ideal value, for every order.
@@ -45,7 +47,7 @@ fn quick_study_meets_the_acceptance_lines() {
         assert!(both.force_peak < r.force_peak, "{}", r.method.key);
     }
     let checks = acceptance(&st);
-    assert_eq!(checks.iter().filter(|(_, ok)| !ok).count(), 1, "{checks:?}");
+    assert!(checks.iter().all(|(_, ok)| *ok), "{checks:?}");
     // 4. The on-line stability indicator (default settings, fed every step of every method)
     //    raises no alarm on the study: every method is stable. Both views must have run.
     let (mut worst_eta, mut worst_margin) = (f64::NEG_INFINITY, f64::INFINITY);

@@ -36,7 +36,7 @@
 //! Measured reduction of the RMS tracking error `|d − y|` (1 Hz sine, Δτ = 1 ms, 10 ms delay,
 //! `tests/compensate.rs`): polynomial p = 3 ≈ 56 000× (unaffected by displacement noise, which
 //! it never sees, but 0.2× — worse than none — when 2 µm of noise rides on the command);
-//! [`ArxPhaseLag`] ≈ 1500× noise-free, ≈ 160× with 1 % displacement noise, ≈ 60× with the
+//! [`ArxPhaseLag`] ≈ 690× noise-free, ≈ 170× with 1 % displacement noise, ≈ 110× with the
 //! command noise as well; [`InverseFir`] ≈ 1150× / 13×.
 
 mod arx_lag;
