@@ -162,6 +162,58 @@ def test_a_stopped_run_raises_run_error_with_the_cli_message(cli, root, tmp_path
     assert r2.error == str(e.value)
 
 
+DAMPER = """
+[structure]
+mass = [[2.0e5, 0.0, 0.0], [0.0, 2.0e5, 0.0], [0.0, 0.0, 2.0e5]]
+stiffness = [[4.0e8, -2.0e8, 0.0], [-2.0e8, 4.0e8, -2.0e8], [0.0, -2.0e8, 2.0e8]]
+[structure.rayleigh]
+zeta = 0.02
+[ground_motion]
+generator = "sine_sweep"
+amplitude = 2.0
+f0 = 0.5
+f1 = 5.0
+duration = 8.0
+[integrator]
+scheme = "average_acceleration"
+dt = 0.01
+[substructure]
+coupling_dofs = [1]
+substeps = 10
+[[substructure.specimen]]
+kind = "linear_sdof"
+dof = 1
+stiffness = 0.0
+damping = DAMPING
+[substructure.actuator]
+kind = "ideal"
+delay = 0.01
+[substructure.error_force]
+kind = "pid"
+p = 1.0
+"""
+
+
+def test_a_diverging_run_raises_run_error_and_says_diverged(cli, tmp_path, monkeypatch):
+    # 5 MN s/m at k_sub = 10: G_cc c / dtau > 1/2, the sub-step iteration itself diverges.
+    (tmp_path / "div.toml").write_text(DAMPER.replace("DAMPING", "5.0e6"))
+    monkeypatch.chdir(tmp_path)
+    p = run_cli(cli, "run", "div.toml", "--out", "out", "--quiet", "--no-plots", cwd=tmp_path)
+    assert p.returncode == 1
+    cli_summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert cli_summary["diverged"] is True and cli_summary["completed"] is False
+    with pytest.raises(substep.RunError, match="diverged"):
+        substep.run("div.toml")
+    r = substep.run("div.toml", raise_on_stop=False)
+    assert r.summary["diverged"] is True and not r.completed
+    assert comparable(r.summary) == comparable(cli_summary)
+    # The same test with half the damper is stable and says so.
+    (tmp_path / "ok.toml").write_text(DAMPER.replace("DAMPING", "2.5e6"))
+    ok = substep.run("ok.toml")
+    assert ok.completed and ok.summary["diverged"] is False
+    assert ok.summary["reference"]["max_displacement_error"] < 1.0
+
+
 def test_the_stability_indicator_columns_and_summary_equal_the_cli(cli, root, tmp_path, monkeypatch):
     text = (root / "examples" / "default.toml").read_text()
     text += '\n[substructure.limits]\nstability = "warn"\n'

@@ -124,6 +124,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let mut peak_f = (0.0_f64, 0usize, 0.0_f64);
     let coupling = sub.coupling_dofs.clone();
     let mut warnings: Vec<String> = Vec::new();
+    let mut runaway: Option<String> = None;
     let sink = |r: &substep::realtime::StepRecordOwned| {
         let ag = accel.get(r.step).copied().unwrap_or(0.0);
         if let Some(w) = live.record_realtime(r, ag, &coupling) {
@@ -131,6 +132,23 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         }
         if let Some(reason) = live.take_stop() {
             stop.request(reason);
+        }
+        // A runaway response stops the test with the controlled ramp-down (as offline).
+        if runaway.is_none()
+            && let Some((k, x)) =
+                r.u.iter()
+                    .enumerate()
+                    .find(|(_, x)| !(x.abs() <= substep::run::RUNAWAY_DISPLACEMENT))
+        {
+            let reason = format!(
+                "diverged: runaway response: |u| = {} m on DOF {} exceeded {} m at step {}",
+                substep::io::format::sig(x.abs(), 4),
+                k + 1,
+                substep::run::RUNAWAY_DISPLACEMENT,
+                r.step
+            );
+            stop.request(reason.clone());
+            runaway = Some(reason);
         }
         for (k, &x) in r.u.iter().enumerate() {
             if x.abs() > peak_u.0 {
@@ -220,6 +238,40 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     outputs.push(summary_path.clone());
     let rt = report_json(&report);
     write_json(&realtime_path, &rt)?;
+    // The largest errors against the reference (the offline summary's keys; its per-DOF
+    // details are in the offline run's summary).
+    let max = |t: &substep::run::ErrorTracker, n: usize| {
+        (0..n)
+            .map(|k| t.stats(k).peak_error)
+            .filter(|x| x.is_finite())
+            .fold(0.0, f64::max)
+    };
+    let reference_errors = reference.as_ref().map(|r| {
+        (
+            r.scheme(),
+            r.n_dofs(),
+            max(&err_u, def.model.n_dofs()),
+            max(&err_f, n_c),
+        )
+    });
+    // As offline: an error against the reference beyond 100 % is a diverged run.
+    let mut failure = failure;
+    if failure.is_none()
+        && let Some((_, _, u, _)) = reference_errors
+        && !(u <= substep::run::DIVERGED_ERROR)
+    {
+        failure = Some(substep::Error::Diverged {
+            step: report.steps,
+            time: report.steps as f64 * def.integrator.dt,
+            reason: format!(
+                "the error against the reference reached {} of its peak (more than {} %): the test diverged \
+                 from the structure it simulates",
+                substep::io::format::percent(u),
+                100.0 * substep::run::DIVERGED_ERROR
+            ),
+        });
+    }
+    let diverged = matches!(failure, Some(substep::Error::Diverged { .. })) || (runaway.is_some() && failure.is_some());
     let (stopped_at_step, reason) = match &failure {
         Some(substep::Error::Diverged { step, reason, .. } | substep::Error::Stopped { step, reason, .. }) => {
             (Some(*step), Some(reason.clone()))
@@ -238,6 +290,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         "dt": def.integrator.dt,
         "steps": def.integrator.steps,
         "completed": failure.is_none(),
+        "diverged": diverged,
         "steps_done": report.steps,
         "stopped_at_step": stopped_at_step,
         "reason": reason,
@@ -252,22 +305,6 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let (Some(s), Some(obj)) = (stopped_by, summary.as_object_mut()) {
         obj.insert("stopped_by".into(), s.into());
     }
-    // The largest errors against the reference (the offline summary's keys; its per-DOF
-    // details are in the offline run's summary).
-    let max = |t: &substep::run::ErrorTracker, n: usize| {
-        (0..n)
-            .map(|k| t.stats(k).peak_error)
-            .filter(|x| x.is_finite())
-            .fold(0.0, f64::max)
-    };
-    let reference_errors = reference.as_ref().map(|r| {
-        (
-            r.scheme(),
-            r.n_dofs(),
-            max(&err_u, def.model.n_dofs()),
-            max(&err_f, n_c),
-        )
-    });
     if let (Some((scheme, n_dofs, u, f)), Some(obj)) = (reference_errors, summary.as_object_mut()) {
         obj.insert(
             "reference".into(),

@@ -159,3 +159,61 @@ fn container_formats_need_the_feature_or_work() {
         "{e}"
     );
 }
+
+/// A study's run that diverges (here: the sub-step iteration with a 5 MN·s/m damper at
+/// k_sub = 10) has `completed = false` and says why in `error`; the stable one does not.
+#[test]
+fn a_diverging_run_is_not_completed_in_study_csv() {
+    let dir = temp_dir("diverging");
+    std::fs::write(
+        dir.join("base.toml"),
+        r#"[structure]
+mass = [[2.0e5, 0.0, 0.0], [0.0, 2.0e5, 0.0], [0.0, 0.0, 2.0e5]]
+stiffness = [[4.0e8, -2.0e8, 0.0], [-2.0e8, 4.0e8, -2.0e8], [0.0, -2.0e8, 2.0e8]]
+[structure.rayleigh]
+zeta = 0.02
+[ground_motion]
+generator = "sine_sweep"
+amplitude = 2.0
+f0 = 0.5
+f1 = 5.0
+duration = 8.0
+[integrator]
+scheme = "average_acceleration"
+dt = 0.01
+[substructure]
+coupling_dofs = [1]
+substeps = 10
+[[substructure.specimen]]
+kind = "linear_sdof"
+dof = 1
+stiffness = 0.0
+damping = 2.5e6
+[substructure.actuator]
+kind = "ideal"
+delay = 0.01
+[substructure.error_force]
+kind = "pid"
+p = 1.0
+"#,
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("s.toml"),
+        "base = \"base.toml\"\nmetrics = [\"max_displacement_error\"]\n[grid]\n\"substructure.specimen.0.damping\" = [2.5e6, 5.0e6]\n",
+    )
+    .unwrap();
+    let out = substep(&dir, &["study", "s.toml", "--out", "o", "--no-plots"]);
+    let stdout = text(&out.stdout);
+    assert!(
+        stdout.contains("1 of 2 runs did not complete"),
+        "{stdout}{}",
+        text(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(dir.join("o/study.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.splitn(5, ',').collect()).collect();
+    assert_eq!(rows[1][2], "true");
+    assert!(rows[1][3].parse::<f64>().unwrap() < 1.0);
+    assert_eq!(rows[2][2], "false");
+    assert!(rows[2][4].contains("runaway response"), "{}", rows[2][4]);
+}

@@ -105,3 +105,24 @@ fn methods_are_distinct_and_complete() {
     }
     assert_eq!(m.iter().filter(|m| m.series).count(), ORDERS.len());
 }
+
+/// A VST run that diverges is flagged (not completed, diverged), as `substep run` judges a run:
+/// with a 0.3 s actuator delay the uncompensated test goes unstable.
+#[test]
+fn a_diverging_vst_run_is_flagged() {
+    let settings = VstSettings {
+        duration: 5.0,
+        settle: 1.0,
+        ..VstSettings::quick(0.3)
+    };
+    let st = run_study(&settings).unwrap();
+    let none = st.run("none");
+    println!(
+        "none: completed {}, diverged {}, u peak error {:e}",
+        none.completed, none.diverged, none.disp_peak
+    );
+    assert!(none.diverged && !none.completed, "u peak error {}", none.disp_peak);
+    for r in &st.runs {
+        assert_eq!(r.diverged, !(r.disp_peak <= 1.0) || !r.completed, "{}", r.method.key);
+    }
+}

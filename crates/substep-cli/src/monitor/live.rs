@@ -129,7 +129,9 @@ impl Live {
             (None, Some(_)) if n_c > 0 && !realtime => Some(StabilitySettings::default()),
             _ => None,
         };
-        let wants_ramp = args.monitor.is_some() || settings.as_ref().is_some_and(|s| s.action == StabilityAction::Stop);
+        // A real-time run always can ramp down: a response that runs away stops with the ramp.
+        let wants_ramp =
+            realtime || args.monitor.is_some() || settings.as_ref().is_some_and(|s| s.action == StabilityAction::Stop);
         if let Some(sub) = &mut def.substructure
             && wants_ramp
             && sub.limits.is_none()
