@@ -138,7 +138,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             && let Some((k, x)) =
                 r.u.iter()
                     .enumerate()
-                    .find(|(_, x)| !(x.abs() <= substep::run::RUNAWAY_DISPLACEMENT))
+                    .find(|(_, x)| substep::run::exceeds(x.abs(), substep::run::RUNAWAY_DISPLACEMENT))
         {
             let reason = format!(
                 "diverged: runaway response: |u| = {} m on DOF {} exceeded {} m at step {}",
@@ -258,7 +258,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let mut failure = failure;
     if failure.is_none()
         && let Some((_, _, u, _)) = reference_errors
-        && !(u <= substep::run::DIVERGED_ERROR)
+        && substep::run::exceeds(u, substep::run::DIVERGED_ERROR)
     {
         failure = Some(substep::Error::Diverged {
             step: report.steps,

@@ -471,7 +471,7 @@ pub fn grid_markdown(grids: &[(GridActuator, Vec<GridRow>)]) -> String {
         for r in rows {
             let note = if !r.stable_without() {
                 "uncompensated unstable (both runs end as diverged)".to_string()
-            } else if !(r.error_arx <= 1.2 * r.error_none) {
+            } else if substep::run::exceeds(r.error_arx, 1.2 * r.error_none) {
                 "✗ > 1.2 ×".to_string()
             } else if r.backed_off {
                 "supervisor backed off".to_string()

@@ -35,7 +35,7 @@ fn no_silent_divergence(rows: &[GridRow]) {
             (r.error_none, r.completed_none, r.diverged_none, "uncompensated"),
             (r.error_arx, r.completed_arx, r.diverged_arx, "ARX"),
         ] {
-            if !(err <= 1.0) {
+            if substep::run::exceeds(err, 1.0) {
                 assert!(
                     diverged && !completed,
                     "{what} {} MN·s/m, {} ms, k_sub {}: error {err:e} but diverged = {diverged}, completed = {completed}",

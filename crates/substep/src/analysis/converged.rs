@@ -18,7 +18,7 @@ use crate::error::Result;
 use crate::transfer::{ActuatorSpec, Dynamics};
 use std::f64::consts::PI;
 
-/// Longest convergence run [sub-steps].
+/// Longest convergence run \[sub-steps\].
 const MAX_SUBSTEPS: usize = 300_000;
 
 /// The parameters the compensator of `def` converges to in front of `actuator` (sub-steps of

@@ -84,7 +84,7 @@ pub struct ArxPhaseLagSpec {
     /// between two lags of the regressor (≥ 1; default `k_lag`; test definitions: one time step,
     /// `k_sub`).
     pub span: usize,
-    /// `T_s`: time constant [sub-steps] of each of the two first-order low-pass stages that give
+    /// `T_s`: time constant \[sub-steps\] of each of the two first-order low-pass stages that give
     /// the smoothed target `d̄` the velocities are taken from (≥ 0; 0: `d̄ = d`; default
     /// `span / 2`).
     pub smoothing: f64,
@@ -96,13 +96,13 @@ pub struct ArxPhaseLagSpec {
     /// [`ArxPhaseLag::prior`]) instead of `θ = 0` (default `true`; only with
     /// [`Regressor::Velocity`]).
     pub prior: bool,
-    /// Supervisor bound `ℓ_max` [sub-steps] on the lead the correction amounts to (see
+    /// Supervisor bound `ℓ_max` \[sub-steps\] on the lead the correction amounts to (see
     /// [`ArxPhaseLag`]); `None`: no supervisor. Default `4 k_lag + span`.
     pub max_lead: Option<f64>,
     /// Updates are skipped while the normalised regressor is shorter than this (the excitation
     /// is too low to identify anything; default 0.01).
     pub min_excitation: f64,
-    /// The expected lead [sub-steps], fractional (default `k_lag`): the prior's lead and, with
+    /// The expected lead \[sub-steps\], fractional (default `k_lag`): the prior's lead and, with
     /// `period`, the ripple's.
     pub lead: f64,
     /// Sub-steps per time step `k` when the commands come from the sub-step algorithm, whose
@@ -517,7 +517,7 @@ impl ArxPhaseLag {
     pub fn covariance_trace(&self) -> f64 {
         self.est.covariance_trace()
     }
-    /// The largest lead [sub-steps] the supervisor has seen (0 before the command moved).
+    /// The largest lead \[sub-steps\] the supervisor has seen (0 before the command moved).
     pub fn peak_lead(&self) -> f64 {
         self.supervisor.lead_peak
     }

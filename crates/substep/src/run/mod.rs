@@ -348,9 +348,18 @@ pub const DIVERGED_ERROR: f64 = 1.0;
 /// kilometre): the run ends as diverged at once (after the controlled ramp-down where it has one).
 pub const RUNAWAY_DISPLACEMENT: f64 = 1.0e3;
 
+/// `value` is beyond `bound` or not a number (a NaN error or response counts as beyond).
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+pub fn exceeds(value: f64, bound: f64) -> bool {
+    !(value <= bound)
+}
+
 /// Why `u` is a runaway response, if it is.
 fn runaway(u: &[f64]) -> Option<String> {
-    let (k, v) = u.iter().enumerate().find(|(_, v)| !(v.abs() <= RUNAWAY_DISPLACEMENT))?;
+    let (k, v) = u
+        .iter()
+        .enumerate()
+        .find(|(_, v)| exceeds(v.abs(), RUNAWAY_DISPLACEMENT))?;
     Some(format!(
         "runaway response: |u| = {} m on DOF {} exceeded {RUNAWAY_DISPLACEMENT} m at the step before",
         crate::io::format::sig(v.abs(), 4),
@@ -605,7 +614,7 @@ impl<'d> Run<'d> {
         let reference_summary = reference.as_ref().map(|r| recorder.reference_summary(r));
         if failure.is_none()
             && let Some(r) = &reference_summary
-            && !(r.max_displacement_error <= DIVERGED_ERROR)
+            && exceeds(r.max_displacement_error, DIVERGED_ERROR)
         {
             failure = Some(Error::Diverged {
                 step: done,

@@ -37,12 +37,14 @@ impl RawLimits {
                 || self.stability_window.is_some()
                 || self.stability_refresh.is_some()
             {
-                if self.stability_off() {
-                    return Err(Error::invalid(
-                        "substructure.limits.stability",
-                        "the stability_* thresholds are not used with stability = \"off\"",
-                    ));
-                }
+                return Err(Error::invalid(
+                    "substructure.limits.stability",
+                    if self.stability_off() {
+                        "the stability_* thresholds are not used with stability = \"off\""
+                    } else {
+                        "the stability_* thresholds need stability = \"warn\" or \"stop\""
+                    },
+                ));
             }
             return Ok(None);
         };

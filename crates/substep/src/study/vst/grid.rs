@@ -14,12 +14,13 @@
 use crate::Result;
 use crate::benchmark::rths::GroundRecord;
 use crate::io::TestDefinition;
+use crate::run::exceeds;
 use rayon::prelude::*;
 use std::path::Path;
 
-/// Time step of every run [s].
+/// Time step of every run \[s\].
 pub const GRID_DT: f64 = 0.01;
-/// Length of every run [s].
+/// Length of every run \[s\].
 pub const GRID_DURATION: f64 = 30.0;
 
 /// The actuator in front of the delay.
@@ -27,7 +28,7 @@ pub const GRID_DURATION: f64 = 30.0;
 pub enum GridActuator {
     /// `kind = "ideal"` with the delay (the specimen follows the delayed command linearly).
     PureDelay,
-    /// `kind = "second_order"`, `frequency` [Hz], `zeta`, with the delay.
+    /// `kind = "second_order"`, `frequency` \[Hz\], `zeta`, with the delay.
     SecondOrder { frequency: f64, zeta: f64 },
 }
 
@@ -45,9 +46,9 @@ impl GridActuator {
 /// What the grid spans.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridSettings {
-    /// Damper coefficients [N·s/m].
+    /// Damper coefficients \[N·s/m\].
     pub dampers: Vec<f64>,
-    /// Actuator delays [s].
+    /// Actuator delays \[s\].
     pub delays: Vec<f64>,
     pub k_subs: Vec<usize>,
     pub actuator: GridActuator,
@@ -239,7 +240,10 @@ pub fn counts(rows: &[GridRow]) -> GridCounts {
         settings: rows.len(),
         stable_without: stable.len(),
         diverged_with: stable.iter().filter(|r| r.diverged_arx || !r.completed_arx).count(),
-        worse: stable.iter().filter(|r| !(r.error_arx <= 1.2 * r.error_none)).count(),
+        worse: stable
+            .iter()
+            .filter(|r| exceeds(r.error_arx, 1.2 * r.error_none))
+            .count(),
         step_delays: step.len(),
         step_delays_better: step.iter().filter(|r| r.error_arx <= 0.7 * r.error_none).count(),
         backed_off: rows.iter().filter(|r| r.backed_off).count(),

@@ -204,8 +204,11 @@ fn one_run(s: &VstSettings, sigma: f64, method: &Method, reference: &Series) -> 
     };
     let (disp_rms, disp_peak) = err(&ser.u, &reference.u);
     let diverged = !completed
-        || !(disp_peak <= crate::run::DIVERGED_ERROR)
-        || ser.u.iter().any(|u| !(u.abs() <= crate::run::RUNAWAY_DISPLACEMENT));
+        || crate::run::exceeds(disp_peak, crate::run::DIVERGED_ERROR)
+        || ser
+            .u
+            .iter()
+            .any(|u| crate::run::exceeds(u.abs(), crate::run::RUNAWAY_DISPLACEMENT));
     let completed = completed && !diverged;
     let (force_rms, force_peak) = err(&ser.f_true, &reference.f_true);
     let (force_meas_rms, _) = err(&ser.f_meas, &reference.f_true);
