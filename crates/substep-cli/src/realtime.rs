@@ -325,11 +325,11 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             println!("  {l}");
         }
         println!(
-            "  peak relative displacement |u| = {:.6} m (DOF {}, t = {:.3} s); peak coupling force |f_c| = {:.3} N (DOF {}, t = {:.3} s)",
-            peak_u.0,
+            "  peak relative displacement |u| = {} m (DOF {}, t = {:.3} s); peak coupling force |f_c| = {} N (DOF {}, t = {:.3} s)",
+            substep::io::format::sig(peak_u.0, 7),
             peak_u.1 + 1,
             peak_u.2,
-            peak_f.0,
+            substep::io::format::sig(peak_f.0, 7),
             sub.coupling_dofs.get(peak_f.1).map_or(0, |d| d + 1),
             peak_f.2
         );

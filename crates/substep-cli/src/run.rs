@@ -719,6 +719,17 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
         for w in &summary.warnings {
             println!("  warning: {w}");
         }
+        if let Some(st) = &summary.stability
+            && st.alarm_count == 0
+        {
+            let show = |x: f64, f: &dyn Fn(f64) -> String| if x.is_finite() { f(x) } else { "–".to_string() };
+            println!(
+                "  stability indicator ({}): no alarm; largest energy ratio η {}, smallest model margin 1 − ρ {}",
+                st.action,
+                show(st.max_eta, &|x| format!("{x:.3}")),
+                show(st.min_margin, &|x| format!("{x:.2e}"))
+            );
+        }
         if let Some(r) = &summary.reference {
             print_reference_error(r.scheme, r.max_displacement_error, r.max_force_error);
         }
