@@ -76,10 +76,13 @@ fn parse_error_force(s: &str) -> PyResult<ErrorForceSpec> {
     Ok(ErrorForceSpec::Pid { p, i, d })
 }
 
-/// `none` or `polynomial:ORDER`.
+/// `none`, `polynomial:ORDER` or `arx`.
 fn parse_phase_lag(s: &str) -> PyResult<Option<FrozenPhaseLag>> {
     if s == "none" {
         return Ok(None);
+    }
+    if s == "arx" {
+        return Ok(Some(FrozenPhaseLag::Arx));
     }
     match s.split_once(':') {
         Some(("polynomial", o)) => match o.trim().parse::<usize>() {
@@ -91,7 +94,7 @@ fn parse_phase_lag(s: &str) -> PyResult<Option<FrozenPhaseLag>> {
         },
         _ => Err(bad(
             "phase_lag",
-            format!("expected none or polynomial:ORDER, got '{s}'"),
+            format!("expected none, polynomial:ORDER or arx, got '{s}'"),
         )),
     }
 }

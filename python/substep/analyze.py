@@ -60,8 +60,8 @@ def stability(
 
     ``case``: ``typical`` (η_m 5 %, ζ 5 %, ζ_s 10 %, η_f 1) or ``large_mass_ratio``, with the
     overrides ``eta_m``, ``eta_f``, ``zeta``, ``zeta_s``; ``error_force``: ``none``, ``pid:P`` or
-    ``pid:P:I:D``; ``eta_p``: phase-lag ratio τ/Δt; ``phase_lag``: ``none`` or
-    ``polynomial:ORDER``; ``k_sub``: a list; ``omega``: a grid ``(a, b, n)`` or ``"a:b:n"``;
+    ``pid:P:I:D``; ``eta_p``: phase-lag ratio τ/Δt; ``phase_lag``: ``none``,
+    ``polynomial:ORDER`` or ``arx`` (frozen at its converged parameters); ``k_sub``: a list; ``omega``: a grid ``(a, b, n)`` or ``"a:b:n"``;
     ``vary``: ``(name, (a, b, n))`` or ``"name=a:b:n"`` with name one of zeta_s, zeta, eta_f,
     eta_m, eta_p.
 

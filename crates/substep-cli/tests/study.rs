@@ -215,5 +215,7 @@ p = 1.0
     assert_eq!(rows[1][2], "true");
     assert!(rows[1][3].parse::<f64>().unwrap() < 1.0);
     assert_eq!(rows[2][2], "false");
+    // Its metrics are NaN, as docs/config.md says (not the 10⁵ % of a runaway response).
+    assert_eq!(rows[2][3], "NaN");
     assert!(rows[2][4].contains("runaway response"), "{}", rows[2][4]);
 }

@@ -89,3 +89,27 @@ fn the_frozen_compensator_state_is_part_of_the_map() {
     let e = bad.step_map().unwrap_err().to_string();
     assert!(e.contains("phase_lag.order"), "{e}");
 }
+
+/// The ARX compensator in the analysis: frozen at the parameters it converges to in front of the
+/// delayed actuator, the wrapper is a time-invariant linear map (probing it twice gives the same
+/// spectral radius to rounding), and at an undamped TMD behind a step of delay it damps the
+/// test (smaller ρ than without compensation).
+#[test]
+fn frozen_arx_at_converged_parameters_is_a_fixed_linear_map() {
+    let delayed = AnalysisCase {
+        eta_p: 1.0,
+        zeta_s: 0.0,
+        omega_dt: 0.2,
+        k_sub: 4,
+        ..AnalysisCase::typical_tmd()
+    };
+    let arx = AnalysisCase {
+        phase_lag: Some(FrozenPhaseLag::Arx),
+        ..delayed
+    };
+    let (r1, r2) = (arx.spectral_radius().unwrap(), arx.spectral_radius().unwrap());
+    let none = delayed.spectral_radius().unwrap();
+    println!("η_p = 1, ζ_s = 0, Ω = 0.2, k_sub = 4: ρ = {none:.6} without, {r1:.6} with the converged ARX compensator");
+    assert!((r1 - r2).abs() <= 1e-12 * r1, "{r1} vs {r2}");
+    assert!(r1 < none, "{r1} vs {none}");
+}

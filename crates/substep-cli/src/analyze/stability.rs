@@ -10,8 +10,9 @@ pub struct StabilityArgs {
     /// Phase-lag ratio η_p = τ/Δt (pure actuator delay)
     #[arg(long, default_value_t = 0.0)]
     pub eta_p: f64,
-    /// Phase-lag compensation with frozen parameters: `none` or `polynomial:ORDER` (ORDER 1..=3,
-    /// lead η_p·k_sub sub-steps)
+    /// Phase-lag compensation with frozen parameters: `none`, `polynomial:ORDER` (ORDER 1..=3,
+    /// lead η_p·k_sub sub-steps) or `arx` (the identified compensator at its defaults, frozen at
+    /// the parameters it converges to in front of the delayed actuator)
     #[arg(long, default_value = "none")]
     pub phase_lag: String,
     /// Sub-steps per step, a list
@@ -104,17 +105,20 @@ pub(super) fn stability(a: &StabilityArgs) -> Result<()> {
     Ok(())
 }
 
-/// `none` or `polynomial:ORDER`.
+/// `none`, `polynomial:ORDER` or `arx`.
 pub(super) fn parse_phase_lag(s: &str) -> Result<Option<FrozenPhaseLag>> {
     if s == "none" {
         return Ok(None);
+    }
+    if s == "arx" {
+        return Ok(Some(FrozenPhaseLag::Arx));
     }
     match s.split_once(':') {
         Some(("polynomial", o)) => match o.trim().parse::<usize>() {
             Ok(order) if (1..=3).contains(&order) => Ok(Some(FrozenPhaseLag::Polynomial { order })),
             _ => bad!("--phase-lag", "the polynomial order must be 1, 2 or 3, got '{o}'"),
         },
-        _ => bad!("--phase-lag", "expected none or polynomial:ORDER, got '{s}'"),
+        _ => bad!("--phase-lag", "expected none, polynomial:ORDER or arx, got '{s}'"),
     }
 }
 
@@ -133,8 +137,10 @@ pub(super) fn describe_case(c: &AnalysisCase, varied: Parameter) -> String {
     if c.error_force != ErrorForceSpec::None {
         parts.push("PID".into());
     }
-    if let Some(FrozenPhaseLag::Polynomial { order }) = c.phase_lag {
-        parts.push(format!("polynomial p = {order} (frozen)"));
+    match c.phase_lag {
+        Some(FrozenPhaseLag::Polynomial { order }) => parts.push(format!("polynomial p = {order} (frozen)")),
+        Some(FrozenPhaseLag::Arx) => parts.push("ARX (frozen at its converged parameters)".into()),
+        None => {}
     }
     parts.join(", ")
 }

@@ -3,7 +3,10 @@
 //! `Δt = Ω`, `T = 2π`).
 
 use super::StepMap;
-use crate::compensate::{CompensatedSite, PhaseLagCompensator, Polynomial, Ramp};
+use super::converged::converged_parameters;
+use crate::compensate::{
+    ArxPhaseLagSpec, CompensatedSite, PhaseLagCompensator, PhaseLagDefinition, PhaseLagSpec, Polynomial, Ramp,
+};
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::model::{StructuralModel, TmdSystem, sdof, tmd_two_dof};
 use crate::specimen::SpecimenSpec;
@@ -42,6 +45,11 @@ pub enum FrozenPhaseLag {
     /// Polynomial extrapolation of order `order` (1..=3) with the lead `η_p · k_sub` sub-steps
     /// (the actuator delay).
     Polynomial { order: usize },
+    /// The ARX compensator by identification (`kind = "arx"` at its defaults for the delay
+    /// `η_p · k_sub` sub-steps), frozen at the parameters it converges to in front of the
+    /// actuator under the two modal frequencies of the assembled system
+    /// ([`super::converged::converged_parameters`]).
+    Arx,
 }
 
 /// Parameters that maps and series vary.
@@ -214,7 +222,7 @@ impl AnalysisCase {
         let lab = VirtualLab::from_specs(
             &[0],
             &[specimen],
-            &[actuator],
+            &[actuator.clone()],
             &[SensorSpec::ideal()],
             &[SensorSpec::ideal()],
             self.dt() / self.k_sub as f64,
@@ -226,6 +234,25 @@ impl AnalysisCase {
                 let lead = self.eta_p * self.k_sub as f64;
                 let comp: Box<dyn PhaseLagCompensator> = Box::new(Polynomial::new(order, lead)?);
                 let mut site = CompensatedSite::new(Box::new(lab), vec![comp], Ramp::full())?;
+                site.set_frozen(true);
+                Box::new(site)
+            }
+            Some(FrozenPhaseLag::Arx) => {
+                let def = PhaseLagDefinition {
+                    spec: PhaseLagSpec::Arx(ArxPhaseLagSpec::for_substeps(
+                        self.eta_p * self.k_sub as f64,
+                        self.k_sub,
+                    )),
+                    ramp: Ramp::full(),
+                };
+                let modes = self.assembled_model()?.modes()?;
+                let freqs: Vec<f64> = modes.omega.iter().map(|w| w / (2.0 * PI)).collect();
+                let dtau = self.dt() / self.k_sub as f64;
+                let theta = converged_parameters(&def, &actuator, dtau, 1, &freqs)?;
+                let mut site = def.wrap(Box::new(lab))?;
+                if let Some(t) = &theta {
+                    site.set_parameters(t);
+                }
                 site.set_frozen(true);
                 Box::new(site)
             }

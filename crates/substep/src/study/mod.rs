@@ -438,7 +438,12 @@ impl Study {
             values,
             completed,
             error,
-            metrics: self.metrics.iter().map(|m| m.value(&summary)).collect(),
+            // A run that diverged or stopped has no meaningful metrics (docs/config.md): NaN.
+            metrics: self
+                .metrics
+                .iter()
+                .map(|m| if completed { m.value(&summary) } else { f64::NAN })
+                .collect(),
             summary: Some(summary),
         }
     }
@@ -537,7 +542,9 @@ pub fn to_csv(study: &Study, rows: &[Row]) -> String {
         out.push_str(if r.completed { ",true" } else { ",false" });
         for m in &r.metrics {
             out.push(',');
-            out.push_str(&format!("{m}"));
+            // Shortest round-trip form, in exponent notation when large or small (`{}` would
+            // write 10³⁰⁰ with 301 digits).
+            out.push_str(&format!("{m:?}"));
         }
         out.push(',');
         out.push_str(&quote(&r.error.split_whitespace().collect::<Vec<_>>().join(" ")));
