@@ -222,7 +222,7 @@ impl AnalysisCase {
         let lab = VirtualLab::from_specs(
             &[0],
             &[specimen],
-            &[actuator.clone()],
+            std::slice::from_ref(&actuator),
             &[SensorSpec::ideal()],
             &[SensorSpec::ideal()],
             self.dt() / self.k_sub as f64,
