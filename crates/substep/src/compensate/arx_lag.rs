@@ -355,9 +355,7 @@ pub struct ArxPhaseLag {
     stage1: f64,
     stage2: f64,
     alpha: f64,
-    /// The last target `d_{j−1}`.
-    target_prev: f64,
-    /// Targets `d_{j−1} … d_{j−k}` (ripple term).
+    /// Targets `d_{j−1} … d_{j−k−1}` (the tracking error and the ripple term).
     targets: History,
     count: usize,
     scale: f64,
@@ -405,15 +403,15 @@ impl Supervisor {
         }
     }
 
-    /// Record one sub-step (`correction` before the gain, `velocity` per sub-step); returns
-    /// whether the compensator may keep adapting.
-    fn observe(&mut self, correction: f64, velocity: f64) -> bool {
+    /// Record one sub-step (`correction` before the gain, `velocity` per sub-step); once tripped,
+    /// lower the gain.
+    fn observe(&mut self, correction: f64, velocity: f64) {
         if self.trip.is_some() {
             self.gain = (self.gain - self.fade_step).max(0.0);
-            return false;
+            return;
         }
         let Some(max_lead) = self.max_lead else {
-            return true;
+            return;
         };
         let w = self.weight;
         self.ms_correction += w * (correction * correction - self.ms_correction);
@@ -428,10 +426,8 @@ impl Supervisor {
             self.lead_peak = self.lead_peak.max(lead);
             if lead > max_lead {
                 self.trip = Some(GuardTrip::Unstable { lead, bound: max_lead });
-                return false;
             }
         }
-        true
     }
 }
 
@@ -467,7 +463,6 @@ impl ArxPhaseLag {
             stage1: 0.0,
             stage2: 0.0,
             alpha,
-            target_prev: 0.0,
             targets: History::new(spec.period + 1),
             count: 0,
             scale: 0.0,
@@ -587,7 +582,7 @@ impl PhaseLagCompensator for ArxPhaseLag {
             return 0.0;
         }
         let k = self.spec.k_lag;
-        let lag = self.target_prev - measured_prev;
+        let lag = self.targets.get(0) - measured_prev;
         // Age of the correction the error of sub-step j − 1 is attributed to.
         let cause = match self.spec.pairing {
             ErrorPairing::Current => 0,
@@ -640,7 +635,6 @@ impl PhaseLagCompensator for ArxPhaseLag {
         self.v.push(v);
         self.eps.push(0.0);
         self.smoothed.push(self.stage2);
-        self.target_prev = target;
         self.targets.push(target);
         self.count += 1;
         du
@@ -674,38 +668,42 @@ impl PhaseLagCompensator for ArxPhaseLag {
             self.supervisor.trip = None;
         }
     }
-    /// `[d_{j−1}, low-pass stages (2), d history (k + 1), d̄ history (S), Δu history,
-    /// h Δu history, v history, ε history]`, newest first.
+    /// `[low-pass stages (2), d history (k + 1), d̄ history (S), Δu history, h Δu history,
+    /// v history, ε history]`, newest first.
     fn state_len(&self) -> usize {
-        3 + self.targets.len() + self.smoothed.len() + 4 * self.du.len()
+        2 + self.targets.len() + self.smoothed.len() + 4 * self.du.len()
     }
     fn write_state(&self, out: &mut [f64]) {
-        let p = self.targets.len();
-        out[0] = self.target_prev;
-        out[1] = self.stage1;
-        out[2] = self.stage2;
-        self.targets.write(&mut out[3..3 + p]);
-        let out = &mut out[p..];
-        let (t, l) = (self.smoothed.len(), self.du.len());
-        self.smoothed.write(&mut out[3..3 + t]);
-        for (k, h) in [&self.du, &self.applied, &self.v, &self.eps].into_iter().enumerate() {
-            h.write(&mut out[3 + t + k * l..3 + t + (k + 1) * l]);
+        out[0] = self.stage1;
+        out[1] = self.stage2;
+        let mut at = 2;
+        for h in [
+            &self.targets,
+            &self.smoothed,
+            &self.du,
+            &self.applied,
+            &self.v,
+            &self.eps,
+        ] {
+            h.write(&mut out[at..at + h.len()]);
+            at += h.len();
         }
     }
     fn read_state(&mut self, s: &[f64]) {
-        let p = self.targets.len();
-        self.target_prev = s[0];
-        self.stage1 = s[1];
-        self.stage2 = s[2];
-        self.targets.read(&s[3..3 + p]);
-        let s = &s[p..];
-        let (t, l) = (self.smoothed.len(), self.du.len());
-        self.smoothed.read(&s[3..3 + t]);
-        for (k, h) in [&mut self.du, &mut self.applied, &mut self.v, &mut self.eps]
-            .into_iter()
-            .enumerate()
-        {
-            h.read(&s[3 + t + k * l..3 + t + (k + 1) * l]);
+        self.stage1 = s[0];
+        self.stage2 = s[1];
+        let mut at = 2;
+        for h in [
+            &mut self.targets,
+            &mut self.smoothed,
+            &mut self.du,
+            &mut self.applied,
+            &mut self.v,
+            &mut self.eps,
+        ] {
+            let n = h.len();
+            h.read(&s[at..at + n]);
+            at += n;
         }
     }
 }
