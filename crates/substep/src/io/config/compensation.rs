@@ -84,6 +84,9 @@ impl RawErrorForce {
     }
 }
 
+/// The keys of `kind = "arx"` alone (refused with the other kinds).
+const ARX_ONLY: &[&str] = &["span", "smoothing", "max_lead", "supervisor"];
+
 /// Default ramp-in of the phase-lag compensation [steps].
 pub(crate) const DEFAULT_RAMP_STEPS: usize = 100;
 
@@ -167,20 +170,8 @@ impl RawPhaseLag {
                 return Ok(None);
             }
             "polynomial" => {
-                forbid(
-                    p,
-                    &keys(&[
-                        "k_lag",
-                        "n_u",
-                        "forgetting_factor",
-                        "taps",
-                        "span",
-                        "smoothing",
-                        "max_lead",
-                        "supervisor",
-                    ]),
-                    &unused,
-                )?;
+                forbid(p, &keys(&["k_lag", "n_u", "forgetting_factor", "taps"]), &unused)?;
+                forbid(p, &keys(ARX_ONLY), &unused)?;
                 PhaseLagSpec::Polynomial {
                     order: self.order.unwrap_or(3),
                     lead: lead()?,
@@ -189,15 +180,16 @@ impl RawPhaseLag {
             }
             "arx" => {
                 forbid(p, &keys(&["order", "lead", "lead_substeps", "taps"]), &unused)?;
-                let k_lag = self.k_lag.unwrap_or_else(|| ((lag / dtau).round() as usize).max(1));
-                // Velocities over one time step (the sub-step ripple repeats every step).
-                let mut spec = ArxPhaseLagSpec::new(k_lag).with_span(self.span.unwrap_or(k_sub));
-                spec.lead = if self.k_lag.is_some() {
-                    k_lag as f64
-                } else {
-                    (lag / dtau).max(1.0)
-                };
-                spec.period = k_sub;
+                // The actuator's lag in sub-steps, or the k_lag given.
+                let lag = self.k_lag.map_or(lag / dtau, |k| k as f64);
+                let mut spec = ArxPhaseLagSpec::for_substeps(lag, k_sub);
+                if let Some(k) = self.k_lag {
+                    // As given (0 is refused by the validation, not rounded up).
+                    spec.k_lag = k;
+                }
+                if let Some(s) = self.span {
+                    spec = spec.with_span(s);
+                }
                 if let Some(t) = self.smoothing {
                     spec.smoothing = t;
                 }
@@ -223,19 +215,8 @@ impl RawPhaseLag {
                 PhaseLagSpec::Arx(spec)
             }
             "inverse_fir" => {
-                forbid(
-                    p,
-                    &keys(&[
-                        "k_lag",
-                        "n_u",
-                        "guard_factor",
-                        "span",
-                        "smoothing",
-                        "max_lead",
-                        "supervisor",
-                    ]),
-                    &unused,
-                )?;
+                forbid(p, &keys(&["k_lag", "n_u", "guard_factor"]), &unused)?;
+                forbid(p, &keys(ARX_ONLY), &unused)?;
                 let mut spec = InverseFirSpec::new(lead()?);
                 if let Some(o) = self.order {
                     spec.order = o;
