@@ -17,7 +17,7 @@ pub struct StudyArgs {
     /// Output directory
     #[arg(long, value_name = "DIR", default_value = "study")]
     pub out: PathBuf,
-    /// Threads (0: all cores)
+    /// Threads (0: all cores; at most 256)
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// No progress bar and no summary on stdout
@@ -81,6 +81,14 @@ pub fn study(args: &StudyArgs) -> Result<()> {
             .filter_map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()))
             .collect();
         println!("  outputs in {}: {}", args.out.display(), names.join(", "));
+    }
+    // A study whose runs failed is not a success (exit 1), though study.csv has every row.
+    if !failed.is_empty() {
+        anyhow::bail!(
+            "{} of {n} runs did not complete (study.csv, column `error`; the first: {})",
+            failed.len(),
+            failed[0].error
+        );
     }
     Ok(())
 }

@@ -47,7 +47,11 @@ fn study_csv_rows_match_single_runs_and_survive_a_failing_run() {
     )
     .unwrap();
     let out = substep(&dir, &["study", "s.toml", "--out", "o"]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
+    // A study with a failed run exits 1 and says how many, in one line; study.csv has every row.
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(stderr.starts_with("error: 1 of 3 runs did not complete"), "{stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
     let stdout = text(&out.stdout);
     assert!(stdout.contains("1 of 3 runs did not complete"), "{stdout}");
     let csv = std::fs::read_to_string(dir.join("o/study.csv")).unwrap();
@@ -218,4 +222,22 @@ p = 1.0
     // Its metrics are NaN, as docs/config.md says (not the 10⁵ % of a runaway response).
     assert_eq!(rows[2][3], "NaN");
     assert!(rows[2][4].contains("runaway response"), "{}", rows[2][4]);
+}
+
+/// Issue "Hardening, round 2": `--threads 10⁶` is refused in one line (exit 2), before anything
+/// is spawned.
+#[test]
+fn an_absurd_thread_count_is_refused() {
+    let dir = temp_dir("threads");
+    write_base(&dir);
+    std::fs::write(
+        dir.join("s.toml"),
+        "base = \"base.toml\"\n[grid]\n\"substructure.substeps\" = [2, 4]\n",
+    )
+    .unwrap();
+    let out = substep(&dir, &["study", "s.toml", "--out", "o", "--threads", "1000000"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(err.starts_with("error: threads: at most 256"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
 }

@@ -80,6 +80,10 @@ pub struct Row {
 /// content, with `completed` and `reason`) out; an error when the test cannot start.
 pub type Runner = dyn Fn(&TestDefinition) -> Result<serde_json::Value> + Sync;
 
+/// Most threads a study runs on (`--threads`, Python's `threads`): a bound on what a typo can
+/// spawn.
+pub const MAX_THREADS: usize = 256;
+
 /// Records nothing: a study keeps only the summary of each run.
 pub(crate) struct SummaryOnly;
 
@@ -361,6 +365,14 @@ impl Study {
             return Err(Error::invalid(
                 "study",
                 format!("run {bad} does not exist (the study has {})", self.len()),
+            ));
+        }
+        if threads > MAX_THREADS {
+            return Err(Error::invalid(
+                "threads",
+                format!(
+                    "at most {MAX_THREADS} (the runs are computation: more threads than cores do not help), got {threads}"
+                ),
             ));
         }
         let pool = rayon::ThreadPoolBuilder::new()

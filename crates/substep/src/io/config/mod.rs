@@ -360,6 +360,20 @@ impl RawConfig {
             Some(s) => Some(s.build(&model, &name_s, scheme, dt, base, &limits)?),
         };
         check_exact_range(&self.structure, &model, substructure.as_ref(), scheme, dt)?;
+        if let Some(sub) = &substructure {
+            // A delay longer than the test leaves the specimen at rest for the whole run (and
+            // its delay line costs memory and time for nothing): a typo, refused.
+            let duration = steps as f64 * dt;
+            if sub.actuator.delay > duration {
+                return Err(Error::invalid(
+                    "substructure.actuator.delay",
+                    format!(
+                        "{} s is longer than the test ({} s): the specimen would never move",
+                        sub.actuator.delay, duration
+                    ),
+                ));
+            }
+        }
         Ok(TestDefinition {
             source: name.to_string(),
             model,

@@ -545,3 +545,16 @@ fn phase_lag_bad_values_name_the_key() {
         assert!(e.starts_with(&format!("{p}{expect}")), "{extra}: {e}");
     }
 }
+
+#[test]
+fn a_delay_longer_than_the_test_is_refused() {
+    // The base test lasts 1 s; a 511 s delay (a typo of 5.11 ms) would leave the specimen at rest.
+    let text = edit("zeta = 0.7", "zeta = 0.7\ndelay = 511.0");
+    let e = err(&text);
+    assert!(
+        e.starts_with("cfg.toml: substructure.actuator.delay: 511 s is longer than the test (1 s)"),
+        "{e}"
+    );
+    // Up to the test's length it is accepted (the specimen moves at the end).
+    assert!(parse(&edit("zeta = 0.7", "zeta = 0.7\ndelay = 0.5")).is_ok());
+}
