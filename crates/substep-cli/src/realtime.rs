@@ -256,17 +256,15 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     });
     // As offline: an error against the reference beyond 100 % is a diverged run.
     let mut failure = failure;
-    if failure.is_none()
-        && let Some((_, _, u, _)) = reference_errors
-        && substep::run::exceeds(u, substep::run::DIVERGED_ERROR)
-    {
+    let overall = err_u.overall_peak_error();
+    if failure.is_none() && overall > substep::run::DIVERGED_ERROR {
         failure = Some(substep::Error::Diverged {
             step: report.steps,
             time: report.steps as f64 * def.integrator.dt,
             reason: format!(
-                "the error against the reference reached {} of its peak (more than {} %): the test diverged \
-                 from the structure it simulates",
-                substep::io::format::percent(u),
+                "the largest displacement error against the reference reached {} of the reference's largest \
+                 displacement (more than {} %): the test diverged from the structure it simulates",
+                substep::io::format::percent(overall),
                 100.0 * substep::run::DIVERGED_ERROR
             ),
         });

@@ -74,6 +74,16 @@ impl ErrorTracker {
         }
         self.count += 1;
     }
+    /// The largest error over all components relative to the largest reference peak over all
+    /// components (NaN if the reference is identically zero): the divergence measure, which a
+    /// component that hardly moves in the reference (a tiny peak, a huge relative error) does not
+    /// inflate.
+    pub fn overall_peak_error(&self) -> f64 {
+        let peak = self.max_ref.iter().fold(0.0, |m: f64, v| m.max(*v));
+        let err = self.max_err.iter().fold(0.0, |m: f64, v| m.max(*v));
+        if peak > 0.0 { err / peak } else { f64::NAN }
+    }
+
     /// Normalised errors of component `k` (NaN if the reference is identically zero).
     pub fn stats(&self, k: usize) -> ErrorStats {
         let peak = self.max_ref[k];
@@ -105,5 +115,10 @@ mod tests {
         assert_eq!(s.rms_error, 0.5_f64.sqrt() / 4.0);
         assert_eq!(s.peak_error, 0.25);
         assert!(ErrorTracker::new(1).stats(0).peak_error.is_nan());
+        // Overall: the largest error over the largest reference peak, whatever the component.
+        let mut e = ErrorTracker::new(2);
+        e.update(&[1.0, 1e-6], &[2.0, 1e-9]);
+        assert!(e.stats(1).peak_error > 900.0);
+        assert_eq!(e.overall_peak_error(), 0.5);
     }
 }
