@@ -123,7 +123,9 @@ class Result:
           ``substeps.csv``, ``response.csv`` and ``summary.json`` in it, byte for byte as
           ``substep run`` writes them (timings aside);
         * ``*.csv``: the history alone;
-        * ``*.h5`` / ``*.hdf5`` / ``*.mat``: HDF5 or MATLAB files (see docs/python.md).
+        * ``*.h5`` / ``*.hdf5``: HDF5 (needs the package built with the hdf5 feature);
+        * ``*.mat``: a MATLAB level-5 MAT-file (every build; ``scipy.io.loadmat`` and MATLAB's
+          ``load`` read it; see docs/python.md).
 
         Returns the paths written.
         """
@@ -157,13 +159,13 @@ class Result:
 
 
 def _save_binary(result: Result, path: Path, suffix: str) -> List[str]:
-    """``results.h5`` / ``results.mat`` of the CLI (the same layout, docs/python.md "HDF5 /
-    MATLAB"), from the tables written as CSV into a temporary folder beside ``path``."""
+    """``results.h5`` / ``results.mat`` (level 5) of the CLI (the same layout, docs/python.md
+    "HDF5 / MATLAB"), from the tables written as CSV into a temporary folder beside ``path``."""
     import shutil
     import tempfile
 
     fmt = "mat" if suffix == ".mat" else "hdf5"
-    if not _substep.has_hdf5():
+    if fmt == "hdf5" and not _substep.has_hdf5():
         raise ConfigError(f"{path}: this build of substep has no HDF5 support (build it with the hdf5 feature)")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".substep-", dir=path.parent))

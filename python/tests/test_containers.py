@@ -1,8 +1,9 @@
-"""HDF5 and MATLAB v7.3 result files read back equal to the CSV tables of the same run.
+"""HDF5 and MATLAB result files read back equal to the CSV tables of the same run.
 
-Runs the `substep` CLI (built with `--features hdf5`; `SUBSTEP_BIN` or target/release/substep)
-on a short virtual substructure test and reads results.h5 with h5py, results.mat with the two
-MATLAB v7.3 readers on PyPI (mat73, hdf5storage).
+Runs the `substep` CLI (`SUBSTEP_BIN` or target/release/substep) on a short virtual substructure
+test and reads results.h5 with h5py, the level-5 results.mat (`--format mat`, every build) with
+SciPy's `scipy.io.loadmat`, the v7.3 results.mat (`--format mat73`, built with `--features hdf5`)
+with the two MATLAB v7.3 readers on PyPI (mat73, hdf5storage).
 """
 
 import csv as csvlib
@@ -18,6 +19,7 @@ import pytest
 h5py = pytest.importorskip("h5py")
 mat73 = pytest.importorskip("mat73")
 hdf5storage = pytest.importorskip("hdf5storage")
+scipy_io = pytest.importorskip("scipy.io")
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 BIN = pathlib.Path(os.environ.get("SUBSTEP_BIN", ROOT / "target" / "release" / "substep"))
@@ -84,8 +86,35 @@ def test_hdf5_reads_back_equal_to_the_csv(tmp_path):
         assert "[substructure]" in f.attrs["config"]
 
 
-def test_mat_v73_reads_back_equal_to_the_csv(tmp_path):
+def test_mat_level5_from_the_default_build_reads_back_equal_to_the_csv(tmp_path):
+    """`--format mat` needs no HDF5: scipy.io.loadmat reads every table, the units, the summary
+    and the config with the numbers of the CSV files."""
     out = run(tmp_path, "mat")
+    path = out / "results.mat"
+    head = path.read_bytes()[:128]
+    assert head.startswith(b"MATLAB 5.0 MAT-file, Platform: GLNXA64, Created on: ")
+    assert head[124:128] == b"\x00\x01IM"
+    m = scipy_io.loadmat(str(path), simplify_cells=True)
+    raw = scipy_io.loadmat(str(path))  # MATLAB's view: 1x1 structs of N x 1 double columns
+    assert set(tables_in(out)) >= {"history", "substeps", "response"}
+    for table in tables_in(out):
+        frame = csv(out, table)
+        assert list(m[table].keys()) == list(frame.columns)
+        for col in frame.columns:
+            expected = frame[col].to_numpy()
+            column = raw[table][0, 0][col]
+            assert column.dtype == np.float64 and column.shape == (len(expected), 1), (table, col, column.shape)
+            np.testing.assert_array_equal(column[:, 0], expected, err_msg=f"loadmat {table}.{col}")
+    assert m["units"]["history"]["u1"] == "m"
+    assert m["units"]["history"]["t"] == "s"
+    assert m["units"]["history"]["fc1"] == "N"
+    assert m["units"]["response"]["E_kinetic"] == "J"
+    assert json.loads(m["summary"]) == json.loads((out / "summary.json").read_text())
+    assert "[substructure]" in m["config"]
+
+
+def test_mat_v73_reads_back_equal_to_the_csv(tmp_path):
+    out = run(tmp_path, "mat73")
     path = out / "results.mat"
     head = path.read_bytes()[:128]
     assert head.startswith(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: ")
@@ -124,5 +153,5 @@ def test_python_save_writes_the_cli_containers(tmp_path):
         assert json.loads(mine.attrs["summary"])["steps_done"] == 200
     mat = tmp_path / "py.mat"
     result.save(mat)
-    m = mat73.loadmat(str(mat))
+    m = scipy_io.loadmat(str(mat), simplify_cells=True)
     np.testing.assert_array_equal(np.ravel(m["history"]["u1"]), result.history["u1"])

@@ -1,6 +1,6 @@
 //! `substep study` end to end: study.csv with one row per run in run order, equal to
 //! `substep run` of the same variant; figures; a failing run keeps the others; bad study files
-//! are bad input (exit code 2); `--format hdf5|mat` without the feature says how to enable it.
+//! are bad input (exit code 2); `--format hdf5|mat73` without the feature says how to enable it.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -120,19 +120,34 @@ fn bad_study_files_are_bad_input() {
 fn container_formats_need_the_feature_or_work() {
     let dir = temp_dir("format");
     write_base(&dir);
-    let out = substep(
-        &dir,
-        &[
-            "run",
-            "base.toml",
-            "--out",
-            "o",
-            "--quiet",
-            "--no-plots",
-            "--format",
-            "mat",
-        ],
+    let run = |format: &str| {
+        substep(
+            &dir,
+            &[
+                "run",
+                "base.toml",
+                "--out",
+                "o",
+                "--quiet",
+                "--no-plots",
+                "--format",
+                format,
+            ],
+        )
+    };
+    // MATLAB level 5: every build.
+    let out = run("mat");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let head = std::fs::read(dir.join("o/results.mat")).unwrap();
+    assert!(head.starts_with(b"MATLAB 5.0 MAT-file"));
+    assert_eq!(&head[124..128], b"\x00\x01IM");
+    assert_eq!(
+        &head[128..132],
+        &14u32.to_le_bytes(),
+        "an miMATRIX element follows the header"
     );
+    // MATLAB v7.3: the hdf5 feature.
+    let out = run("mat73");
     if cfg!(feature = "hdf5") {
         assert!(out.status.success(), "{}", text(&out.stderr));
         let head = std::fs::read(dir.join("o/results.mat")).unwrap();
@@ -144,7 +159,7 @@ fn container_formats_need_the_feature_or_work() {
         assert_eq!(out.status.code(), Some(2));
         let e = text(&out.stderr);
         assert!(
-            e.starts_with("error: --format: format `mat`: this build of substep has no HDF5 support"),
+            e.starts_with("error: --format: format `mat73`: this build of substep has no HDF5 support"),
             "{e}"
         );
         assert!(e.contains("--features hdf5"), "{e}");

@@ -7,7 +7,7 @@
 //! `MATLAB_fields` (the field names as variable-length arrays of single characters), the
 //! convention MATLAB itself writes and `hdf5storage` / `mat73` read.
 
-use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, matlab_name};
+use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name};
 use crate::error::{Error, Result};
 use hdf5::types::{FixedAscii, VarLenArray, VarLenUnicode};
 use hdf5::{Extent, File, Location};
@@ -223,64 +223,13 @@ fn matlab_header(created: String) -> Vec<u8> {
     h
 }
 
-/// `Tue Dec  1 22:29:17 2026` (UTC, C `asctime` style as MATLAB writes it), from
-/// `SOURCE_DATE_EPOCH` when set (reproducible builds of result files), else the clock.
-fn created_on() -> String {
-    let secs = std::env::var("SOURCE_DATE_EPOCH")
-        .ok()
-        .and_then(|s| s.parse::<i64>().ok())
-        .unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_secs() as i64)
-        });
-    asctime(secs)
-}
-
-fn asctime(secs: i64) -> String {
-    let days = secs.div_euclid(86_400);
-    let rem = secs.rem_euclid(86_400);
-    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    const WD: [&str; 7] = ["Thu", "Fri", "Sat", "Sun", "Mon", "Tue", "Wed"];
-    const MO: [&str; 12] = [
-        "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
-    ];
-    format!(
-        "{} {} {:2} {:02}:{:02}:{:02} {year}",
-        WD[days.rem_euclid(7) as usize],
-        MO[(month - 1) as usize],
-        day,
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn asctime_matches_known_dates() {
-        assert_eq!(asctime(0), "Thu Jan  1 00:00:00 1970");
-        // 2026-12-01T22:29:17Z (date -d @1796164157 -u)
-        assert_eq!(asctime(1_796_164_157), "Tue Dec  1 22:29:17 2026");
-        // leap day
-        assert_eq!(asctime(951_782_400), "Tue Feb 29 00:00:00 2000");
-    }
-
-    #[test]
     fn matlab_header_layout() {
-        let h = matlab_header(asctime(0));
+        let h = matlab_header(super::asctime(0));
         assert_eq!(h.len(), 512);
         assert!(h.starts_with(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Thu Jan  1 00:00:00 1970"));
         assert_eq!(&h[116..124], b"        ");

@@ -1,20 +1,24 @@
 //! Result containers: the CSV histories of a run gathered into one HDF5 file
-//! (`results.h5`) or one MATLAB v7.3 file (`results.mat`), `[output] format`.
+//! (`results.h5`) or one MATLAB file (`results.mat`: level 5 for `mat`, v7.3 for `mat73`),
+//! `[output] format`.
 //!
 //! The CSV files are always written first, row by row while the run steps (a run killed at any
 //! moment keeps what it recorded); the container is built from them after the run, one table
 //! per CSV file, streamed in blocks of [`BLOCK_ROWS`] rows so that its memory does not grow with
-//! the length of the run. HDF5 needs the system library (Debian `libhdf5-dev`) and so the cargo
-//! feature `hdf5`; without it, choosing `hdf5` or `mat` is refused with a message saying how to
-//! enable it, and the CSV format works as before.
+//! the length of the run. The level-5 MAT-file (`mat`, [`mat5`]) is pure Rust and always there.
+//! HDF5 and MATLAB v7.3 need the system library (Debian `libhdf5-dev`) and so the cargo
+//! feature `hdf5`; without it, choosing `hdf5` or `mat73` is refused with a message saying how
+//! to enable it.
 //!
 //! Layout (both containers; see docs/config.md "Output formats"):
 //! * `results.h5`: a group per table (`/history`, `/substeps`, `/response`, ...), in it one 1-D
 //!   `f64` dataset per column (chunked, deflate-compressed) with a `units` attribute; the group
 //!   has a `columns` attribute listing the columns in CSV order. The root holds the run
 //!   summary as the JSON string attribute `summary` and the config text as `config`.
-//! * `results.mat`: MATLAB v7.3 (HDF5 with the 512-byte MATLAB user block); every table is a
-//!   MATLAB struct of column vectors (`history.u1`), `summary` and `config` are char variables.
+//! * `results.mat`: every table is a MATLAB struct of column vectors (`history.u1`), `summary`
+//!   and `config` are char variables. `mat` writes a level-5 MAT-file (MATLAB's `-v7` without
+//!   compression; 2 GB per table at most), with `units` (a struct of structs of char) besides;
+//!   `mat73` writes MATLAB v7.3 (HDF5 with the 512-byte MATLAB user block) for larger runs.
 
 use crate::error::{Error, Result};
 use std::io::BufRead;
@@ -22,6 +26,7 @@ use std::path::{Path, PathBuf};
 
 #[cfg(feature = "hdf5")]
 mod hdf5_writer;
+pub mod mat5;
 
 /// Rows converted per block (memory per column: 8 bytes × this).
 pub const BLOCK_ROWS: usize = 8192;
@@ -44,8 +49,10 @@ pub enum Format {
     Csv,
     /// CSV files and `results.h5`.
     Hdf5,
-    /// CSV files and `results.mat` (MATLAB v7.3).
+    /// CSV files and `results.mat` (MATLAB level 5, pure Rust).
     Mat,
+    /// CSV files and `results.mat` (MATLAB v7.3, an HDF5 file: for tables over 2 GB).
+    Mat73,
 }
 
 /// How to get a build that writes HDF5 / MATLAB files (the one-line refusal without it).
@@ -54,31 +61,37 @@ pub const ENABLE_HINT: &str = "this build of substep has no HDF5 support: instal
      (cargo install --path crates/substep-cli --features hdf5)";
 
 impl Format {
-    pub const NAMES: &'static [&'static str] = &["csv", "hdf5", "mat"];
+    pub const NAMES: &'static [&'static str] = &["csv", "hdf5", "mat", "mat73"];
 
     /// The format named `name`; `what` (the config key or option) names it in errors. `hdf5`
-    /// and `mat` in a build without the `hdf5` feature are refused with [`ENABLE_HINT`].
+    /// and `mat73` in a build without the `hdf5` feature are refused with [`ENABLE_HINT`].
     pub fn parse(what: &str, name: &str) -> Result<Self> {
         let f = match name {
             "csv" => Self::Csv,
             "hdf5" | "h5" => Self::Hdf5,
             "mat" => Self::Mat,
+            "mat73" => Self::Mat73,
             other => {
                 return Err(Error::invalid(
                     what,
-                    format!("unknown output format `{other}` (expected csv, hdf5 or mat)"),
+                    format!("unknown output format `{other}` (expected csv, hdf5, mat or mat73)"),
                 ));
             }
         };
-        if f != Self::Csv && !Self::container_support() {
+        if f.needs_hdf5() && !Self::container_support() {
             return Err(Error::invalid(what, format!("format `{name}`: {ENABLE_HINT}")));
         }
         Ok(f)
     }
 
-    /// Whether this build can write HDF5 and MATLAB files (the `hdf5` feature).
+    /// Whether this build can write HDF5 and MATLAB v7.3 files (the `hdf5` feature).
     pub const fn container_support() -> bool {
         cfg!(feature = "hdf5")
+    }
+
+    /// Whether the format needs the `hdf5` feature.
+    pub const fn needs_hdf5(self) -> bool {
+        matches!(self, Self::Hdf5 | Self::Mat73)
     }
 
     pub fn name(self) -> &'static str {
@@ -86,6 +99,7 @@ impl Format {
             Self::Csv => "csv",
             Self::Hdf5 => "hdf5",
             Self::Mat => "mat",
+            Self::Mat73 => "mat73",
         }
     }
 
@@ -94,13 +108,13 @@ impl Format {
         match self {
             Self::Csv => None,
             Self::Hdf5 => Some("results.h5"),
-            Self::Mat => Some("results.mat"),
+            Self::Mat | Self::Mat73 => Some("results.mat"),
         }
     }
 }
 
 /// SI unit of a result column, from its name (the CSV headers of `substep run`): `m`, `m/s`,
-/// `m/s^2`, `N`, `J`, `s`, `Hz`, or `1` for counts and indices.
+/// `m/s^2`, `N`, `N/m`, `N*s/m`, `J`, `s`, `Hz`, or `1` for counts, indices and ratios.
 pub fn column_unit(table: &str, column: &str) -> &'static str {
     let stem = column.trim_end_matches(|c: char| c.is_ascii_digit());
     match (table, stem) {
@@ -111,7 +125,10 @@ pub fn column_unit(table: &str, column: &str) -> &'static str {
         ("spectrum", "psv_m_s") => "m/s",
         ("spectrum", _) => "m/s^2",
         (_, "t") => "s",
-        (_, "step" | "substep" | "ramp") => "1",
+        (_, "step" | "substep" | "ramp" | "eta" | "margin") => "1",
+        (_, "k_id") => "N/m",
+        (_, "c_id") => "N*s/m",
+        (_, "lag_id") => "s",
         (_, "u" | "uref" | "dm" | "cmd" | "te" | "du" | "drift") => "m",
         (_, "v") => "m/s",
         (_, "a" | "ag" | "a_abs") => "m/s^2",
@@ -237,13 +254,20 @@ pub fn write_container(dir: &Path, format: Format, meta: &Metadata) -> Result<Op
     Ok(Some(path))
 }
 
-#[cfg(feature = "hdf5")]
 fn write_impl(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
-    hdf5_writer::write(path, format == Format::Mat, tables, meta)
+    if format == Format::Mat {
+        return mat5::write(path, tables, meta);
+    }
+    write_hdf5(path, format, tables, meta)
+}
+
+#[cfg(feature = "hdf5")]
+fn write_hdf5(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
+    hdf5_writer::write(path, format == Format::Mat73, tables, meta)
 }
 
 #[cfg(not(feature = "hdf5"))]
-fn write_impl(path: &Path, format: Format, _tables: &[(&str, PathBuf)], _meta: &Metadata) -> Result<()> {
+fn write_hdf5(path: &Path, format: Format, _tables: &[(&str, PathBuf)], _meta: &Metadata) -> Result<()> {
     Err(Error::file(
         path.display().to_string(),
         format!("format `{}`: {ENABLE_HINT}", format.name()),
@@ -264,9 +288,60 @@ pub fn matlab_name(name: &str) -> String {
     s
 }
 
+/// `Tue Dec  1 22:29:17 2026` (UTC, C `asctime` style as MATLAB writes it), from
+/// `SOURCE_DATE_EPOCH` when set (reproducible builds of result files), else the clock.
+pub(crate) fn created_on() -> String {
+    let secs = std::env::var("SOURCE_DATE_EPOCH")
+        .ok()
+        .and_then(|s| s.parse::<i64>().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs() as i64)
+        });
+    asctime(secs)
+}
+
+pub(crate) fn asctime(secs: i64) -> String {
+    let days = secs.div_euclid(86_400);
+    let rem = secs.rem_euclid(86_400);
+    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    const WD: [&str; 7] = ["Thu", "Fri", "Sat", "Sun", "Mon", "Tue", "Wed"];
+    const MO: [&str; 12] = [
+        "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
+    ];
+    format!(
+        "{} {} {:2} {:02}:{:02}:{:02} {year}",
+        WD[days.rem_euclid(7) as usize],
+        MO[(month - 1) as usize],
+        day,
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn asctime_matches_known_dates() {
+        assert_eq!(asctime(0), "Thu Jan  1 00:00:00 1970");
+        // 2026-12-01T22:29:17Z (date -d @1796164157 -u)
+        assert_eq!(asctime(1_796_164_157), "Tue Dec  1 22:29:17 2026");
+        // leap day
+        assert_eq!(asctime(951_782_400), "Tue Feb 29 00:00:00 2000");
+    }
 
     #[test]
     fn units_of_the_run_columns() {
