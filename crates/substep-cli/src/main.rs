@@ -95,6 +95,10 @@ pub struct RunArgs {
     /// With --realtime: SCHED_FIFO priority of the sub-step thread; reported when not permitted
     #[arg(long, requires = "realtime", value_name = "PRIO")]
     pub fifo_priority: Option<i32>,
+    /// With --realtime: the share of sub-step deadlines (0–1) that may be missed before the run
+    /// counts as failed (exit 1); overrides `[realtime] max_missed` (default 0.01 = 1 %)
+    #[arg(long, requires = "realtime", value_name = "SHARE")]
+    pub max_missed: Option<f64>,
     /// Serve a live monitor page during the run at ADDR (default: `[monitor] address`, else
     /// 127.0.0.1:8080; see docs/monitor.md)
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "")]

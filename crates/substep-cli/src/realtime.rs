@@ -63,6 +63,10 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let accel = def.ground_motion.accel.clone();
     let load0 = -def.model.effective_mass_vector() * accel[0];
     let test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
+    let max_missed = match args.max_missed {
+        Some(x) => substep::io::config::check_max_missed("--max-missed", x)?,
+        None => def.realtime.max_missed,
+    };
     let options = RealtimeOptions {
         lock_memory: args.lock_memory,
         fifo_priority: args.fifo_priority,
@@ -269,14 +273,36 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             ),
         });
     }
+    // A run that missed more deadlines than the lab accepts was not the real-time test it was
+    // meant to be (the actuator held or jumped on every missed slot): a failure, not "completed".
+    let slots = report.substeps + report.hold_substeps;
+    let missed_share = if slots > 0 {
+        report.missed as f64 / slots as f64
+    } else {
+        0.0
+    };
+    let not_real_time = substep::io::config::too_many_missed(report.missed, slots, max_missed);
+    let mut not_real_time_reason = None;
+    if failure.is_none() && not_real_time {
+        not_real_time_reason = Some(format!(
+            "not real time: {} of {} sub-step deadlines missed ({}), more than the {} allowed \
+             ([realtime] max_missed, --max-missed); the actuator held or jumped on every missed \
+             sub-step, so this was a slower test than the one defined (docs/realtime.md)",
+            report.missed,
+            slots,
+            substep::io::format::percent(missed_share),
+            substep::io::format::percent(max_missed)
+        ));
+    }
     let diverged = matches!(failure, Some(substep::Error::Diverged { .. })) || (runaway.is_some() && failure.is_some());
     let (stopped_at_step, reason) = match &failure {
         Some(substep::Error::Diverged { step, reason, .. } | substep::Error::Stopped { step, reason, .. }) => {
             (Some(*step), Some(reason.clone()))
         }
         Some(e) => (Some(report.steps + 1), Some(e.to_string())),
-        None => (None, None),
+        None => (None, not_real_time_reason.clone()),
     };
+    let completed = failure.is_none() && not_real_time_reason.is_none();
     // As offline: only the monitor's own stops (operator, stability indicator) are named.
     let stopped_by = match &failure {
         Some(substep::Error::Stopped { .. }) => live.stopped_by,
@@ -287,13 +313,17 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         "mode": "realtime",
         "dt": def.integrator.dt,
         "steps": def.integrator.steps,
-        "completed": failure.is_none(),
+        "completed": completed,
         "diverged": diverged,
+        "real_time": !not_real_time,
         "steps_done": report.steps,
         "stopped_at_step": stopped_at_step,
         "reason": reason,
         "ramp_substeps": ramp_substeps,
         "missed_deadlines": report.missed,
+        "deadlines": slots,
+        "missed_share": missed_share,
+        "max_missed": max_missed,
         "late_steps": report.late_steps,
         "wake_up_latency_p99_us": report.latency_p99.as_secs_f64() * 1e6,
         "warnings": warnings,
@@ -323,6 +353,14 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             println!("  {l}");
         }
         println!(
+            "  deadlines: {} of {} sub-step slots missed ({}; at most {} allowed): {}",
+            report.missed,
+            slots,
+            substep::io::format::percent(missed_share),
+            substep::io::format::percent(max_missed),
+            if not_real_time { "NOT real time" } else { "real time" }
+        );
+        println!(
             "  peak relative displacement |u| = {} m (DOF {}, t = {:.3} s); peak coupling force |f_c| = {} N (DOF {}, t = {:.3} s)",
             substep::io::format::sig(peak_u.0, 7),
             peak_u.1 + 1,
@@ -349,15 +387,16 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         );
     }
     live.finish(
-        serde_json::json!({ "completed": failure.is_none(), "reason": summary["reason"], "stopped_by": stopped_by,
+        serde_json::json!({ "completed": completed, "reason": summary["reason"], "stopped_by": stopped_by,
             "steps_done": report.steps,
             "missed_deadlines": report.missed, "late_steps": report.late_steps }),
         &outputs,
         args.quiet,
     );
-    match failure {
-        Some(e) => Err(e.into()),
-        None => Ok(()),
+    match (failure, not_real_time_reason) {
+        (Some(e), _) => Err(e.into()),
+        (None, Some(reason)) => Err(anyhow::anyhow!("{reason}")),
+        (None, None) => Ok(()),
     }
 }
 

@@ -27,7 +27,9 @@ fn realtime_run_equals_offline_and_reports_latency() {
     };
     // Offline the stability indicator runs by default; a real-time run runs it when asked for.
     run(&["--stability", "off"], "offline");
-    run(&["--realtime"], "rt");
+    // What is checked here is the numbers, not the pace: a loaded test machine may miss
+    // deadlines (`an_impossible_deadline_fails_the_run` checks that limit).
+    run(&["--realtime", "--max-missed", "1"], "rt");
     let read = |p: &str| -> Vec<Vec<f64>> {
         std::fs::read_to_string(dir.join(p))
             .unwrap()
@@ -248,4 +250,86 @@ stability_window = 1.0
         "ramp ends at 0"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A run whose sub-step deadlines cannot be met (2 µs slots: Δt = 0.1 ms, k_sub = 50) is not
+/// real time: exit 1, one line saying how many deadlines it missed and the limit, and a
+/// summary that is not "completed"; `--max-missed 1` accepts it; a share outside [0, 1] is bad
+/// input (exit 2, one line), from the option and from `[realtime] max_missed`.
+#[test]
+fn an_impossible_deadline_fails_the_run() {
+    let dir = std::env::temp_dir().join(format!("substep-rt-missed-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/default.toml"))
+        .unwrap()
+        .replace("duration = 20.0 ", "duration = 0.01 ")
+        .replace("\ndt = 0.01 ", "\ndt = 0.0001 ")
+        .replace("\nsubsteps = 4 ", "\nsubsteps = 50 ");
+    assert!(
+        cfg.contains("duration = 0.01 ") && cfg.contains("\ndt = 0.0001 ") && cfg.contains("\nsubsteps = 50 "),
+        "the default example changed: adapt this test"
+    );
+    std::fs::write(dir.join("fast.toml"), &cfg).unwrap();
+    let run = |config: &str, extra: &[&str], out: &str| {
+        let mut args = vec!["run", config, "--out", out, "--no-plots", "--realtime"];
+        args.extend_from_slice(extra);
+        Command::new(env!("CARGO_BIN_EXE_substep"))
+            .args(&args)
+            .current_dir(&dir)
+            .output()
+            .unwrap()
+    };
+    let summary = |out: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("summary.json")).unwrap()).unwrap()
+    };
+    let o = run("fast.toml", &[], "missed");
+    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+    let stdout = String::from_utf8_lossy(&o.stdout).to_string();
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.starts_with("error: not real time: "), "{stderr}");
+    assert!(
+        stderr.contains("sub-step deadlines missed") && stderr.contains("1.000 % allowed"),
+        "{stderr}"
+    );
+    assert!(stdout.contains("NOT real time"), "{stdout}");
+    let s = summary("missed");
+    assert_eq!(s["completed"], false);
+    assert_eq!(s["real_time"], false);
+    assert_eq!(s["deadlines"], 5000);
+    assert_eq!(s["max_missed"], 0.01);
+    let share = s["missed_share"].as_f64().unwrap();
+    assert_eq!(share, s["missed_deadlines"].as_f64().unwrap() / 5000.0);
+    assert!(share > 0.5, "2 µs slots: most deadlines missed, got {share}");
+    assert!(s["reason"].as_str().unwrap().starts_with("not real time: "));
+    // The rows are all there: a slow run is a failed run, not a lost one.
+    let rows = std::fs::read_to_string(dir.join("missed/history.csv"))
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(rows, 1 + 101);
+
+    let o = run("fast.toml", &["--max-missed", "1", "--quiet"], "accepted");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = summary("accepted");
+    assert_eq!(s["completed"], true);
+    assert_eq!(s["real_time"], true);
+
+    let o = run("fast.toml", &["--max-missed", "2"], "bad");
+    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("error: --max-missed: must be a share of the sub-step deadlines between 0 and 1"),
+        "{stderr}"
+    );
+    std::fs::write(dir.join("bad.toml"), cfg + "\n[realtime]\nmax_missed = -0.5\n").unwrap();
+    let o = run("bad.toml", &[], "bad");
+    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.starts_with("error: bad.toml: realtime.max_missed: must be a share"),
+        "{stderr}"
+    );
 }

@@ -32,6 +32,7 @@ mod ground_motion;
 mod integrator;
 mod monitor;
 mod output;
+mod realtime;
 mod remote;
 mod safety_limits;
 mod sensors;
@@ -58,6 +59,8 @@ pub use monitor::{MAX_TOKEN_CHARS, MIN_TOKEN_CHARS, MonitorSettings, check_token
 use nalgebra::DMatrix;
 use output::{Format, RawOutput};
 pub use output::{OutputSettings, PLOT_FIGURES, PlotOptions};
+use realtime::RawRealtime;
+pub use realtime::{DEFAULT_MAX_MISSED, RealtimeSettings, check_max_missed, too_many_missed};
 pub use remote::{RemoteDefinition, RemoteProtocol};
 pub(crate) use sensors::RawSensors;
 use serde::Deserialize;
@@ -82,6 +85,8 @@ pub struct TestDefinition {
     pub output: OutputSettings,
     /// `[monitor]`: token and address of the live page (used with `--monitor`).
     pub monitor: MonitorSettings,
+    /// `[realtime]`: the share of missed deadlines a `--realtime` run accepts.
+    pub realtime: RealtimeSettings,
 }
 
 impl TestDefinition {
@@ -145,6 +150,8 @@ pub(crate) struct RawConfig {
     pub(crate) limits: Option<RawRunLimits>,
     #[serde(default)]
     pub(crate) monitor: RawMonitor,
+    #[serde(default)]
+    pub(crate) realtime: RawRealtime,
 }
 
 /// `[limits]`: what one run may ask of the machine (docs/limits.md).
@@ -398,6 +405,7 @@ impl RawConfig {
                 }
             },
             monitor: self.monitor.build()?,
+            realtime: self.realtime.build()?,
         })
     }
 }

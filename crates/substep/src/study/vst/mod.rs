@@ -284,5 +284,6 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
             format: Default::default(),
         },
         monitor: Default::default(),
+        realtime: Default::default(),
     })
 }
