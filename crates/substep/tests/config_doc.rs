@@ -15,6 +15,7 @@ const TABLES: &[(&str, Option<&str>, &str)] = &[
     ("[structure.rayleigh]", None, "### Damping options"),
     ("[structure.modal]", None, "### Damping options"),
     ("[ground_motion]", None, "## `[ground_motion]`"),
+    ("[realtime]", None, "### `[realtime]`"),
     ("[integrator]", None, "## `[integrator]`"),
     ("[substructure]", None, "## `[substructure]`"),
     (
