@@ -62,7 +62,7 @@ pub(crate) fn definition(kind: &str, text: &str, name: &str, base_dir: &str) -> 
             })?;
             let toml = toml::to_string(&value)
                 .map_err(|e| substep::Error::invalid(name, format!("cannot be written as TOML: {e}")))?;
-            TestDefinition::from_toml(&toml, name, Path::new(base_dir))
+            TestDefinition::from_generated_toml(&toml, name, Path::new(base_dir))
         }
         other => Err(substep::Error::invalid("config", format!("unknown kind {other:?}"))),
     }

@@ -111,6 +111,20 @@ def test_toml_text_and_dict_give_the_same_run(root, default_run):
         np.testing.assert_array_equal(r.history.values, by_path.history.values)
 
 
+def test_a_dict_config_error_names_the_key_path(root):
+    """A config given as a dict: the error names the key path in the dict, not a line of the
+    TOML text the package wrote from it."""
+    tomllib = pytest.importorskip("tomllib")
+    config = tomllib.loads((root / "examples" / "default.toml").read_text())
+    config["integrator"]["dtt"] = 0.01
+    with pytest.raises(substep.ConfigError, match=r"^<dict>: integrator\.dtt: unknown field `dtt`"):
+        substep.run(config)
+    del config["integrator"]["dtt"]
+    config["substructure"]["specimen"][0]["stifness"] = 1.0
+    with pytest.raises(substep.ConfigError, match=r"^<dict>: substructure\.specimen\[0\]\.stifness: unknown field"):
+        substep.run(config)
+
+
 def test_monolithic_run_has_no_coupling_arrays(cli, root, tmp_path, monkeypatch):
     monkeypatch.chdir(root)
     r = substep.run("examples/monolithic_tmd.toml")

@@ -110,10 +110,71 @@ impl TestDefinition {
         })
     }
 
+    /// As [`from_toml`](Self::from_toml) for TOML text generated from a nested map (a Python
+    /// dict, JSON): an error of the TOML reader names the key path in the map
+    /// (`<dict>: structure.sdof.mas: unknown field ...`) instead of a line of text the user never
+    /// saw.
+    pub fn from_generated_toml(text: &str, name: &str, base_dir: &Path) -> Result<Self> {
+        Self::from_toml(text, name, base_dir).map_err(|e| match e {
+            Error::File { path, reason } if path == name => match reason
+                .strip_prefix("line ")
+                .and_then(|r| r.split_once(": "))
+                .and_then(|(n, rest)| Some((n.parse::<usize>().ok()?, rest)))
+            {
+                Some((line, rest)) => {
+                    // A tagged table (a specimen) is reported at its array; the unknown key's
+                    // own line is the first one below that defines it.
+                    let line = rest
+                        .strip_prefix("unknown field `")
+                        .and_then(|r| r.split_once('`'))
+                        .and_then(|(key, _)| {
+                            text.lines().enumerate().skip(line.saturating_sub(1)).find_map(|(i, l)| {
+                                let (k, _) = l.split_once('=')?;
+                                (k.trim().trim_matches('"') == key).then_some(i + 1)
+                            })
+                        })
+                        .unwrap_or(line);
+                    Error::invalid(format!("{name}: {}", key_path_at(text, line)), rest)
+                }
+                None => Error::File { path, reason },
+            },
+            other => other,
+        })
+    }
+
     /// Step time `t_i = i·dt` \[s\].
     pub fn time(&self, step: usize) -> f64 {
         step as f64 * self.integrator.dt
     }
+}
+
+/// The dotted key path of line `line` (1-based) of TOML text written by `toml::to_string`:
+/// the table header above it (`[a.b]`; the n-th `[[a.b]]` as `a.b[n]`, 0-based) and the key on
+/// the line (`key = ...`).
+fn key_path_at(text: &str, line: usize) -> String {
+    let mut table = String::new();
+    let mut counts = std::collections::BTreeMap::<String, usize>::new();
+    for (i, l) in text.lines().enumerate().take(line) {
+        let t = l.trim();
+        if let Some(h) = t.strip_prefix("[[").and_then(|h| h.strip_suffix("]]")) {
+            let h = h.trim().to_string();
+            let n = counts.entry(h.clone()).and_modify(|n| *n += 1).or_insert(0);
+            table = format!("{h}[{n}]");
+        } else if let Some(h) = t.strip_prefix('[').and_then(|h| h.strip_suffix(']')) {
+            // a sub-table of an array element stays under that element
+            let h = h.trim();
+            table = match counts.keys().filter(|k| h.starts_with(&format!("{k}."))).max_by_key(|k| k.len()) {
+                Some(k) => format!("{k}[{}]{}", counts[k], &h[k.len()..]),
+                None => h.to_string(),
+            };
+        } else if i + 1 == line
+            && let Some((key, _)) = t.split_once('=')
+        {
+            let key = key.trim().trim_matches('"');
+            return if table.is_empty() { key.to_string() } else { format!("{table}.{key}") };
+        }
+    }
+    if table.is_empty() { "(top level)".to_string() } else { table }
 }
 
 /// `FILE: line L: message` from a toml error (its message may span lines; they are joined).

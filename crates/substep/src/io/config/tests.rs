@@ -558,3 +558,38 @@ fn a_delay_longer_than_the_test_is_refused() {
     // Up to the test's length it is accepted (the specimen moves at the end).
     assert!(parse(&edit("zeta = 0.7", "zeta = 0.7\ndelay = 0.5")).is_ok());
 }
+
+/// A config given as a map (a Python dict) names the key path of a reader error, not a line of
+/// the TOML text written from the map (issue 29).
+#[test]
+fn generated_toml_errors_name_the_key_path() {
+    let value: toml::Value = toml::from_str(BASE).unwrap();
+    let gen_err = |edit: &dyn Fn(&mut toml::Table)| {
+        let mut v = value.clone();
+        edit(v.as_table_mut().unwrap());
+        let text = toml::to_string(&v).unwrap();
+        match TestDefinition::from_generated_toml(&text, "<dict>", Path::new("/nonexistent-dir")) {
+            Ok(_) => panic!("accepted:\n{text}"),
+            Err(e) => e.to_string(),
+        }
+    };
+    let e = gen_err(&|t| {
+        t["integrator"].as_table_mut().unwrap().insert("dtt".into(), 0.01.into());
+    });
+    assert!(e.starts_with("<dict>: integrator.dtt: unknown field `dtt`"), "{e}");
+    let e = gen_err(&|t| {
+        t["integrator"].as_table_mut().unwrap().insert("dt".into(), "fast".into());
+    });
+    assert!(e.starts_with("<dict>: integrator.dt: "), "{e}");
+    let e = gen_err(&|t| {
+        let specimens = t["substructure"].as_table_mut().unwrap()["specimen"].as_array_mut().unwrap();
+        specimens[1].as_table_mut().unwrap().insert("stifness".into(), 1.0.into());
+    });
+    assert!(e.starts_with("<dict>: substructure.specimen[1].stifness: "), "{e}");
+    // Validation errors already name their keys; they are unchanged.
+    let e = gen_err(&|t| {
+        t["integrator"].as_table_mut().unwrap().insert("dt".into(), (-1.0).into());
+    });
+    assert!(e.starts_with("<dict>: integrator.dt: "), "{e}");
+    assert!(!e.contains("line "), "{e}");
+}
