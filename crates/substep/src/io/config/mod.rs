@@ -128,10 +128,13 @@ impl TestDefinition {
                         .strip_prefix("unknown field `")
                         .and_then(|r| r.split_once('`'))
                         .and_then(|(key, _)| {
-                            text.lines().enumerate().skip(line.saturating_sub(1)).find_map(|(i, l)| {
-                                let (k, _) = l.split_once('=')?;
-                                (k.trim().trim_matches('"') == key).then_some(i + 1)
-                            })
+                            text.lines()
+                                .enumerate()
+                                .skip(line.saturating_sub(1))
+                                .find_map(|(i, l)| {
+                                    let (k, _) = l.split_once('=')?;
+                                    (k.trim().trim_matches('"') == key).then_some(i + 1)
+                                })
                         })
                         .unwrap_or(line);
                     Error::invalid(format!("{name}: {}", key_path_at(text, line)), rest)
@@ -163,7 +166,11 @@ fn key_path_at(text: &str, line: usize) -> String {
         } else if let Some(h) = t.strip_prefix('[').and_then(|h| h.strip_suffix(']')) {
             // a sub-table of an array element stays under that element
             let h = h.trim();
-            table = match counts.keys().filter(|k| h.starts_with(&format!("{k}."))).max_by_key(|k| k.len()) {
+            table = match counts
+                .keys()
+                .filter(|k| h.starts_with(&format!("{k}.")))
+                .max_by_key(|k| k.len())
+            {
                 Some(k) => format!("{k}[{}]{}", counts[k], &h[k.len()..]),
                 None => h.to_string(),
             };
@@ -171,10 +178,18 @@ fn key_path_at(text: &str, line: usize) -> String {
             && let Some((key, _)) = t.split_once('=')
         {
             let key = key.trim().trim_matches('"');
-            return if table.is_empty() { key.to_string() } else { format!("{table}.{key}") };
+            return if table.is_empty() {
+                key.to_string()
+            } else {
+                format!("{table}.{key}")
+            };
         }
     }
-    if table.is_empty() { "(top level)".to_string() } else { table }
+    if table.is_empty() {
+        "(top level)".to_string()
+    } else {
+        table
+    }
 }
 
 /// `FILE: line L: message` from a toml error (its message may span lines; they are joined).

@@ -574,21 +574,35 @@ fn generated_toml_errors_name_the_key_path() {
         }
     };
     let e = gen_err(&|t| {
-        t["integrator"].as_table_mut().unwrap().insert("dtt".into(), 0.01.into());
+        t["integrator"]
+            .as_table_mut()
+            .unwrap()
+            .insert("dtt".into(), 0.01.into());
     });
     assert!(e.starts_with("<dict>: integrator.dtt: unknown field `dtt`"), "{e}");
     let e = gen_err(&|t| {
-        t["integrator"].as_table_mut().unwrap().insert("dt".into(), "fast".into());
+        t["integrator"]
+            .as_table_mut()
+            .unwrap()
+            .insert("dt".into(), "fast".into());
     });
     assert!(e.starts_with("<dict>: integrator.dt: "), "{e}");
     let e = gen_err(&|t| {
-        let specimens = t["substructure"].as_table_mut().unwrap()["specimen"].as_array_mut().unwrap();
-        specimens[1].as_table_mut().unwrap().insert("stifness".into(), 1.0.into());
+        let specimens = t["substructure"].as_table_mut().unwrap()["specimen"]
+            .as_array_mut()
+            .unwrap();
+        specimens[1]
+            .as_table_mut()
+            .unwrap()
+            .insert("stifness".into(), 1.0.into());
     });
     assert!(e.starts_with("<dict>: substructure.specimen[1].stifness: "), "{e}");
     // Validation errors already name their keys; they are unchanged.
     let e = gen_err(&|t| {
-        t["integrator"].as_table_mut().unwrap().insert("dt".into(), (-1.0).into());
+        t["integrator"]
+            .as_table_mut()
+            .unwrap()
+            .insert("dt".into(), (-1.0).into());
     });
     assert!(e.starts_with("<dict>: integrator.dt: "), "{e}");
     assert!(!e.contains("line "), "{e}");
