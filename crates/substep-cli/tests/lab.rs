@@ -130,7 +130,7 @@ fn bad_transfer_inputs_exit_2_with_one_line() {
         (
             "servo_without_lumped_specimen",
             edit("kind = \"lumped_sdof\"", "kind = \"linear_sdof\"").replace("mass = 29.13 ", "# mass = 29.13 "),
-            "cfg.toml: substructure.actuator.kind: servo_hydraulic needs exactly one lumped_sdof specimen at coupling DOF 1",
+            "cfg.toml: substructure.actuator.kind: a servo_hydraulic or hydraulic actuator needs exactly one lumped_sdof specimen at coupling DOF 1",
         ),
         (
             "csi",

@@ -63,6 +63,16 @@ const TABLES: &[(&str, Option<&str>, &str)] = &[
         Some("second_order"),
         "### `[substructure.actuator]`",
     ),
+    (
+        "[substructure.actuator]",
+        Some("servo_hydraulic"),
+        "### `[substructure.actuator]`",
+    ),
+    (
+        "[substructure.actuator]",
+        Some("hydraulic"),
+        "### `[substructure.actuator]`",
+    ),
     ("[substructure.sensors]", None, "### `[substructure.sensors]`"),
     ("[substructure.delay_ramp]", None, "### `[substructure.delay_ramp]`"),
     (

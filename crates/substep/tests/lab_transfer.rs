@@ -452,7 +452,7 @@ fn bad_transfer_inputs_name_the_key() {
         ),
         (
             "[substructure.actuator]\nkind = \"servo_hydraulic\"\n",
-            "cfg.toml: substructure.actuator.kind: servo_hydraulic needs exactly one lumped_sdof specimen at coupling DOF 1",
+            "cfg.toml: substructure.actuator.kind: a servo_hydraulic or hydraulic actuator needs exactly one lumped_sdof specimen at coupling DOF 1",
         ),
         (
             "[substructure.sensors]\ndisplacement_noise_power = 1e-12\n",

@@ -59,6 +59,21 @@ impl ServoSpec {
             derivative: Derivative::FiniteDifference,
         }
     }
+    /// The block form of a servo described by its physical parameters (exact derivative: the
+    /// physical velocity feedback).
+    pub fn from_physical(h: &super::servo::HydraulicActuator) -> Self {
+        let [g, a1_beta0, beta1, beta2, a2, a3] = h.servo_coefficients();
+        Self {
+            g,
+            a1_beta0,
+            beta1,
+            beta2,
+            a2,
+            a3,
+            derivative: Derivative::Exact,
+        }
+    }
+
     /// The plant with a specimen of mass `m`, damping `c`, stiffness `k` at the DOF.
     pub fn params(&self, [m, c, k]: [f64; 3]) -> ServoParams {
         ServoParams {
@@ -197,6 +212,11 @@ impl ActuatorSpec {
             )
         })?;
         let params = servo.params(plant);
+        params.validate().map_err(|e| match e {
+            Error::InvalidInput { what, reason } => Error::invalid(what.replace("plant.m_e", "specimen.mass"), reason),
+            other => other,
+        })?;
+        params.check_runnable(dt_inner)?;
         let servo_act = ServoActuator::new(params, servo.derivative, dt_inner).map_err(|e| match e {
             Error::InvalidInput { what, reason } => Error::invalid(
                 what.replace("plant.m_e", "specimen.mass")

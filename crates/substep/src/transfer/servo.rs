@@ -96,6 +96,153 @@ impl ServoParams {
     }
 }
 
+impl ServoParams {
+    /// The plant's state matrix with the exact derivative, states `[p, ṗ, F, x, ẋ]` (the
+    /// command `u` is the input and does not enter it).
+    pub fn state_matrix(&self) -> nalgebra::DMatrix<f64> {
+        let p = self;
+        nalgebra::dmatrix![
+            0.0, 1.0, 0.0, 0.0, 0.0;
+            -p.beta2, -p.beta1, 0.0, -p.a1_beta0, 0.0;
+            1.0, 0.0, -p.a3, 0.0, -p.a2;
+            0.0, 0.0, 0.0, 0.0, 1.0;
+            0.0, 0.0, 1.0 / p.m_e, -p.k_e / p.m_e, -p.c_e / p.m_e
+        ]
+    }
+
+    /// The closed-loop poles of the servo loop with the specimen (exact derivative) \[1/s\].
+    pub fn poles(&self) -> Result<Vec<nalgebra::Complex<f64>>> {
+        crate::linalg::eigenvalues(&self.state_matrix())
+            .ok_or_else(|| Error::numerical("actuator", "the poles of the servo loop could not be computed"))
+    }
+
+    /// Refuse a plant that cannot be run: a servo loop that is unstable with this specimen
+    /// (a pole with `Re ≥ 0`), or one that RK4 at the inner step `h` cannot integrate (a pole
+    /// `λ` with `|R(λh)| > 1`, `R(z) = 1 + z + z²/2 + z³/6 + z⁴/24`); the message names the pole
+    /// and what to change. Errors name `actuator`.
+    pub fn check_runnable(&self, h: f64) -> Result<()> {
+        let poles = self.poles()?;
+        let pole = |z: &nalgebra::Complex<f64>| {
+            format!(
+                "{} {} {}i 1/s",
+                crate::io::format::sig(z.re, 4),
+                if z.im < 0.0 { '-' } else { '+' },
+                crate::io::format::sig(z.im.abs(), 4)
+            )
+        };
+        let specimen = format!(
+            "m = {} kg, c = {} N·s/m, k = {} N/m",
+            crate::io::format::sig(self.m_e, 4),
+            crate::io::format::sig(self.c_e, 4),
+            crate::io::format::sig(self.k_e, 4)
+        );
+        if let Some(z) = poles.iter().find(|z| z.re >= 0.0) {
+            return Err(Error::invalid(
+                "actuator",
+                format!(
+                    "the servo loop with the specimen at its DOF ({specimen}) is unstable: closed-loop pole \
+                     {} has Re >= 0; lower the loop gain (kp or valve_flow of a hydraulic actuator, \
+                     a1_beta0 of servo_hydraulic) or raise the valve's damping",
+                    pole(z)
+                ),
+            ));
+        }
+        let rk4 = |z: nalgebra::Complex<f64>| (1.0 + z + z * z / 2.0 + z * z * z / 6.0 + z * z * z * z / 24.0).norm();
+        if let Some(z) = poles.iter().find(|&&z| rk4(z * h) > 1.0) {
+            // the smallest subdivision of h that makes every pole stable
+            let factor = (1..=1 << 20)
+                .map(|n: u32| n as f64)
+                .find(|&n| poles.iter().all(|&p| rk4(p * (h / n)) <= 1.0))
+                .unwrap_or(f64::INFINITY);
+            return Err(Error::invalid(
+                "actuator",
+                format!(
+                    "the servo plant's pole {} (with the specimen: {specimen}) is too fast for RK4 \
+                     at the inner step {} s; divide the inner step by at least {factor} (substructure.inner_steps)",
+                    pole(z),
+                    crate::io::format::sig(h, 4)
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A servo-hydraulic actuator described by its physical parameters (SI), as a lab knows it:
+/// the servo-controller's proportional gain, the servo-valve's rated flow and dynamics, the
+/// piston area, the oil column's stiffness and the leakage. It maps onto the block form of the
+/// module docs with the exact derivative (docs/config.md, `kind = "hydraulic"`):
+///
+/// ```text
+/// i = k_p (g u − x)                                   valve command (1 = fully open)
+/// q = Q_r ω_v² / (s² + 2ζ_v ω_v s + ω_v²) · i         valve flow [m³/s]
+/// q = A ẋ + (A / k_oil) Ḟ + (C_l / A) F               continuity (P = F/A, k_oil = 4 β_e A² / V)
+/// m_e ẍ + c_e ẋ + k_e x = F                           piston + specimen
+/// ```
+///
+/// so `a₁β₀ = k_oil Q_r k_p ω_v² / A`, `β₁ = 2ζ_v ω_v`, `β₂ = ω_v²`, `a₂ = k_oil`,
+/// `a₃ = k_oil C_l / A²` ([`Self::servo_coefficients`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HydraulicActuator {
+    /// Piston area `A` \[m²\].
+    pub piston_area: f64,
+    /// Oil column stiffness `k_oil` \[N/m\] (`4 β_e A² / V`, [`Self::oil_stiffness`]).
+    pub oil_stiffness: f64,
+    /// Leakage coefficient `C_l` across the piston \[m³/(s·Pa)\].
+    pub leakage: f64,
+    /// Rated flow `Q_r` of the servo-valve at full opening \[m³/s\].
+    pub valve_flow: f64,
+    /// Servo-valve natural frequency `f_v` \[Hz\] and damping ratio `ζ_v`.
+    pub valve_frequency_hz: f64,
+    pub valve_damping: f64,
+    /// Proportional gain `k_p` of the servo-controller \[1/m\]: valve opening per metre of
+    /// displacement error.
+    pub kp: f64,
+    /// Gain `g` on the command.
+    pub command_gain: f64,
+}
+
+impl HydraulicActuator {
+    /// `4 β_e A² / V`: the stiffness of the two oil columns of a symmetric actuator with its
+    /// piston centred (bulk modulus `β_e` \[Pa\], total oil volume `V` \[m³\]).
+    pub fn oil_stiffness(bulk_modulus: f64, piston_area: f64, oil_volume: f64) -> f64 {
+        4.0 * bulk_modulus * piston_area * piston_area / oil_volume
+    }
+
+    /// Every parameter finite and positive (leakage: non-negative); errors name
+    /// `actuator.KEY` with the config's key names.
+    pub fn validate(&self) -> Result<()> {
+        for (key, v) in [
+            ("piston_area", self.piston_area),
+            ("oil_stiffness", self.oil_stiffness),
+            ("valve_flow", self.valve_flow),
+            ("valve_frequency", self.valve_frequency_hz),
+            ("valve_damping", self.valve_damping),
+            ("kp", self.kp),
+            ("command_gain", self.command_gain),
+        ] {
+            crate::error::require_positive(&format!("actuator.{key}"), v)?;
+        }
+        crate::error::require_non_negative("actuator.leakage", self.leakage)?;
+        Ok(())
+    }
+
+    /// `(g, a₁β₀, β₁, β₂, a₂, a₃)` of the block form (struct docs).
+    pub fn servo_coefficients(&self) -> [f64; 6] {
+        let w = 2.0 * std::f64::consts::PI * self.valve_frequency_hz;
+        let k = self.oil_stiffness;
+        let a = self.piston_area;
+        [
+            self.command_gain,
+            k * self.valve_flow * self.kp * w * w / a,
+            2.0 * self.valve_damping * w,
+            w * w,
+            k,
+            k * self.leakage / (a * a),
+        ]
+    }
+}
+
 /// How the CSI feedback differentiates the specimen displacement.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Derivative {

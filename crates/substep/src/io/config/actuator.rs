@@ -3,7 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::transfer::lti::{StateSpace, TransferFunction};
-use crate::transfer::servo::Derivative;
+use crate::transfer::servo::{Derivative, HydraulicActuator};
 use crate::transfer::{ActuatorSpec, Dynamics, ServoSpec};
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
@@ -58,6 +58,32 @@ pub(crate) enum RawActuator {
         #[serde(default)]
         delay: f64,
     },
+    /// A servo-hydraulic actuator from physical parameters ([`HydraulicActuator`]).
+    Hydraulic {
+        piston_area: f64,
+        oil_stiffness: Option<f64>,
+        bulk_modulus: Option<f64>,
+        oil_volume: Option<f64>,
+        #[serde(default)]
+        leakage: f64,
+        valve_flow: f64,
+        valve_frequency: f64,
+        #[serde(default = "default_valve_damping")]
+        valve_damping: f64,
+        kp: f64,
+        #[serde(default = "one")]
+        command_gain: f64,
+        #[serde(default)]
+        delay: f64,
+    },
+}
+
+fn default_valve_damping() -> f64 {
+    0.7
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl RawActuator {
@@ -158,6 +184,50 @@ impl RawActuator {
                         a3: a3.unwrap_or(base.a3),
                         derivative,
                     }),
+                    delay: *delay,
+                }
+            }
+            RawActuator::Hydraulic {
+                piston_area,
+                oil_stiffness,
+                bulk_modulus,
+                oil_volume,
+                leakage,
+                valve_flow,
+                valve_frequency,
+                valve_damping,
+                kp,
+                command_gain,
+                delay,
+            } => {
+                let oil_stiffness = match (oil_stiffness, bulk_modulus, oil_volume) {
+                    (Some(k), None, None) => *k,
+                    (None, Some(b), Some(v)) => {
+                        crate::error::require_positive("actuator.bulk_modulus", *b)?;
+                        crate::error::require_positive("actuator.oil_volume", *v)?;
+                        HydraulicActuator::oil_stiffness(*b, *piston_area, *v)
+                    }
+                    _ => {
+                        return Err(Error::invalid(
+                            "actuator.oil_stiffness",
+                            "give either oil_stiffness [N/m] or both bulk_modulus [Pa] and oil_volume [m^3] \
+                             (k_oil = 4 bulk_modulus piston_area^2 / oil_volume)",
+                        ));
+                    }
+                };
+                let h = HydraulicActuator {
+                    piston_area: *piston_area,
+                    oil_stiffness,
+                    leakage: *leakage,
+                    valve_flow: *valve_flow,
+                    valve_frequency_hz: *valve_frequency,
+                    valve_damping: *valve_damping,
+                    kp: *kp,
+                    command_gain: *command_gain,
+                };
+                h.validate()?;
+                ActuatorSpec {
+                    dynamics: Dynamics::ServoHydraulic(ServoSpec::from_physical(&h)),
                     delay: *delay,
                 }
             }

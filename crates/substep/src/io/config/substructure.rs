@@ -344,7 +344,7 @@ impl RawSubstructure {
                     return Err(Error::invalid(
                         format!("{p}actuator.kind"),
                         format!(
-                            "servo_hydraulic needs exactly one lumped_sdof specimen at coupling DOF {} (its mass, damping and stiffness are part of the plant)",
+                            "a servo_hydraulic or hydraulic actuator needs exactly one lumped_sdof specimen at coupling DOF {} (its mass, damping and stiffness are part of the plant)",
                             c + 1
                         ),
                     ));
