@@ -76,20 +76,43 @@ fn scripts_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../benches/compare"))
 }
 
-/// `SUBSTEP_PYTHON`, else the project's `.venv` (see docs/performance.md), else `python3`.
-fn python() -> String {
+/// The Pythons to try for a peer: `SUBSTEP_PYTHON` alone when set; else the project's `.venv`
+/// (see docs/performance.md) when there is one, then `python3` — so a peer whose packages are
+/// installed system-wide (SciPy from Debian, openseespy with `pip install --user`) is found
+/// even when the `.venv` lacks them.
+fn pythons() -> Vec<String> {
     if let Ok(p) = std::env::var("SUBSTEP_PYTHON") {
-        return p;
+        return vec![p];
     }
-    for venv in [
+    let mut found: Vec<String> = [
         ".venv/bin/python",
         concat!(env!("CARGO_MANIFEST_DIR"), "/../../.venv/bin/python"),
-    ] {
-        if Path::new(venv).is_file() {
-            return venv.to_string();
+    ]
+    .iter()
+    .filter(|v| Path::new(v).is_file())
+    .take(1)
+    .map(|v| v.to_string())
+    .collect();
+    found.push("python3".into());
+    found
+}
+
+/// [`run_peer`] with each of `pythons` until one runs the peer (not a skip); the Python that
+/// did, or every skip reason joined.
+fn run_peer_any(
+    pythons: &[String],
+    dir: &Path,
+    p: &Peer,
+    extra: &[String],
+) -> std::result::Result<(String, Value), String> {
+    let mut reasons = Vec::new();
+    for python in pythons {
+        match run_peer(python, dir, p, extra) {
+            Ok(v) => return Ok((python.clone(), v)),
+            Err(reason) => reasons.push(format!("{python}: {reason}")),
         }
     }
-    "python3".into()
+    Err(reasons.join("; "))
 }
 
 /// A peer: a display name, its script and the arguments that describe the model.
@@ -205,7 +228,7 @@ pub fn compare(args: &BenchArgs) -> Result<()> {
 
     // Agreement first: the same response after the same steps, or no timing.
     let (ours_roof, _) = monolithic_run(m, roof, args.two_cores, CHECK_STEPS, 0, 0)?;
-    let python = python();
+    let candidates = pythons();
     let dir = scripts_dir();
     let check = [
         "--check-steps".to_string(),
@@ -214,8 +237,12 @@ pub fn compare(args: &BenchArgs) -> Result<()> {
         "0".into(),
     ];
     let mut tools: Vec<ToolResult> = Vec::new();
+    // The Python that ran each peer's check runs its timed rounds.
+    let mut peer_python: Vec<String> = Vec::new();
     for p in &peers {
-        let r = match run_peer(&python, &dir, p, &check) {
+        let outcome = run_peer_any(&candidates, &dir, p, &check);
+        peer_python.push(outcome.as_ref().map(|(python, _)| python.clone()).unwrap_or_default());
+        let r = match outcome.map(|(_, v)| v) {
             Err(reason) => ToolResult {
                 tool: p.tool.into(),
                 status: "skipped".into(),
@@ -282,7 +309,7 @@ pub fn compare(args: &BenchArgs) -> Result<()> {
             if tools[k].status != "agreed" {
                 continue;
             }
-            match run_peer(&python, &dir, p, &timed) {
+            match run_peer(&peer_python[k], &dir, p, &timed) {
                 Ok(v) => {
                     theirs_rounds[k].push(median(&floats(&v, "cpu_us_per_batch")));
                     tools[k].detail = v;
