@@ -102,7 +102,14 @@ fn compare_skips_missing_tools_cleanly() {
     for t in v["tools"].as_array().unwrap() {
         assert_eq!(t["status"], "skipped", "{t}");
         assert!(t["cpu_us_per_step"].is_null(), "{t}");
-        assert!(t["reason"].as_str().unwrap().starts_with("skipped: cannot run"), "{t}");
+        // each Python tried is named with its reason (SUBSTEP_PYTHON: the only one)
+        assert!(
+            t["reason"]
+                .as_str()
+                .unwrap()
+                .starts_with("/nonexistent/python3: skipped: cannot run"),
+            "{t}"
+        );
     }
     // --steps is honoured, not rounded up: it must split into the timed batches.
     let out = substep(&["bench", "--compare", "--compare-dofs", "200", "--steps", "12"]);
