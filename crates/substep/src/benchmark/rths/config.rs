@@ -5,7 +5,7 @@
 //! [controller]
 //! kind = "arx"                  # none | sample | arx | polynomial | inverse_fir (--controller wins)
 //! converters = true             # the benchmark's A/D and D/A (±3.8, q = 2^-18)
-//! feedforward = { num = [50.83163360273612, 8570.397339444286], den = [1.0, 8570.397339444286] }
+//! # feedforward = { num = [...], den = [...] }  # the shaping filter of kind none | sample only
 //! feedback = { num = [2.0, 95.0], den = [1.0, 0.0] }   # continuous TFs in s, Tustin at 1/4096 s
 //! no_feedforward = false        # drop the preset's feedforward (sample: G_T)
 //! no_feedback = false           # drop the preset's feedback (sample: G_C)
