@@ -58,9 +58,12 @@ pub struct RthsArgs {
     /// Output directory for benchmark.md and the plots
     #[arg(long, value_name = "DIR", default_value = "results")]
     pub out: PathBuf,
-    /// No PNG plots
+    /// No plots
     #[arg(long)]
     pub no_plots: bool,
+    /// Figure format: png, svg or pdf (vector, for papers)
+    #[arg(long, value_enum, value_name = "FORMAT", default_value = "png")]
+    pub plot_format: crate::plots::PlotFormat,
 }
 
 pub fn benchmark(args: &BenchmarkArgs) -> Result<()> {
@@ -270,7 +273,7 @@ fn plots(base: &RthsInput, cases: &[Case], dir: &Path) -> Result<Vec<PathBuf>> {
         let n = hist.desired.len();
         let c = case.number;
         let path = dir.join(format!("tracking_case{c}.png"));
-        line_chart(
+        let written = line_chart(
             &path,
             &format!("case {c}: desired vs measured actuator displacement"),
             "t [s]",
@@ -280,7 +283,7 @@ fn plots(base: &RthsInput, cases: &[Case], dir: &Path) -> Result<Vec<PathBuf>> {
                 curve("measured x_m", decimate(h, 1, &hist.measured, 0, n, 8000), 1e3),
             ],
         )?;
-        files.push(path);
+        files.push(written);
         // Zoom: 0.5 s around the largest desired displacement.
         let peak = (0..n)
             .max_by(|&a, &b| hist.desired[a].abs().total_cmp(&hist.desired[b].abs()))
@@ -288,7 +291,7 @@ fn plots(base: &RthsInput, cases: &[Case], dir: &Path) -> Result<Vec<PathBuf>> {
         let half = (0.25 / h) as usize;
         let (from, to) = (peak.saturating_sub(half), (peak + half).min(n));
         let path = dir.join(format!("tracking_zoom_case{c}.png"));
-        line_chart(
+        let written = line_chart(
             &path,
             &format!("case {c}: tracking, 0.5 s around the peak"),
             "t [s]",
@@ -298,7 +301,7 @@ fn plots(base: &RthsInput, cases: &[Case], dir: &Path) -> Result<Vec<PathBuf>> {
                 curve("measured x_m", decimate(h, 1, &hist.measured, from, to, 4000), 1e3),
             ],
         )?;
-        files.push(path);
+        files.push(written);
         // Floors: 3 s around the peak of the top floor's reference (the whole record is too dense).
         let stride = hist.floor_stride;
         let m = hist.floors[0].len();
@@ -323,14 +326,14 @@ fn plots(base: &RthsInput, cases: &[Case], dir: &Path) -> Result<Vec<PathBuf>> {
             ));
         }
         let path = dir.join(format!("floors_case{c}.png"));
-        line_chart(
+        let written = line_chart(
             &path,
             &format!("case {c}: floor displacements vs the exact reference (3 s around the peak)"),
             "t [s]",
             "displacement [mm]",
             &curves,
         )?;
-        files.push(path);
+        files.push(written);
     }
     Ok(files)
 }
@@ -355,6 +358,7 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     let files = if args.no_plots {
         Vec::new()
     } else {
+        crate::plots::set_format(args.plot_format);
         let base = setup.base.with_k_sub(setup.k_subs.first().copied().flatten());
         plots(&base, &setup.cases, &args.out)?
     };

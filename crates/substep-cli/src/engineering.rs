@@ -100,8 +100,8 @@ impl ResponseWriter {
                         curve("coupling E_C", 7),
                     ]))
                     .panel(
-                        Panel::new("time t [s]", "E_K + E_S + E_D − E_I − E_C [J]")
-                            .curves(vec![curve("residual E_err", 8)])
+                        Panel::new("time t [s]", "residual [J]")
+                            .curves(vec![curve("E_K + E_S + E_D − E_I − E_C", 8)])
                             .height(0.35),
                     ),
             ),
@@ -127,6 +127,7 @@ impl ResponseWriter {
                     .columns(2)
                     .panel(
                         Panel::new("peak drift |δ| [mm]", "storey")
+                            .integer_y()
                             .curves(vec![Curve {
                                 label: "drift".into(),
                                 x: drift,
@@ -136,6 +137,7 @@ impl ResponseWriter {
                     )
                     .panel(
                         Panel::new("peak storey shear |V| [kN]", "storey")
+                            .integer_y()
                             .curves(vec![Curve {
                                 label: "shear".into(),
                                 x: shear,

@@ -258,7 +258,7 @@ impl PlotRecorder {
             file: "hysteresis",
             figure: one(
                 &format!("Specimen force vs displacement, t = {w0:.2} … {w1:.2} s"),
-                "specimen displacement d_m [m] (measured)",
+                "measured specimen displacement d_m [m]",
                 "force on the specimen −f_c [N]",
                 hyst,
             ),
@@ -315,7 +315,7 @@ impl PlotRecorder {
                 )
                 .panel(
                     Panel::new(
-                        &format!("time t [s] (zoom on {z0:.2} … {z1:.2} s)"),
+                        &format!("time t (zoom on {z0:.2} … {z1:.2} s) [s]"),
                         "displacement u [m]",
                     )
                     .curves(curves)

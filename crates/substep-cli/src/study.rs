@@ -26,6 +26,9 @@ pub struct StudyArgs {
     /// Do not draw figures
     #[arg(long)]
     pub no_plots: bool,
+    /// Figure format: png, svg or pdf (vector, for papers)
+    #[arg(long, value_enum, value_name = "FORMAT", default_value = "png")]
+    pub plot_format: crate::plots::PlotFormat,
 }
 
 pub fn study(args: &StudyArgs) -> Result<()> {
@@ -62,6 +65,7 @@ pub fn study(args: &StudyArgs) -> Result<()> {
         .with_context(|| format!("cannot write {}", csv_path.display()))?;
     let mut outputs = vec![csv_path];
     if !args.no_plots {
+        crate::plots::set_format(args.plot_format);
         outputs.extend(figures(&study, &rows, &args.out)?);
     }
     let failed: Vec<&Row> = rows.iter().filter(|r| !r.completed).collect();
@@ -93,6 +97,33 @@ pub fn study(args: &StudyArgs) -> Result<()> {
     Ok(())
 }
 
+/// `name [unit]`, or the name alone when the unit is not known.
+fn with_unit(name: &str, unit: &str) -> String {
+    if unit.is_empty() {
+        name.to_string()
+    } else {
+        format!("{name} [{unit}]")
+    }
+}
+
+/// The SI unit of a config key a study varies, from its last component (docs/config.md).
+fn parameter_unit(key: &str) -> &'static str {
+    let last = key.rsplit('.').next().unwrap_or(key);
+    match last {
+        "delay" | "dt" | "time_constant" | "duration" | "lead" | "noise_sample_time" => "s",
+        "stiffness" | "k_e" => "N/m",
+        "damping" | "c_e" => "N·s/m",
+        "mass" | "m_e" => "kg",
+        "frequency" | "f0" | "f1" | "valve_frequency" => "Hz",
+        "amplitude" | "pga" => "m/s²",
+        "force_noise" | "slip_force" => "N",
+        "displacement_noise" | "yield_displacement" => "m",
+        "zeta" | "scale" | "forgetting_factor" | "alpha" | "valve_damping" => "–",
+        "substeps" | "inner_steps" | "seed" | "n_u" | "k_lag" | "span" | "order" | "taps" => "–",
+        _ => "",
+    }
+}
+
 /// One figure per metric, a panel per numeric parameter: every completed run as a point.
 fn figures(study: &Study, rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
     let params = study.parameters();
@@ -115,11 +146,17 @@ fn figures(study: &Study, rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
             if x.iter().all(|v| v.is_nan()) || y.iter().all(|v| v.is_nan()) {
                 continue;
             }
-            fig = fig.panel(Panel::new(name, metric.name()).curves(vec![Curve {
-                label: String::new(),
-                x,
-                y,
-            }]));
+            fig = fig.panel(
+                Panel::new(
+                    &with_unit(name, parameter_unit(name)),
+                    &with_unit(metric.name(), metric.unit()),
+                )
+                .curves(vec![Curve {
+                    label: String::new(),
+                    x,
+                    y,
+                }]),
+            );
             panels += 1;
         }
         if panels == 0 {

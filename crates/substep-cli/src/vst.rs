@@ -25,9 +25,12 @@ pub struct VstArgs {
     /// Pure delay of the actuator [s]
     #[arg(long, default_value_t = 0.010)]
     pub delay: f64,
-    /// No PNG plots
+    /// No plots
     #[arg(long)]
     pub no_plots: bool,
+    /// Figure format: png, svg or pdf (vector, for papers)
+    #[arg(long, value_enum, value_name = "FORMAT", default_value = "png")]
+    pub plot_format: crate::plots::PlotFormat,
     /// No progress output
     #[arg(long, short)]
     pub quiet: bool,
@@ -230,8 +233,7 @@ pub fn plots(st: &Study, dir: &Path) -> Result<Vec<PathBuf>> {
     let runs = ["none", "ef_arx", "pl_arx", "both"];
     let mut chart = |file: &str, title: &str, xl: &str, yl: &str, curves: Vec<Curve>| -> Result<()> {
         let path = dir.join(file);
-        line_chart(&path, title, xl, yl, &curves)?;
-        files.push(path);
+        files.push(line_chart(&path, title, xl, yl, &curves)?);
         Ok(())
     };
     // Time histories against the reference, in a window around the first-mode resonance.
@@ -404,6 +406,7 @@ pub fn vst(args: &VstArgs) -> Result<()> {
     let md = markdown(&study);
     let mut files = vec![write("vst.md", &md)?, write("vst.csv", &csv(&study))?];
     if !args.no_plots {
+        crate::plots::set_format(args.plot_format);
         files.extend(plots(&study, &args.out)?);
     }
     if !args.quiet {

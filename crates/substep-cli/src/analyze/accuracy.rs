@@ -185,8 +185,8 @@ pub(super) fn accuracy_plots(
                 "dynamic amplification of the primary DOF, k_sub = {k}, η_p = {}",
                 eta_ps[0]
             ),
-            "frequency ratio ω_exc/ω",
-            "h = |u₁| ω²/|a_g|",
+            "frequency ratio ω_exc/ω [–]",
+            "h = |u₁| ω²/|a_g| [–]",
             &curves,
         )?;
     }

@@ -79,7 +79,7 @@ fn draw_heatmap<DB: DrawingBackend>(
     };
     root.fill(&WHITE).map_err(e)?;
     let (w, _) = root.dim_in_pixel();
-    let (main, bar) = root.split_horizontally(w - px(150.0));
+    let (main, bar) = root.split_horizontally(w - px(160.0));
     let (x0, x1) = (half(xs, 0).0, half(xs, xs.len() - 1).1);
     let (y0, y1) = (half(ys, 0).0, half(ys, ys.len() - 1).1);
     let mut chart = ChartBuilder::on(&main)
@@ -89,7 +89,8 @@ fn draw_heatmap<DB: DrawingBackend>(
         .y_label_area_size(px(70.0))
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(e)?;
-    let (xsc, ysc) = (x0.abs().max(x1.abs()), y0.abs().max(y1.abs()));
+    let x_ticks = super::TickFormat::new(x0, x1, 1.0, false);
+    let y_ticks = super::TickFormat::new(y0, y1, 1.0, false);
     chart
         .configure_mesh()
         .disable_mesh()
@@ -97,8 +98,8 @@ fn draw_heatmap<DB: DrawingBackend>(
         .y_desc(y_label)
         .label_style(("sans-serif", 14.0 * s))
         .axis_desc_style(("sans-serif", 16.0 * s))
-        .x_label_formatter(&|v| tick(*v, xsc))
-        .y_label_formatter(&|v| tick(*v, ysc))
+        .x_label_formatter(&|v| x_ticks.label(*v))
+        .y_label_formatter(&|v| y_ticks.label(*v))
         .draw()
         .map_err(e)?;
     chart
@@ -125,12 +126,12 @@ fn draw_heatmap<DB: DrawingBackend>(
         .margin_bottom(px(62.0))
         .margin_right(px(10.0))
         .y_label_area_size(px(0.0))
-        .right_y_label_area_size(px(78.0))
+        .right_y_label_area_size(px(86.0))
         .build_cartesian_2d(0.0..1.0, r_lo..r_hi)
         .map_err(e)?
         .set_secondary_coord(0.0..1.0, r_lo..r_hi);
     cb.configure_secondary_axes()
-        .y_desc("spectral radius ρ")
+        .y_desc("spectral radius ρ [–]")
         .label_style(("sans-serif", 13.0 * s))
         .axis_desc_style(("sans-serif", 15.0 * s))
         .y_labels(9)

@@ -38,8 +38,12 @@ const COLORS: [RGBColor; 12] = [
     RGBColor(0, 0, 128),
     RGBColor(128, 128, 0),
 ];
-/// Width reserved right of each panel for its legend [px at scale 1].
-const LEGEND_WIDTH: u32 = 200;
+/// Width reserved right of a panel for its legend [px at scale 1]: the longest label at about
+/// 0.6 em per character of the 14 px legend font, plus the line sample; 120 to 380 px.
+fn legend_width(p: &Panel) -> u32 {
+    let chars = p.curves.iter().map(|c| c.label.chars().count()).max().unwrap_or(0);
+    (50.0 + 8.6 * chars as f64).clamp(120.0, 380.0) as u32
+}
 
 /// Output format of every figure written by this process.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -121,6 +125,8 @@ pub struct Panel {
     pub x_window: Option<(f64, f64)>,
     /// Shade this x interval (where a zoom panel looks).
     pub highlight: Option<(f64, f64)>,
+    /// The y axis counts things (storeys, runs): ticks only at whole numbers.
+    pub integer_y: bool,
 }
 
 impl Panel {
@@ -134,7 +140,12 @@ impl Panel {
             height: 1.0,
             x_window: None,
             highlight: None,
+            integer_y: false,
         }
+    }
+    pub fn integer_y(mut self) -> Self {
+        self.integer_y = true;
+        self
     }
     pub fn curves(mut self, c: Vec<Curve>) -> Self {
         self.curves = c;
@@ -216,16 +227,113 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - 0.05 * span, hi + 0.05 * span)
 }
 
-/// Tick labels: fixed point for moderate magnitudes, exponent notation otherwise.
-fn tick(v: f64, scale: f64) -> String {
-    if v.abs() <= 1e-9 * scale {
-        "0".into()
-    } else if (1e-4..1e5).contains(&scale) {
-        let digits = (1.0 - scale.log10().floor()).clamp(0.0, 6.0) as usize;
-        format!("{v:.digits$}")
-    } else {
-        format!("{v:.1e}")
+/// How one axis writes its ticks: the values divided by `factor` (an SI prefix, see
+/// [`engineering_unit`]) with enough digits that neighbouring ticks differ.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TickFormat {
+    factor: f64,
+    /// Decimals of fixed-point labels, or `None` for exponent notation with `mantissa` digits.
+    decimals: Option<usize>,
+    mantissa: usize,
+    /// Only whole numbers get a label.
+    integer: bool,
+}
+
+/// Tick spacing plotters uses for an axis of this span (at most ~10 labels, 1-2-5 steps),
+/// estimated from above so that labels never need more digits than this gives.
+fn tick_step(span: f64) -> f64 {
+    let raw = span / 12.0;
+    let p = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * p)
+        .find(|&st| st >= raw)
+        .unwrap_or(10.0 * p)
+}
+
+impl TickFormat {
+    /// For an axis from `lo` to `hi` (already divided by `factor`).
+    fn new(lo: f64, hi: f64, factor: f64, integer: bool) -> Self {
+        let magnitude = lo.abs().max(hi.abs());
+        let step = tick_step((hi - lo).abs().max(magnitude * 1e-12).max(1e-300));
+        let (decimals, mantissa) = if (1e-4..1e5).contains(&magnitude) {
+            (Some((-step.log10().floor()).clamp(0.0, 8.0) as usize), 0)
+        } else {
+            (
+                None,
+                (magnitude.log10().floor() - step.log10().floor()).clamp(1.0, 6.0) as usize,
+            )
+        };
+        Self {
+            factor,
+            decimals,
+            mantissa,
+            integer,
+        }
     }
+
+    fn label(&self, v: f64) -> String {
+        let v = v / self.factor;
+        if self.integer {
+            return if (v - v.round()).abs() < 1e-6 {
+                format!("{}", v.round() as i64)
+            } else {
+                String::new()
+            };
+        }
+        let step_zero = match self.decimals {
+            Some(d) => 0.5 * 10f64.powi(-(d as i32)),
+            None => 0.0,
+        };
+        if v == 0.0 || v.abs() < step_zero * 1e-6 {
+            return "0".into();
+        }
+        match self.decimals {
+            Some(d) => {
+                let t = format!("{v:.d$}");
+                // "-0.00" from a value that rounds to zero
+                if t.trim_start_matches('-').chars().all(|c| c == '0' || c == '.') {
+                    "0".into()
+                } else {
+                    t
+                }
+            }
+            None => format!("{v:.*e}", self.mantissa),
+        }
+    }
+}
+
+/// An SI prefix for the unit in brackets at the end of `label` (`"force [N]"`) so that the
+/// axis' largest value `max_abs` reads between 1 and 1000: `("force [kN]", 1e3)`. Units that
+/// take prefixes here: lengths (down to nm; never km), forces, energies, powers, pressures,
+/// stiffnesses and damping coefficients. Any other label is returned unchanged with factor 1.
+pub fn engineering_unit(label: &str, max_abs: f64) -> (String, f64) {
+    let unchanged = (label.to_string(), 1.0);
+    let Some(open) = label.rfind('[') else {
+        return unchanged;
+    };
+    let Some(unit) = label[open + 1..].strip_suffix(']') else {
+        return unchanged;
+    };
+    let (lowest, highest) = match unit {
+        "m" => (-9, 0),
+        "N" | "J" | "W" | "Pa" | "N/m" | "N·s/m" | "N s/m" | "N·m" => (-3, 9),
+        _ => return unchanged,
+    };
+    if !(max_abs.is_finite() && max_abs > 0.0) {
+        return unchanged;
+    }
+    let k = ((max_abs.log10() / 3.0).floor() as i32 * 3).clamp(lowest, highest);
+    let prefix = match k {
+        -9 => "n",
+        -6 => "µ",
+        -3 => "m",
+        3 => "k",
+        6 => "M",
+        9 => "G",
+        _ => return unchanged,
+    };
+    (format!("{}[{prefix}{unit}]", &label[..open]), 10f64.powi(k))
 }
 
 /// A log-axis tick (the axis holds `log10 x`).
@@ -310,28 +418,45 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, s: f
     let labelled = p.curves.iter().any(|c| !c.label.is_empty());
     let (plot_area, legend_area) = if labelled && legend_right {
         let (w, _) = area.dim_in_pixel();
-        let (a, b) = area.split_horizontally(w.saturating_sub(px(LEGEND_WIDTH as f64)));
+        let (a, b) = area.split_horizontally(w.saturating_sub(px(legend_width(p) as f64)));
         (a, Some(b))
     } else {
         (area.clone(), None)
     };
-    let (xs, ys) = (x0.abs().max(x1.abs()), y0.abs().max(y1.abs()));
+    // Engineering units (kN, mm) and ticks with as many digits as their spacing needs.
+    let (x_label, x_factor) = if p.log_x {
+        (p.x_label.clone(), 1.0)
+    } else {
+        engineering_unit(&p.x_label, x0.abs().max(x1.abs()))
+    };
+    let (y_label, y_factor) = engineering_unit(&p.y_label, y0.abs().max(y1.abs()));
+    let x_ticks = TickFormat::new(x0 / x_factor, x1 / x_factor, x_factor, false);
+    let y_ticks = TickFormat::new(y0 / y_factor, y1 / y_factor, y_factor, p.integer_y);
+    // Room for the longest y tick label (about 0.6 em per character) and the axis title.
+    let y_chars = [y0, y1, 0.5 * (y0 + y1)]
+        .iter()
+        .map(|&v| y_ticks.label(v).chars().count())
+        .max()
+        .unwrap_or(4);
+    let y_area = (30.0 + 8.6 * y_chars as f64).clamp(56.0, 140.0);
     let mut chart = ChartBuilder::on(&plot_area)
         .margin(px(10.0))
         .x_label_area_size(px(48.0))
-        .y_label_area_size(px(84.0))
+        .y_label_area_size(px(y_area))
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(e)?;
     let log_x = p.log_x;
-    let x_fmt = move |v: &f64| if log_x { log_tick(*v) } else { tick(*v, xs) };
+    let x_fmt = move |v: &f64| if log_x { log_tick(*v) } else { x_ticks.label(*v) };
     chart
         .configure_mesh()
-        .x_desc(p.x_label.as_str())
-        .y_desc(p.y_label.as_str())
+        .x_desc(x_label.as_str())
+        .y_desc(y_label.as_str())
         .label_style(("sans-serif", 14.0 * s))
         .axis_desc_style(("sans-serif", 16.0 * s))
         .x_label_formatter(&x_fmt)
-        .y_label_formatter(&|v| tick(*v, ys))
+        .y_label_formatter(&|v| y_ticks.label(*v))
+        // panels side by side are half as wide: half as many x labels
+        .x_labels(if legend_right { 10 } else { 5 })
         .bold_line_style(RGBColor(215, 215, 215).stroke_width(px(1.0)))
         .light_line_style(RGBColor(242, 242, 242).stroke_width(px(1.0)))
         .max_light_lines(if p.height < 0.8 { 1 } else { 4 })
@@ -529,13 +654,13 @@ pub fn figure(path: &Path, fig: &Figure) -> Result<PathBuf> {
 }
 
 /// Draw `curves` into one panel at `path` (1100×560 px; the extension follows the current
-/// format, see [`output_path`]).
-pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, curves: &[Curve]) -> Result<()> {
+/// format, see [`output_path`]); returns the written path.
+pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, curves: &[Curve]) -> Result<PathBuf> {
     let fig = Figure {
         size: Some((1100, 560)),
         ..Figure::new(title).panel(Panel::new(x_label, y_label).curves(curves.to_vec()))
     };
-    figure(path, &fig).map(|_| ())
+    figure(path, &fig)
 }
 
 #[cfg(test)]
@@ -544,13 +669,35 @@ mod tests {
 
     #[test]
     fn ticks_and_ranges() {
-        assert_eq!(tick(0.0, 1.0), "0");
-        assert_eq!(tick(-1e-17, 0.1), "0");
-        assert_eq!(tick(0.5, 1.0), "0.5");
-        assert_eq!(tick(0.06, 0.07), "0.060");
-        assert_eq!(tick(400.0, 750.0), "400");
-        assert_eq!(tick(2.0e-4, 3.0e-4), "0.00020");
-        assert_eq!(tick(2.0e-5, 3.0e-5), "2.0e-5");
+        let t = |lo: f64, hi: f64, v: f64| TickFormat::new(lo, hi, 1.0, false).label(v);
+        assert_eq!(t(-1.0, 1.0, 0.0), "0");
+        assert_eq!(t(-0.1, 0.1, -1e-17), "0");
+        assert_eq!(t(-1.0, 1.0, 0.5), "0.5");
+        assert_eq!(t(0.0, 750.0, 400.0), "400");
+        assert_eq!(t(0.0, 3.0e-4, 2.0e-4), "0.00020");
+        assert_eq!(t(0.0, 3.0e-5, 2.0e-5), "2.0e-5");
+        // A zoom window of 0.6 s around t = 7.5 s: ticks every 0.05 s must read apart (the
+        // old magnitude-based format wrote 7.3, 7.3, 7.5).
+        let labels: Vec<String> = (0..12).map(|k| t(7.2, 7.8, 7.25 + 0.05 * k as f64)).collect();
+        let unique: std::collections::BTreeSet<&String> = labels.iter().collect();
+        assert_eq!(unique.len(), labels.len(), "{labels:?}");
+        assert_eq!(labels[..3], ["7.25", "7.30", "7.35"]);
+        // exponent notation with the digits the spacing needs
+        assert_eq!(t(7.5e5, 8.1e5, 7.55e5), "7.55e5");
+        // whole numbers only on a counting axis
+        let storey = TickFormat::new(0.8, 3.2, 1.0, true);
+        assert_eq!((storey.label(2.0), storey.label(2.5)), ("2".to_string(), String::new()));
+        // engineering units
+        assert_eq!(engineering_unit("force [N]", 5.0e5), ("force [kN]".to_string(), 1e3));
+        assert_eq!(engineering_unit("force [N]", 2.5e6), ("force [MN]".to_string(), 1e6));
+        assert_eq!(engineering_unit("u [m]", 0.012), ("u [mm]".to_string(), 1e-3));
+        assert_eq!(engineering_unit("u [m]", 3.0e-6), ("u [µm]".to_string(), 1e-6));
+        assert_eq!(engineering_unit("u [m]", 5.0e3), ("u [m]".to_string(), 1.0));
+        assert_eq!(engineering_unit("E [J]", 12.0), ("E [J]".to_string(), 1.0));
+        assert_eq!(engineering_unit("a [m/s²]", 1e4), ("a [m/s²]".to_string(), 1.0));
+        assert_eq!(engineering_unit("V [kN]", 1e4), ("V [kN]".to_string(), 1.0));
+        let f = TickFormat::new(0.0, 500.0, 1e3, false);
+        assert_eq!(f.label(2.5e5), "250");
         assert_eq!(log_tick(0.0), "1");
         assert_eq!(log_tick(-1.0), "0.10");
         assert_eq!(range([0.0, 0.0].into_iter()), (-1.0, 1.0));

@@ -130,6 +130,41 @@ impl Metric {
         &self.name
     }
 
+    /// The metric's unit for axis labels: `s`, `m`, `m/s²`, `N` for the built-ins that have
+    /// one, `–` for the ratios (errors relative to the reference's peak), and for a summary
+    /// path the unit its last key names (`…_N`, `…_m`, `…_s`, `…_m_s2`); empty when unknown.
+    pub fn unit(&self) -> &'static str {
+        match &self.kind {
+            Kind::MaxOver { .. } => match self.name.as_str() {
+                "tracking_delay" => "s",
+                "peak_displacement" => "m",
+                "peak_acceleration" => "m/s²",
+                "peak_coupling_force" | "peak_error_force" => "N",
+                _ => "–",
+            },
+            Kind::Path(p) => {
+                let last = p
+                    .split('.')
+                    .rev()
+                    .find(|k| k.parse::<usize>().is_err() && *k != "peak")
+                    .unwrap_or("");
+                if last.ends_with("_m_s2") {
+                    "m/s²"
+                } else if last.ends_with("_N") {
+                    "N"
+                } else if last.ends_with("_m") {
+                    "m"
+                } else if last.ends_with("_s") || last == "delay_s" {
+                    "s"
+                } else if last.ends_with("error") || last.ends_with("nrms") {
+                    "–"
+                } else {
+                    ""
+                }
+            }
+        }
+    }
+
     /// The metric of a run summary; NaN when the summary does not have it.
     pub fn value(&self, summary: &Value) -> f64 {
         match &self.kind {
