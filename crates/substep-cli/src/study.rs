@@ -134,9 +134,13 @@ fn figures(study: &Study, rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
         for (p, name) in params.iter().enumerate() {
             // A NaN between points: each point is its own run, drawn as a marker (no lines).
             let (mut x, mut y) = (Vec::new(), Vec::new());
+            let mut counts = true;
             for r in rows.iter().filter(|r| r.completed) {
                 let xv = match r.values.get(p) {
-                    Some(toml::Value::Float(f)) => *f,
+                    Some(toml::Value::Float(f)) => {
+                        counts = false;
+                        *f
+                    }
                     Some(toml::Value::Integer(i)) => *i as f64,
                     _ => continue,
                 };
@@ -155,7 +159,8 @@ fn figures(study: &Study, rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
                     label: String::new(),
                     x,
                     y,
-                }]),
+                }])
+                .integer_axis_x(counts),
             );
             panels += 1;
         }

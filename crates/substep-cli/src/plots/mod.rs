@@ -127,6 +127,8 @@ pub struct Panel {
     pub highlight: Option<(f64, f64)>,
     /// The y axis counts things (storeys, runs): ticks only at whole numbers.
     pub integer_y: bool,
+    /// The same for the x axis (sub-steps, seeds).
+    pub integer_x: bool,
 }
 
 impl Panel {
@@ -141,7 +143,13 @@ impl Panel {
             x_window: None,
             highlight: None,
             integer_y: false,
+            integer_x: false,
         }
+    }
+    /// Whole-number x ticks when `on` (a parameter that only takes integers).
+    pub fn integer_axis_x(mut self, on: bool) -> Self {
+        self.integer_x = on;
+        self
     }
     pub fn integer_y(mut self) -> Self {
         self.integer_y = true;
@@ -305,7 +313,7 @@ impl TickFormat {
 
 /// An SI prefix for the unit in brackets at the end of `label` (`"force [N]"`) so that the
 /// axis' largest value `max_abs` reads between 1 and 1000: `("force [kN]", 1e3)`. Units that
-/// take prefixes here: lengths (down to nm; never km), forces, energies, powers, pressures,
+/// take prefixes here: lengths (down to nm; never km), times (down to µs), forces, energies, powers, pressures,
 /// stiffnesses and damping coefficients. Any other label is returned unchanged with factor 1.
 pub fn engineering_unit(label: &str, max_abs: f64) -> (String, f64) {
     let unchanged = (label.to_string(), 1.0);
@@ -317,6 +325,7 @@ pub fn engineering_unit(label: &str, max_abs: f64) -> (String, f64) {
     };
     let (lowest, highest) = match unit {
         "m" => (-9, 0),
+        "s" => (-6, 0),
         "N" | "J" | "W" | "Pa" | "N/m" | "N·s/m" | "N s/m" | "N·m" => (-3, 9),
         _ => return unchanged,
     };
@@ -430,7 +439,7 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, s: f
         engineering_unit(&p.x_label, x0.abs().max(x1.abs()))
     };
     let (y_label, y_factor) = engineering_unit(&p.y_label, y0.abs().max(y1.abs()));
-    let x_ticks = TickFormat::new(x0 / x_factor, x1 / x_factor, x_factor, false);
+    let x_ticks = TickFormat::new(x0 / x_factor, x1 / x_factor, x_factor, p.integer_x);
     let y_ticks = TickFormat::new(y0 / y_factor, y1 / y_factor, y_factor, p.integer_y);
     // Room for the longest y tick label (about 0.6 em per character) and the axis title.
     let y_chars = [y0, y1, 0.5 * (y0 + y1)]
@@ -693,6 +702,8 @@ mod tests {
         assert_eq!(engineering_unit("u [m]", 0.012), ("u [mm]".to_string(), 1e-3));
         assert_eq!(engineering_unit("u [m]", 3.0e-6), ("u [µm]".to_string(), 1e-6));
         assert_eq!(engineering_unit("u [m]", 5.0e3), ("u [m]".to_string(), 1.0));
+        assert_eq!(engineering_unit("delay [s]", 0.01), ("delay [ms]".to_string(), 1e-3));
+        assert_eq!(engineering_unit("t [s]", 20.0), ("t [s]".to_string(), 1.0));
         assert_eq!(engineering_unit("E [J]", 12.0), ("E [J]".to_string(), 1.0));
         assert_eq!(engineering_unit("a [m/s²]", 1e4), ("a [m/s²]".to_string(), 1.0));
         assert_eq!(engineering_unit("V [kN]", 1e4), ("V [kN]".to_string(), 1.0));
