@@ -358,6 +358,7 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     let files = if args.no_plots {
         Vec::new()
     } else {
+        crate::plots::check_format(args.plot_format, "--plot-format")?;
         crate::plots::set_format(args.plot_format);
         let base = setup.base.with_k_sub(setup.k_subs.first().copied().flatten());
         plots(&base, &setup.cases, &args.out)?

@@ -591,6 +591,14 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
                 .and_then(crate::plots::PlotFormat::from_name)
         })
         .unwrap_or(crate::plots::PlotFormat::Png);
+    if def.output.plots && !args.no_plots {
+        let what = if args.plot_format.is_some() {
+            "--plot-format".to_string()
+        } else {
+            format!("{}: output.plots.format", def.source)
+        };
+        crate::plots::check_format(format, &what)?;
+    }
     crate::plots::set_format(format);
     if args.realtime {
         let name = args

@@ -65,6 +65,7 @@ pub fn study(args: &StudyArgs) -> Result<()> {
         .with_context(|| format!("cannot write {}", csv_path.display()))?;
     let mut outputs = vec![csv_path];
     if !args.no_plots {
+        crate::plots::check_format(args.plot_format, "--plot-format")?;
         crate::plots::set_format(args.plot_format);
         outputs.extend(figures(&study, &rows, &args.out)?);
     }

@@ -406,6 +406,7 @@ pub fn vst(args: &VstArgs) -> Result<()> {
     let md = markdown(&study);
     let mut files = vec![write("vst.md", &md)?, write("vst.csv", &csv(&study))?];
     if !args.no_plots {
+        crate::plots::check_format(args.plot_format, "--plot-format")?;
         crate::plots::set_format(args.plot_format);
         files.extend(plots(&study, &args.out)?);
     }

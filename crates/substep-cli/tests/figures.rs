@@ -60,7 +60,26 @@ const SUBSTRUCTURE_FIGURES: [&str; 12] = [
 
 #[test]
 fn every_figure_is_written_in_every_format() {
-    for fmt in ["png", "svg", "pdf"] {
+    let formats: &[&str] = if cfg!(feature = "pdf") {
+        &["png", "svg", "pdf"]
+    } else {
+        // Without the `pdf` feature PDF figures are refused up front: one line, exit 2.
+        let dir = temp_dir("nopdf");
+        let out = Command::new(env!("CARGO_BIN_EXE_substep"))
+            .args(["run", "--out", dir.to_str().unwrap(), "--quiet", "--plot-format", "pdf"])
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&out.stderr).to_string();
+        assert_eq!(out.status.code(), Some(2), "{e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+        assert!(
+            e.starts_with("error: --plot-format: format `pdf`: this build of substep has no PDF figures"),
+            "{e}"
+        );
+        assert!(e.contains("--features pdf"), "{e}");
+        &["png", "svg"]
+    };
+    for &fmt in formats {
         let dir = temp_dir(fmt);
         let d = dir.to_str().unwrap();
         // The default example (1 DOF: no storey figure) and the 10-storey building.

@@ -208,6 +208,7 @@ fn write_file(path: &Path, text: &str) -> Result<()> {
 }
 
 pub fn analyze(args: &AnalyzeArgs) -> Result<()> {
+    crate::plots::check_format(args.plot_format, "--plot-format")?;
     crate::plots::set_format(args.plot_format);
     match &args.command {
         AnalyzeCommand::Stability(a) => stability::stability(a),

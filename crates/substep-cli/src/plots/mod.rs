@@ -1,5 +1,6 @@
 //! Figures with plotters: PNG (drawn at twice the size and averaged down, so lines and text are
-//! anti-aliased), SVG (plotters' SVG backend) or PDF (the SVG converted by svg2pdf), all with the
+//! anti-aliased), SVG (plotters' SVG backend) or PDF (the SVG converted by svg2pdf, cargo feature
+//! `pdf`), all with the
 //! bundled DejaVu Sans, so no system fonts are needed.
 //!
 //! A [`Figure`] is a title over one or more [`Panel`]s stacked vertically (or in columns); each
@@ -72,6 +73,19 @@ impl PlotFormat {
 }
 
 static FORMAT: AtomicU8 = AtomicU8::new(0);
+
+/// How to get a build that writes PDF figures (the one-line refusal without it).
+pub const PDF_HINT: &str = "this build of substep has no PDF figures (they pull in a font and SVG stack that \
+     doubles the build time): build with `--features pdf` (cargo install --path crates/substep-cli --features pdf), \
+     or use svg, which is vector too";
+
+/// Refuse a format this build cannot draw, before any work: `what` names the option or key.
+pub fn check_format(f: PlotFormat, what: &str) -> Result<()> {
+    if f == PlotFormat::Pdf && !cfg!(feature = "pdf") {
+        return Err(substep::Error::invalid(what, format!("format `pdf`: {PDF_HINT}")).into());
+    }
+    Ok(())
+}
 
 /// Choose the format of all figures drawn from now on (default PNG).
 pub fn set_format(f: PlotFormat) {
@@ -625,7 +639,14 @@ enum RenderTarget<'a> {
     Svg(&'a mut String, (u32, u32)),
 }
 
+/// Without the `pdf` feature: the refusal ([`check_format`] refuses earlier).
+#[cfg(not(feature = "pdf"))]
+fn svg_to_pdf(_svg: &str) -> std::result::Result<Vec<u8>, String> {
+    Err(format!("format `pdf`: {PDF_HINT}"))
+}
+
 /// SVG text → PDF bytes, with the bundled font for the text.
+#[cfg(feature = "pdf")]
 fn svg_to_pdf(svg: &str) -> std::result::Result<Vec<u8>, String> {
     use svg2pdf::usvg;
     let mut options = usvg::Options::default();
@@ -789,7 +810,12 @@ mod tests {
             .iter()
             .map(|y| xs.iter().map(|x| 0.95 + 0.04 * x - y).collect())
             .collect();
-        for fmt in [PlotFormat::Png, PlotFormat::Svg, PlotFormat::Pdf] {
+        let formats: &[PlotFormat] = if cfg!(feature = "pdf") {
+            &[PlotFormat::Png, PlotFormat::Svg, PlotFormat::Pdf]
+        } else {
+            &[PlotFormat::Png, PlotFormat::Svg]
+        };
+        for &fmt in formats {
             set_format(fmt);
             let mut written = Vec::new();
             for (name, fig) in [("multi", &multi), ("log", &logf), ("cols", &cols)] {
@@ -816,8 +842,13 @@ mod tests {
                     }
                     PlotFormat::Svg => {
                         let text = String::from_utf8(bytes).unwrap();
-                        let tree = svg2pdf::usvg::Tree::from_str(&text, &svg2pdf::usvg::Options::default());
-                        assert!(tree.is_ok(), "{}: {:?}", path.display(), tree.err());
+                        // usvg (with the pdf feature) parses it as an SVG renderer would
+                        #[cfg(feature = "pdf")]
+                        {
+                            let tree = svg2pdf::usvg::Tree::from_str(&text, &svg2pdf::usvg::Options::default());
+                            assert!(tree.is_ok(), "{}: {:?}", path.display(), tree.err());
+                        }
+                        assert!(text.starts_with("<svg") && text.trim_end().ends_with("</svg>"));
                         assert!(text.contains(&format!("width=\"{}\"", size.0)), "{}", path.display());
                         for (k, c) in COLORS.iter().enumerate().take(series) {
                             assert!(
