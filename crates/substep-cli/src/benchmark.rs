@@ -76,16 +76,20 @@ pub fn benchmark(args: &BenchmarkArgs) -> Result<()> {
 fn setup(args: &RthsArgs) -> Result<StudySetup> {
     let record = match args.record.as_str() {
         "elcentro" => None,
+        // Through the same bounded reader as every input: a regular file within the default
+        // [limits] max_file_bytes, never a device or FIFO.
         path => Some((
             path,
-            std::fs::read_to_string(path).map_err(|e| substep::Error::file(path, format!("cannot read: {e}")))?,
+            substep::io::limits::read_text(
+                std::path::Path::new(path),
+                substep::io::limits::Limits::default().max_file_bytes,
+            )?,
         )),
     };
     let config = match &args.config {
         Some(path) => {
             let name = path.display().to_string();
-            let text =
-                std::fs::read_to_string(path).map_err(|e| substep::Error::file(&name, format!("cannot read: {e}")))?;
+            let text = substep::io::limits::read_text(path, substep::io::limits::CONFIG_MAX_BYTES)?;
             Some((name, text))
         }
         None => None,

@@ -134,6 +134,23 @@ pub enum StabilityArg {
 /// (e.g. outputs that cannot be written), 2 for bad input (any other library error: config,
 /// files, parameters, the output directory). Every driver reports an experimental side that
 /// fails mid-run as `Error::Stopped`, so a killed site is 1 offline and in real time.
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn usage_errors_are_one_line() {
+        let clap = "error: unexpected argument '--fomat' found\n\n  tip: a similar argument exists: '--format'\n\nUsage: substep run --format <FORMAT> [CONFIG]\n\nFor more information, try '--help'.\n";
+        assert_eq!(
+            super::one_line_usage_error(clap),
+            "error: unexpected argument '--fomat' found (tip: a similar argument exists: '--format') (see --help)"
+        );
+        let clap = "error: the following required arguments were not provided:\n  --realtime\n\nUsage: substep run --realtime --max-missed <SHARE> [CONFIG]\n\nFor more information, try '--help'.\n";
+        assert_eq!(
+            super::one_line_usage_error(clap),
+            "error: the following required arguments were not provided: --realtime (see --help)"
+        );
+    }
+}
+
 fn exit_code(e: &anyhow::Error) -> u8 {
     match e.downcast_ref::<substep::Error>() {
         Some(substep::Error::Diverged { .. } | substep::Error::Stopped { .. }) => 1,
@@ -142,8 +159,45 @@ fn exit_code(e: &anyhow::Error) -> u8 {
     }
 }
 
+/// Clap's message for a bad command line in one line: the error, its details and tip joined,
+/// without the usage block (`--help` has it).
+fn one_line_usage_error(rendered: &str) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for line in rendered.lines() {
+        let l = line.trim();
+        if l.starts_with("Usage:") || l.starts_with("For more information") {
+            break;
+        }
+        if !l.is_empty() {
+            parts.push(l.trim_start_matches("error: ").to_string());
+        }
+    }
+    let message = match parts.split_first() {
+        Some((head, [])) => head.clone(),
+        Some((head, rest)) if head.ends_with(':') => format!("{head} {}", rest.join(", ")),
+        Some((head, rest)) => format!("{head} ({})", rest.join("; ")),
+        None => "invalid command line".to_string(),
+    };
+    format!("error: {message} (see --help)")
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                e.exit();
+            }
+            eprintln!("{}", one_line_usage_error(&e.render().to_string()));
+            return ExitCode::from(2);
+        }
+    };
     let result = match cli.command {
         None => run::run(&RunArgs::default()),
         Some(Command::Run(args)) => run::run(&args),

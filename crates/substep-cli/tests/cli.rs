@@ -278,8 +278,8 @@ fn bad_input_gives_one_line_and_exit_code_2() {
         ),
         (
             "unknown_actuator_kind",
-            edit("kind = \"second_order\"", "kind = \"hydraulic\""),
-            "unknown variant `hydraulic`",
+            edit("kind = \"second_order\"", "kind = \"pneumatic\""),
+            "unknown variant `pneumatic`",
         ),
         (
             "explicit_scheme_with_substructure",

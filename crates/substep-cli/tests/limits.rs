@@ -350,6 +350,42 @@ fn devices_and_fifos_are_refused_without_reading() {
         stderr.trim_end(),
         "error: fifo: is not a regular file (a device, FIFO or socket is never read as input)"
     );
+    // The benchmark's settings and record, a study file: the same bounded reader.
+    for file in ["/dev/zero", "fifo"] {
+        for args in [
+            vec![
+                "benchmark",
+                "rths",
+                "--case",
+                "1",
+                "--config",
+                file,
+                "--no-plots",
+                "--out",
+                "out",
+            ],
+            vec![
+                "benchmark",
+                "rths",
+                "--case",
+                "1",
+                "--record",
+                file,
+                "--no-plots",
+                "--out",
+                "out",
+            ],
+            vec!["study", file, "--out", "out", "--quiet"],
+        ] {
+            let (code, stderr) = run_args(&dir, &args);
+            assert_eq!(code, 2, "{args:?}: {stderr}");
+            assert_eq!(
+                stderr.trim_end(),
+                format!("error: {file}: is not a regular file (a device, FIFO or socket is never read as input)"),
+                "{args:?}"
+            );
+        }
+    }
     // A site file, too.
     for file in ["/dev/zero", "fifo"] {
         let (code, stderr) = run_args(&dir, &["site", "serve", file, "--once"]);
