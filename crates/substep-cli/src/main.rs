@@ -134,23 +134,6 @@ pub enum StabilityArg {
 /// (e.g. outputs that cannot be written), 2 for bad input (any other library error: config,
 /// files, parameters, the output directory). Every driver reports an experimental side that
 /// fails mid-run as `Error::Stopped`, so a killed site is 1 offline and in real time.
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn usage_errors_are_one_line() {
-        let clap = "error: unexpected argument '--fomat' found\n\n  tip: a similar argument exists: '--format'\n\nUsage: substep run --format <FORMAT> [CONFIG]\n\nFor more information, try '--help'.\n";
-        assert_eq!(
-            super::one_line_usage_error(clap),
-            "error: unexpected argument '--fomat' found (tip: a similar argument exists: '--format') (see --help)"
-        );
-        let clap = "error: the following required arguments were not provided:\n  --realtime\n\nUsage: substep run --realtime --max-missed <SHARE> [CONFIG]\n\nFor more information, try '--help'.\n";
-        assert_eq!(
-            super::one_line_usage_error(clap),
-            "error: the following required arguments were not provided: --realtime (see --help)"
-        );
-    }
-}
-
 fn exit_code(e: &anyhow::Error) -> u8 {
     match e.downcast_ref::<substep::Error>() {
         Some(substep::Error::Diverged { .. } | substep::Error::Stopped { .. }) => 1,
@@ -217,5 +200,22 @@ fn main() -> ExitCode {
             eprintln!("error: {}", message.split_whitespace().collect::<Vec<_>>().join(" "));
             ExitCode::from(exit_code(&e))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn usage_errors_are_one_line() {
+        let clap = "error: unexpected argument '--fomat' found\n\n  tip: a similar argument exists: '--format'\n\nUsage: substep run --format <FORMAT> [CONFIG]\n\nFor more information, try '--help'.\n";
+        assert_eq!(
+            super::one_line_usage_error(clap),
+            "error: unexpected argument '--fomat' found (tip: a similar argument exists: '--format') (see --help)"
+        );
+        let clap = "error: the following required arguments were not provided:\n  --realtime\n\nUsage: substep run --realtime --max-missed <SHARE> [CONFIG]\n\nFor more information, try '--help'.\n";
+        assert_eq!(
+            super::one_line_usage_error(clap),
+            "error: the following required arguments were not provided: --realtime (see --help)"
+        );
     }
 }

@@ -490,7 +490,7 @@ const MODEL_FORMS: [&str; 6] = ["mass", "stiffness", "shear_building", "frame", 
 fn own(v: &Value) -> bool {
     match v {
         Value::Table(_) => false,
-        Value::Array(a) => !(!a.is_empty() && a.iter().all(Value::is_table)),
+        Value::Array(a) => a.is_empty() || !a.iter().all(Value::is_table),
         _ => true,
     }
 }
@@ -524,8 +524,7 @@ fn merge(base: &mut Table, fragment: &Table) {
 /// The top-level tables of a test definition, from the parser's unknown-field message.
 fn test_definition_keys() -> Vec<String> {
     let err = TestDefinition::from_toml("zzz_not_a_key = 1\n", "probe.toml", Path::new("."))
-        .err()
-        .expect("the probe key was accepted")
+        .expect_err("the probe key was accepted")
         .to_string();
     let list = err
         .split_once("expected ")
