@@ -326,9 +326,81 @@ impl Decimated {
     }
 }
 
+/// After a run that ended with `result`: a `summary.json` that still says "running" (an error
+/// — a write error, a full disk — ended the run before its summary was written) is replaced by
+/// one that says it failed and why, or removed when even that cannot be written. A summary never
+/// keeps saying "running" once the process has ended on its own (only a killed run leaves it).
+pub fn no_summary_left_running(path: &Path, result: anyhow::Result<()>) -> anyhow::Result<()> {
+    let Err(e) = &result else {
+        return result;
+    };
+    let Ok(text) = substep::io::limits::read_text(path, 1024.0 * 1024.0) else {
+        return result;
+    };
+    let Ok(mut v) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return result;
+    };
+    let running = v["status"].as_str().is_some_and(|s| s.starts_with("running"));
+    if !running {
+        return result;
+    }
+    let reason = format!("{e:#}").split_whitespace().collect::<Vec<_>>().join(" ");
+    if let Some(obj) = v.as_object_mut() {
+        obj.insert("completed".into(), false.into());
+        obj.insert(
+            "status".into(),
+            "failed: the run ended with an error before its summary was written".into(),
+        );
+        obj.insert("reason".into(), reason.into());
+    }
+    let json = serde_json::to_string_pretty(&v).unwrap_or_default() + "\n";
+    if write_atomic(path, json.as_bytes()).is_err() {
+        let _ = std::fs::remove_file(path);
+    }
+    result
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A run that ended with an error while its summary said "running" leaves a summary that
+    /// says it failed and why; a finished summary and a successful run are left alone.
+    #[test]
+    fn a_failed_run_never_leaves_a_running_summary() {
+        let dir = std::env::temp_dir().join(format!("substep-running-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("summary.json");
+        let running =
+            "{\"config\": \"c.toml\", \"completed\": false, \"status\": \"running (a run that was killed ...)\"}\n";
+        std::fs::write(&path, running).unwrap();
+        let r = no_summary_left_running(
+            &path,
+            Err(anyhow::anyhow!("cannot write history.csv: No space left on device")),
+        );
+        assert!(r.is_err());
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        assert_eq!(v["completed"], false);
+        assert_eq!(v["config"], "c.toml");
+        assert!(v["status"].as_str().unwrap().starts_with("failed"), "{v}");
+        assert_eq!(v["reason"], "cannot write history.csv: No space left on device");
+        // success, or a summary already final: untouched
+        std::fs::write(&path, running).unwrap();
+        no_summary_left_running(&path, Ok(())).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), running);
+        let done = "{\"completed\": false, \"reason\": \"diverged\"}\n";
+        std::fs::write(&path, done).unwrap();
+        let _ = no_summary_left_running(&path, Err(anyhow::anyhow!("diverged")));
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), done);
+        // when the replacement cannot be written, the lying summary goes: a directory in the
+        // way of the temporary file stands in for a full disk
+        std::fs::write(&path, running).unwrap();
+        std::fs::create_dir_all(temp_path(&path)).unwrap();
+        let _ = no_summary_left_running(&path, Err(anyhow::anyhow!("disk full")));
+        assert!(!path.exists(), "a summary that cannot be corrected is removed");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn decimation_keeps_a_regular_grid() {

@@ -577,6 +577,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from("results"));
     let container = crate::container::format(args.format.as_deref(), def.output.format)?;
     let result = run_definition(args, def, out_dir.clone());
+    let result = crate::output::no_summary_left_running(&out_dir.join("summary.json"), result);
     crate::container::finish(args, &out_dir, container, result)
 }
 
