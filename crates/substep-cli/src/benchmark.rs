@@ -130,7 +130,7 @@ fn table(setup: &StudySetup, rows: &[RthsRow]) -> String {
         "RTHS benchmark: controller {}, record {} × {}, {}",
         setup.kind.name(),
         setup.base.record.name,
-        setup.base.intensity,
+        substep::io::format::sig(setup.base.intensity, 6),
         alg
     );
     let head = "    J1     J2     J3     J4     J5     J6     J7     J8     J9";
@@ -182,7 +182,7 @@ fn markdown(setup: &StudySetup, rows: &[RthsRow], command: &str, plots: &[PathBu
         "Controller `{}`, record `{}` × {}.\n",
         setup.kind.name(),
         setup.base.record.name,
-        setup.base.intensity
+        substep::io::format::sig(setup.base.intensity, 6)
     );
     let _ = writeln!(
         s,
@@ -234,6 +234,13 @@ fn markdown(setup: &StudySetup, rows: &[RthsRow], command: &str, plots: &[PathBu
         }
     }
     s.push_str("\nJ1 [ms]; J2–J9 [%], rounded as the benchmark rounds.\n");
+    let warnings: Vec<String> = rows.iter().flat_map(|r| r.nominal.warnings()).collect();
+    if !warnings.is_empty() {
+        s.push_str("\n**Warnings**\n\n");
+        for w in warnings {
+            let _ = writeln!(s, "* {w}");
+        }
+    }
     if !plots.is_empty() {
         s.push_str("\nPlots:\n\n");
         for p in plots {
@@ -353,9 +360,31 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     let t0 = std::time::Instant::now();
     let rows = setup.run()?;
     let elapsed = t0.elapsed().as_secs_f64();
+    // Warnings on stderr (the JSON and benchmark.md carry them too); a nominal run without a
+    // score is a failure (exit 1), said after the outputs are written.
+    for row in &rows {
+        for w in row.nominal.warnings() {
+            eprintln!("warning: {w}");
+        }
+    }
+    let no_score: Vec<u8> = rows
+        .iter()
+        .filter(|r| r.nominal.criteria.is_none())
+        .map(|r| r.case)
+        .collect();
+    let verdict = || -> Result<()> {
+        if no_score.is_empty() {
+            return Ok(());
+        }
+        let cases: Vec<String> = no_score.iter().map(u8::to_string).collect();
+        Err(anyhow::anyhow!(
+            "benchmark rths: no score for case {}: the run diverged (see the warnings)",
+            cases.join(", ")
+        ))
+    };
     if args.json {
         out(&format!("{}\n", serde_json::to_string_pretty(&setup.json(&rows))?));
-        return Ok(());
+        return verdict();
     }
     out(&table(&setup, &rows));
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
@@ -384,5 +413,5 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
             format!(" and {} plots", files.len())
         }
     ));
-    Ok(())
+    verdict()
 }

@@ -228,3 +228,61 @@ fn user_record_runs() {
     assert_eq!(v["record"], "sine.csv");
     assert_eq!(v["stable"], true);
 }
+
+/// A benchmark run without a score is a failure (exit 1, the reason on stderr, `warnings` in
+/// the JSON), and a run beyond the actuator's capacity says so (issue 25).
+#[test]
+fn no_score_fails_and_capacity_is_a_warning() {
+    let dir = temp_dir("warnings");
+    let out = substep(
+        &dir,
+        &[
+            "benchmark",
+            "rths",
+            "--case",
+            "1",
+            "--intensity",
+            "1e308",
+            "--no-plots",
+            "--out",
+            "o",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let e = text(&out.stderr);
+    assert!(e.contains("warning: case 1: no score: the run diverged at t = "), "{e}");
+    assert_eq!(
+        e.lines().last().unwrap(),
+        "error: benchmark rths: no score for case 1: the run diverged (see the warnings)"
+    );
+    assert!(
+        text(&out.stdout).contains("record elcentro × 1.00000e308"),
+        "{}",
+        text(&out.stdout)
+    );
+    let md = std::fs::read_to_string(dir.join("o/benchmark.md")).unwrap();
+    assert!(md.contains("* case 1: no score"), "{md}");
+    let out = substep(
+        &dir,
+        &["benchmark", "rths", "--case", "1", "--intensity", "1e308", "--json"],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert!(v["J2"].is_null());
+    assert!(
+        v["warnings"][0].as_str().unwrap().starts_with("case 1: no score"),
+        "{v}"
+    );
+    // three times the record: scored, but beyond the 8900 N the specimen is rated for
+    let out = substep(
+        &dir,
+        &["benchmark", "rths", "--case", "1", "--intensity", "3", "--json"],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert_eq!(v["capacity_exceeded"], true);
+    assert!(v["max_force"].as_f64().unwrap() > 8900.0);
+    let w = v["warnings"][0].as_str().unwrap();
+    assert!(w.contains("beyond the benchmark's capacity of 8900 N"), "{w}");
+    assert!(text(&out.stderr).contains("warning: case 1: the actuator force reached"));
+}

@@ -204,6 +204,10 @@ fn j_json(r: &RthsResult, obj: &mut Map<String, Value>) {
     if let Some(g) = &r.guard_trip {
         obj.insert("guard_trip".into(), json!(g));
     }
+    let warnings = r.warnings();
+    if !warnings.is_empty() {
+        obj.insert("warnings".into(), json!(warnings));
+    }
 }
 
 fn num_or_null(v: f64) -> Value {

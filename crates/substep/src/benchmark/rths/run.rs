@@ -190,6 +190,39 @@ pub struct RthsResult {
     pub history: Option<RunHistory>,
 }
 
+impl RthsResult {
+    /// What a user must know about this run, one sentence each: no score (it diverged), the
+    /// actuator force beyond the benchmark's capacity, the phase-lag guard disabling the
+    /// compensator. Empty for a sound run.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if self.criteria.is_none() {
+            w.push(match self.diverged_at {
+                Some(t) => format!("case {}: no score: the run diverged at t = {t:.3} s", self.case),
+                None => format!(
+                    "case {}: no score: the run did not finish with finite responses",
+                    self.case
+                ),
+            });
+        }
+        if self.capacity_exceeded {
+            w.push(format!(
+                "case {}: the actuator force reached {} N, beyond the benchmark's capacity of {FORCE_CAPACITY} N: \
+                 a lab test would have overloaded the specimen",
+                self.case,
+                crate::io::format::sig(self.max_force, 4)
+            ));
+        }
+        if let Some(g) = &self.guard_trip {
+            w.push(format!(
+                "case {}: the phase-lag compensator was disabled: {g}",
+                self.case
+            ));
+        }
+        w
+    }
+}
+
 /// The exact FOH reference of the full 3-DOF model under `ag` sampled at `h`: floor
 /// displacements `[x_r1, x_r2, x_r3]`.
 pub fn reference(case: &Case, ag: &[f64], h: f64) -> Result<[Vec<f64>; 3]> {
