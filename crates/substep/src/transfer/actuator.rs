@@ -343,19 +343,31 @@ impl DelayLine {
         self.value_at(self.now - self.delay)
     }
 
+    /// The signal at time `t`: linear between the two samples around it, the oldest sample
+    /// before the history. The sample times fall from the newest (`k = 0`) to the oldest
+    /// (`k = cap − 1`), so the first older sample at or before `t` is found by bisection:
+    /// O(log n) per call, where a scan would cost O(delay / Δτ) — quadratic over a run with a
+    /// long delay.
     fn value_at(&self, t: f64) -> f64 {
         let cap = self.times.len();
-        let mut newer = self.head;
-        for _ in 1..cap {
-            let older = (newer + cap - 1) % cap;
-            if self.times[older] <= t {
-                let (t0, t1) = (self.times[older], self.times[newer]);
-                let r = if t1 > t0 { (t - t0) / (t1 - t0) } else { 1.0 };
-                return self.values[older] + r * (self.values[newer] - self.values[older]);
+        let at = |k: usize| (self.head + cap - k) % cap;
+        // first k in 1..cap with times[at(k)] <= t; cap when there is none
+        let (mut lo, mut hi) = (1usize, cap);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if self.times[at(mid)] <= t {
+                hi = mid;
+            } else {
+                lo = mid + 1;
             }
-            newer = older;
         }
-        self.values[newer]
+        if lo == cap {
+            return self.values[at(cap - 1)];
+        }
+        let (older, newer) = (at(lo), at(lo - 1));
+        let (t0, t1) = (self.times[older], self.times[newer]);
+        let r = if t1 > t0 { (t - t0) / (t1 - t0) } else { 1.0 };
+        self.values[older] + r * (self.values[newer] - self.values[older])
     }
 
     /// Values of the history, newest first, as a fixed-length state (for the linear analysis).
@@ -490,6 +502,65 @@ impl Actuator {
         }
         if let Some(d) = &mut self.delay {
             d.read_state(&s[1 + nz..]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::DelayLine;
+
+    /// The scan the bisection replaced: newest to oldest, the first sample at or before `t`.
+    fn scan(line: &DelayLine, t: f64) -> f64 {
+        let cap = line.times.len();
+        let mut newer = line.head;
+        for _ in 1..cap {
+            let older = (newer + cap - 1) % cap;
+            if line.times[older] <= t {
+                let (t0, t1) = (line.times[older], line.times[newer]);
+                let r = if t1 > t0 { (t - t0) / (t1 - t0) } else { 1.0 };
+                return line.values[older] + r * (line.values[newer] - line.values[older]);
+            }
+            newer = older;
+        }
+        line.values[newer]
+    }
+
+    /// The bisection gives the scan's values bit for bit: irregular spacing (re-spaced
+    /// sub-steps, down to half), the history wrapping many times, times before the history,
+    /// between samples and on them.
+    #[test]
+    fn bisection_equals_the_scan() {
+        let mut line = DelayLine::new(0.0137, 0.001);
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for k in 0..5000 {
+            let dt = 0.001 * (0.5 + 0.5 * next());
+            let value = (k as f64 * 0.01).sin() + next();
+            let delayed = line.push(value, dt);
+            assert_eq!(
+                delayed.to_bits(),
+                scan(&line, line.now - line.delay).to_bits(),
+                "push {k}"
+            );
+            for t in [
+                line.now - 1.0,
+                line.now - 0.02,
+                line.now - 0.005 * next(),
+                line.now,
+                line.times[line.head],
+            ] {
+                assert_eq!(
+                    line.value_at(t).to_bits(),
+                    scan(&line, t).to_bits(),
+                    "push {k}, t = {t}"
+                );
+            }
         }
     }
 }
