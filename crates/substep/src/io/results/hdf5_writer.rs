@@ -229,7 +229,7 @@ mod tests {
 
     #[test]
     fn matlab_header_layout() {
-        let h = matlab_header(super::asctime(0));
+        let h = matlab_header(crate::io::results::asctime(0));
         assert_eq!(h.len(), 512);
         assert!(h.starts_with(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Thu Jan  1 00:00:00 1970"));
         assert_eq!(&h[116..124], b"        ");
