@@ -306,7 +306,11 @@ fn an_impossible_deadline_fails_the_run() {
     assert_eq!(s["max_missed"], 0.01);
     let share = s["missed_share"].as_f64().unwrap();
     assert_eq!(share, s["missed_deadlines"].as_f64().unwrap() / slots as f64);
-    assert!(share > 0.5, "2 µs slots: most deadlines missed, got {share}");
+    // (an idle machine misses all of them; a loaded one re-bases its schedule and misses fewer)
+    assert!(
+        share > 0.01,
+        "2 µs slots: more than the 1 % allowed are missed, got {share}"
+    );
     assert!(s["reason"].as_str().unwrap().starts_with("not real time: "));
     // The rows are all there: a slow run is a failed run, not a lost one.
     let rows = std::fs::read_to_string(dir.join("missed/history.csv"))
