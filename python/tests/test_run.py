@@ -248,8 +248,13 @@ def test_the_stability_indicator_columns_and_summary_equal_the_cli(cli, root, tm
 
 
 def long_config(root) -> str:
-    """The default example over 2000 s: long enough to be interrupted."""
-    return (root / "examples" / "default.toml").read_text().replace("duration = 20.0", "duration = 2000.0")
+    """The default example over 2000 s with 40 sub-steps per step: several seconds of work, long
+    enough to be interrupted on any machine (the 4 sub-steps of the example ran 2000 s in about
+    0.3 s, the time the interrupt takes to arrive)."""
+    text = (root / "examples" / "default.toml").read_text()
+    long = text.replace("duration = 20.0", "duration = 2000.0").replace("substeps = 4 ", "substeps = 40 ")
+    assert long.count("2000.0") == 1 and "substeps = 40 " in long, "the default example changed"
+    return long
 
 
 def test_ctrl_c_interrupts_a_run(root):
