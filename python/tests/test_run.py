@@ -2,6 +2,7 @@
 aside), the same history and sub-step rows, the same one-line errors."""
 
 import json
+import signal
 import threading
 import time
 import _thread
@@ -258,6 +259,9 @@ def long_config(root) -> str:
 
 
 def test_ctrl_c_interrupts_a_run(root):
+    # A test run started as a background job inherits SIGINT ignored, and then interrupt_main
+    # does nothing: give the interpreter its own handler, as an interactive Python has.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.3, _thread.interrupt_main)
     t0 = time.monotonic()
     timer.start()
@@ -266,6 +270,7 @@ def test_ctrl_c_interrupts_a_run(root):
             substep.run(long_config(root))
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - t0 < 10
 
 
