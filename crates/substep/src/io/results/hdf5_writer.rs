@@ -21,27 +21,17 @@ const DEFLATE: u8 = 4;
 /// The user block MATLAB v7.3 files start with.
 const USER_BLOCK: u64 = 512;
 
-pub(super) fn write(path: &Path, mat: bool, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
-    let shown = path.display().to_string();
-    let tmp = path.with_file_name(format!(
-        ".{}.tmp",
-        path.file_name()
-            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
-    ));
-    let result = write_file(&tmp, mat, tables, meta, &shown).and_then(|()| {
-        std::fs::rename(&tmp, path).map_err(|e| Error::file(&shown, format!("cannot rename into place: {e}")))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
 fn h5err(what: &str) -> impl Fn(hdf5::Error) -> Error + '_ {
     move |e| Error::file(what, format!("HDF5: {e}"))
 }
 
-fn write_file(tmp: &Path, mat: bool, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
+pub(super) fn write_file(
+    tmp: &Path,
+    mat: bool,
+    tables: &[(&str, PathBuf)],
+    meta: &Metadata,
+    shown: &str,
+) -> Result<()> {
     let err = h5err(shown);
     {
         let file = File::with_options()

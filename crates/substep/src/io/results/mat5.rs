@@ -44,23 +44,7 @@ enum Value {
     Struct(Vec<(String, Value)>),
 }
 
-pub(super) fn write(path: &Path, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
-    let shown = path.display().to_string();
-    let tmp = path.with_file_name(format!(
-        ".{}.tmp",
-        path.file_name()
-            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
-    ));
-    let result = write_file(&tmp, tables, meta, &shown).and_then(|()| {
-        std::fs::rename(&tmp, path).map_err(|e| Error::file(&shown, format!("cannot rename into place: {e}")))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
-fn write_file(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
+pub(super) fn write_file(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
     let io = |e: std::io::Error| Error::file(shown, format!("cannot write: {e}"));
     let file = std::fs::File::create(tmp).map_err(io)?;
     let mut out = BufWriter::new(file);

@@ -256,14 +256,16 @@ pub fn write_container(dir: &Path, format: Format, meta: &Metadata) -> Result<Op
 
 fn write_impl(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
     if format == Format::Mat {
-        return mat5::write(path, tables, meta);
+        return write_via_temp(path, |tmp, shown| mat5::write_file(tmp, tables, meta, shown));
     }
     write_hdf5(path, format, tables, meta)
 }
 
 #[cfg(feature = "hdf5")]
 fn write_hdf5(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
-    hdf5_writer::write(path, format == Format::Mat73, tables, meta)
+    write_via_temp(path, |tmp, shown| {
+        hdf5_writer::write_file(tmp, format == Format::Mat73, tables, meta, shown)
+    })
 }
 
 #[cfg(not(feature = "hdf5"))]
@@ -272,6 +274,24 @@ fn write_hdf5(path: &Path, format: Format, _tables: &[(&str, PathBuf)], _meta: &
         path.display().to_string(),
         format!("format `{}`: {ENABLE_HINT}", format.name()),
     ))
+}
+
+/// Write the container at `path` through `write(tmp, shown)` into a temporary file beside it,
+/// renamed into place: a failed conversion leaves no partial container (both writers).
+fn write_via_temp(path: &Path, write: impl FnOnce(&Path, &str) -> Result<()>) -> Result<()> {
+    let shown = path.display().to_string();
+    let tmp = path.with_file_name(format!(
+        ".{}.tmp",
+        path.file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+    ));
+    let result = write(&tmp, &shown).and_then(|()| {
+        std::fs::rename(&tmp, path).map_err(|e| Error::file(&shown, format!("cannot rename into place: {e}")))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }
 
 /// A MATLAB identifier for a column name: letters, digits and `_`, starting with a letter (other
