@@ -655,3 +655,153 @@ fn bad_monitor_tokens_and_addresses_are_refused_naming_the_key() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Resident memory of a process \[bytes\] (Linux `/proc`).
+fn resident_bytes(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let kb: u64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kb * 1024)
+}
+
+/// Issue 25: 16 connections that dribble their request one byte at a time (reconnecting when
+/// dropped) and 16 event-stream clients that never read do not keep the operator out: the stop
+/// with the token is answered 200 at once, the run stops with `stopped_by = "operator"`, and the
+/// run's memory grows by less than 16 MB while they are attached.
+#[test]
+fn the_stop_gets_through_dribbling_and_non_reading_clients() {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let dir = std::env::temp_dir().join(format!("substep_monitor_attack_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = free_port();
+    let token = "attack-test-token-9c1e77";
+    let out = dir.join("out");
+    let mut run = Command::new(env!("CARGO_BIN_EXE_substep"))
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+        .args(["run", "examples/default.toml"])
+        .arg("--out")
+        .arg(&out)
+        .args([
+            "--no-plots",
+            "--quiet",
+            "--pace",
+            "1",
+            "--monitor-linger",
+            "0",
+            "--monitor-token",
+            token,
+        ])
+        .arg("--monitor")
+        .arg(format!("127.0.0.1:{port}"))
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    struct Kill<'a>(&'a mut Child);
+    impl Drop for Kill<'_> {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let pid = run.id();
+    let run = Kill(&mut run);
+    let t0 = Instant::now();
+    while http(port, "GET", "/state", None).is_err() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "monitor did not come up");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Let the page's history fill a little, then take the baseline.
+    std::thread::sleep(Duration::from_millis(1500));
+    let before = resident_bytes(pid).expect("VmRSS of the run");
+
+    let attacking = Arc::new(AtomicBool::new(true));
+    let mut attackers = Vec::new();
+    for _ in 0..16 {
+        let on = attacking.clone();
+        attackers.push(std::thread::spawn(move || {
+            let request = b"GET /state HTTP/1.1\r\nHost: x\r\nX-Slow: aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\r\n\r\n";
+            while on.load(Ordering::Relaxed) {
+                let Ok(mut s) = TcpStream::connect(("127.0.0.1", port)) else {
+                    std::thread::sleep(Duration::from_millis(50));
+                    continue;
+                };
+                // One byte every 0.2 s: under any per-read timeout, never a whole request.
+                for b in request.iter().cycle() {
+                    if !on.load(Ordering::Relaxed) || s.write_all(&[*b]).is_err() {
+                        break;
+                    }
+                    std::thread::sleep(Duration::from_millis(200));
+                }
+            }
+        }));
+    }
+    // Event-stream clients that send their request and never read a byte.
+    let mut silent = Vec::new();
+    for _ in 0..16 {
+        let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        write!(
+            s,
+            "GET /events HTTP/1.1\r\nHost: x\r\nAccept: text/event-stream\r\n\r\n"
+        )
+        .unwrap();
+        silent.push(s);
+    }
+    // The attack in full swing: every dribbler has reconnected at least once.
+    std::thread::sleep(Duration::from_secs(4));
+    let during = resident_bytes(pid).expect("VmRSS of the run");
+    let asked = Instant::now();
+    let (code, body) = http(
+        port,
+        "POST",
+        "/control",
+        Some(&json!({ "token": token, "action": "stop" })),
+    )
+    .unwrap();
+    let answered = asked.elapsed();
+    assert_eq!(code, 200, "the stop under attack: {body}");
+    assert!(
+        answered < Duration::from_secs(1),
+        "the stop took {answered:?} to be answered under attack"
+    );
+    let child = &mut *run.0;
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "the run did not end after the stop"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    attacking.store(false, Ordering::Relaxed);
+    for a in attackers {
+        a.join().unwrap();
+    }
+    drop(silent);
+    assert_eq!(status.code(), Some(1), "a stopped run exits with 1");
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["stopped_by"], "operator", "{summary}");
+    assert!(summary["steps_done"].as_u64().unwrap() < 2000, "{summary}");
+    let growth = during.saturating_sub(before);
+    eprintln!(
+        "stop answered in {answered:?}; resident memory {:.1} MB before the attack, {:.1} MB during it",
+        before as f64 / 1e6,
+        during as f64 / 1e6
+    );
+    assert!(
+        growth < 16 << 20,
+        "the run's memory grew by {:.1} MB under the attack",
+        growth as f64 / 1e6
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,5 +1,6 @@
-//! Fuzzing of the input-side parsers (issue 11, item 5): the TOML test definition, the site
-//! config, the MatrixMarket reader and the ground-motion record readers get arbitrary bytes and
+//! Fuzzing of the input-side parsers (issue 11, item 5; issue 25): the TOML test definition, the
+//! site config, the MatrixMarket reader, the ground-motion record readers, the benchmark's
+//! config and record, study files and the monitor's HTTP request parser get arbitrary bytes and
 //! mutated valid inputs (seeded, reproducible). Each must either accept the input or refuse it
 //! with one line naming the thing; never panic. See `docs/fuzzing.md`.
 //!
@@ -13,9 +14,12 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
+use substep::benchmark::rths::{BenchmarkConfig, GroundRecord};
 use substep::excitation::{parse_at2, parse_single_column, parse_two_column, read_record};
 use substep::io::site_config::SiteDefinition;
 use substep::io::{TestDefinition, parse_matrix_market, parse_matrix_market_sparse, read_matrix_market};
+use substep::monitor::http::{MAX_BODY, MAX_HEAD, Parsed, parse_request};
+use substep::study::Study;
 
 const DEFAULT_CASES: usize = 3000;
 const DEFAULT_SEED: u64 = 0x5eed_0011;
@@ -635,4 +639,139 @@ fn files() {
         TestDefinition::from_file(cfg(b)?)
     });
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The `--config` of `substep benchmark rths` (every section of docs/benchmark.md's example) and
+/// its `--record` reader.
+#[test]
+fn benchmark_inputs() {
+    let config = r#"
+[controller]
+kind = "arx"
+converters = true
+feedback = { num = [2.0, 95.0], den = [1.0, 0.0] }
+no_feedforward = false
+no_feedback = false
+ramp_start = 0
+ramp_in = 1024
+
+[controller.arx]
+k_lag = 8
+n_u = 6
+forgetting_factor = 0.999
+p0 = 100.0
+p_max = 100.0
+scalar_covariance = false
+guard_factor = 10.0
+regressor = "velocity"
+pairing = "delayed"
+span = 8
+smoothing = 16.0
+max_lead = 600.0
+supervisor = true
+
+[controller.polynomial]
+order = 2
+lead = 97.0
+guard_factor = 10.0
+
+[controller.inverse_fir]
+lead = 97.0
+taps = 4
+order = 2
+forgetting_factor = 0.995
+p0 = 100.0
+
+[plant]
+kind = "servo"
+derivative = "finite_difference"
+
+[noise]
+enabled = true
+seed = 1144108930
+
+[substep]
+dt = 0.0009765625
+k_sub = 4
+beta = 0.25
+gamma = 0.5
+error_force = { kind = "pid", p = 1.0, i = 0.0, d = 0.0 }
+"#
+    .to_string();
+    let sample = "[controller]\nkind = \"sample\"\nfeedforward = { num = [50.83, 8570.4], den = [1.0, 8570.4] }\n\n[plant]\nkind = \"ideal\"\n\n[noise]\nenabled = false\n".to_string();
+    let mix = fuzz("benchmark_config", &[config, sample], HANG, |text| {
+        BenchmarkConfig::parse(text, "fuzz.toml")
+    });
+    assert_mix("benchmark_config", mix);
+    let record: String = substep::benchmark::rths::ELCENTRO_CSV
+        .lines()
+        .take(300)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let seeds = [record, "t,a_g\n0,0\n0.01,0.5\n0.02,-0.25\n".to_string()];
+    let mix = fuzz("benchmark_record", &seeds, HANG, |text| {
+        GroundRecord::parse_csv("fuzz.csv", text)
+    });
+    assert_mix("benchmark_record", mix);
+}
+
+/// Study files (`substep study FILE`) as files, with the shipped studies' base config next to
+/// them: a tenth of the cases (each reads two files).
+#[test]
+fn study_files() {
+    let dir = std::env::temp_dir().join(format!("substep-fuzz-study-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let studies = examples().join("studies");
+    for f in ["tmd_base.toml", "monte_carlo.toml", "substeps_delay.toml"] {
+        std::fs::copy(studies.join(f), dir.join(f)).unwrap();
+    }
+    std::fs::copy(examples().join("ag_sweep.csv"), dir.join("ag_sweep.csv")).unwrap();
+    let seeds: Vec<String> = ["monte_carlo.toml", "substeps_delay.toml"]
+        .iter()
+        .map(|f| std::fs::read_to_string(studies.join(f)).unwrap())
+        .collect();
+    let path = dir.join("fuzz_study.toml");
+    let n = (cases() / 10).max(1);
+    let mix = fuzz_bytes("study_file", &seeds, n, HANG, move |b| {
+        std::fs::write(&path, b).unwrap();
+        Study::from_file(&path)
+    });
+    assert_mix("study_file", mix);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The monitor's HTTP request parser on what any client can send: a whole request, a request
+/// still arriving, or a refusal with its status; a complete request's body is within
+/// `MAX_BODY`, and nothing longer than a head plus a body is ever left waiting for more.
+#[test]
+fn monitor_http_requests() {
+    let seeds = vec![
+        "GET / HTTP/1.1\r\nHost: 127.0.0.1:8080\r\nAccept: text/html\r\n\r\n".to_string(),
+        "GET /events HTTP/1.1\r\nHost: 127.0.0.1:8080\r\nAccept: text/event-stream\r\nCache-Control: no-cache\r\n\r\n"
+            .to_string(),
+        "POST /control HTTP/1.1\r\nHost: 127.0.0.1:8080\r\nContent-Type: application/json\r\nContent-Length: 43\r\n\r\n{\"token\":\"0123456789abcdef\",\"action\":\"stop\"}"
+            .to_string(),
+        "GET /out/summary.json?x=1 HTTP/1.0\nUser-Agent: curl/8\n\n".to_string(),
+    ];
+    let mix = fuzz_bytes("monitor_http", &seeds, cases(), HANG, |b| match parse_request(b) {
+        Parsed::Complete(r) => {
+            assert!(r.body.len() <= MAX_BODY, "a body of {} bytes accepted", r.body.len());
+            assert!(r.path.starts_with('/') && !r.path.contains('?'), "path {:?}", r.path);
+            Ok(())
+        }
+        Parsed::Incomplete => {
+            assert!(
+                b.len() <= MAX_HEAD + 4 + MAX_BODY,
+                "{} bytes still waiting for more",
+                b.len()
+            );
+            Ok(())
+        }
+        Parsed::Refused(code, why) => {
+            assert!(matches!(code, 400 | 413), "status {code}");
+            Err(substep::Error::invalid("request", why))
+        }
+    });
+    assert_mix("monitor_http", mix);
 }

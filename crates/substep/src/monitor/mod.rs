@@ -12,6 +12,7 @@
 //!   checked by the stepping loop between steps (no lock on either side).
 
 pub mod energy;
+pub mod http;
 mod indicator;
 pub mod model_view;
 
