@@ -76,14 +76,12 @@ pub fn benchmark(args: &BenchmarkArgs) -> Result<()> {
 fn setup(args: &RthsArgs) -> Result<StudySetup> {
     let record = match args.record.as_str() {
         "elcentro" => None,
-        // Through the same bounded reader as every input: a regular file within the default
-        // [limits] max_file_bytes, never a device or FIFO.
+        // Through the same bounded reader as every record: a regular file within the default
+        // [limits] max_file_bytes and max_record_values (counted before it is kept), never a
+        // device or FIFO.
         path => Some((
             path,
-            substep::io::limits::read_text(
-                std::path::Path::new(path),
-                substep::io::limits::Limits::default().max_file_bytes,
-            )?,
+            substep::io::limits::read_record_text(std::path::Path::new(path), &substep::io::limits::Limits::default())?,
         )),
     };
     let config = match &args.config {

@@ -350,51 +350,7 @@ fn devices_and_fifos_are_refused_without_reading() {
         stderr.trim_end(),
         "error: fifo: is not a regular file (a device, FIFO or socket is never read as input)"
     );
-    // The benchmark's settings and record, a study file: the same bounded reader.
-    for file in ["/dev/zero", "fifo"] {
-        for args in [
-            vec![
-                "benchmark",
-                "rths",
-                "--case",
-                "1",
-                "--config",
-                file,
-                "--no-plots",
-                "--out",
-                "out",
-            ],
-            vec![
-                "benchmark",
-                "rths",
-                "--case",
-                "1",
-                "--record",
-                file,
-                "--no-plots",
-                "--out",
-                "out",
-            ],
-            vec!["study", file, "--out", "out", "--quiet"],
-        ] {
-            let (code, stderr) = run_args(&dir, &args);
-            assert_eq!(code, 2, "{args:?}: {stderr}");
-            assert_eq!(
-                stderr.trim_end(),
-                format!("error: {file}: is not a regular file (a device, FIFO or socket is never read as input)"),
-                "{args:?}"
-            );
-        }
-    }
-    // A site file, too.
-    for file in ["/dev/zero", "fifo"] {
-        let (code, stderr) = run_args(&dir, &["site", "serve", file, "--once"]);
-        assert_eq!(code, 2, "{stderr}");
-        assert_eq!(
-            stderr.trim_end(),
-            format!("error: {file}: is not a regular file (a device, FIFO or socket is never read as input)")
-        );
-    }
+    // Every other command and file slot: every_command_refuses_special_files_and_huge_records_within_64_mb.
 }
 
 #[test]
@@ -413,6 +369,18 @@ fn limits_are_keys_that_can_be_tightened_and_checked() {
             "ground_motion.file: ag.csv: {size}, more than limits.max_file_bytes = 1000 B"
         )],
     );
+    // The record's numbers are counted before it is kept: 2001 rows are 4002 numbers.
+    let config = "[structure.sdof]\nmass = 1.0\nstiffness = 100.0\n[ground_motion]\nfile = \"ag.csv\"\n\
+                  [integrator]\ndt = 0.01\n[limits]\nmax_record_values = 4001\n";
+    std::fs::write(dir.join("values.toml"), config).unwrap();
+    refused_in(
+        &dir,
+        "values.toml",
+        &["ground_motion.file: ag.csv: holds more than limits.max_record_values = 4001 numbers"],
+    );
+    std::fs::write(dir.join("values.toml"), config.replace("4001", "4002")).unwrap();
+    let (code, stderr) = run(&dir, "values.toml");
+    assert_eq!(code, 0, "4002 numbers within max_record_values = 4002: {stderr}");
     refused(
         "run-time",
         &format!(
@@ -434,4 +402,187 @@ fn limits_are_keys_that_can_be_tightened_and_checked() {
     std::fs::write(dir.join("ok.toml"), tmd(TMD_SPECIMEN, SERVO, "substeps = 4")).unwrap();
     let (code, stderr) = run(&dir, "ok.toml");
     assert_eq!(code, 0, "{stderr}");
+}
+
+/// `substep ARGS` in `dir`: (exit code, stderr, peak resident memory in bytes, wall time), from
+/// `wait4` on the child. Killed (and the test failed) after 60 s: a hang guard, not a timing
+/// goal.
+// The child is reaped by wait4 (for its rusage), which clippy cannot see.
+#[allow(clippy::zombie_processes)]
+fn run_measured(dir: &Path, args: &[String]) -> (i32, String, u64, Duration) {
+    let started = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_substep"))
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the substep binary runs");
+    let pid = child.id() as libc::pid_t;
+    let mut stderr = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut text = String::new();
+        let _ = std::io::Read::read_to_string(&mut stderr, &mut text);
+        text
+    });
+    let (mut status, mut usage) = (0, unsafe { std::mem::zeroed::<libc::rusage>() });
+    loop {
+        // SAFETY: plain wait4 on our own child; status and usage are valid out-pointers.
+        let r = unsafe { libc::wait4(pid, &mut status, libc::WNOHANG, &mut usage) };
+        assert!(r >= 0, "wait4 failed");
+        if r == pid {
+            break;
+        }
+        if started.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("substep {args:?} did not finish (hang or runaway work)");
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let elapsed = started.elapsed();
+    let code = if libc::WIFEXITED(status) {
+        libc::WEXITSTATUS(status)
+    } else {
+        -1
+    };
+    // ru_maxrss is in KiB on Linux.
+    (code, reader.join().unwrap(), usage.ru_maxrss as u64 * 1024, elapsed)
+}
+
+/// Issue 25: every command that reads a file refuses `/dev/zero`, a FIFO and a record of 10⁸
+/// rows in every place a file goes — the config itself, a ground-motion record, a `.mtx`
+/// matrix, a study file, its base and the base's record, the benchmark's settings and record,
+/// a site file — with exit 2 and one line naming the file, and within 64 MB of peak memory
+/// (wait4's ru_maxrss of the process). The times are printed (`--nocapture`), not asserted.
+#[test]
+fn every_command_refuses_special_files_and_huge_records_within_64_mb() {
+    let dir = temp_dir("table");
+    assert!(Command::new("mkfifo").arg(dir.join("fifo")).status().unwrap().success());
+    // The smallest honest 10⁸-row record: one value per line (200 MB).
+    {
+        let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("rows.txt")).unwrap());
+        let chunk = "0\n".repeat(1_000_000);
+        for _ in 0..100 {
+            std::io::Write::write_all(&mut f, chunk.as_bytes()).unwrap();
+        }
+    }
+    let sdof_with_record = |file: &str| {
+        format!(
+            "[structure.sdof]\nmass = 1.0\nstiffness = 100.0\n[ground_motion]\nfile = \"{file}\"\ndt = 0.01\n[integrator]\ndt = 0.01\nduration = 1.0\n"
+        )
+    };
+    let tmd_with_record = |file: &str| {
+        tmd(TMD_SPECIMEN, SERVO, "substeps = 2").replace(
+            HARMONIC,
+            &format!("[ground_motion]\nfile = \"{file}\"\ndt = 0.01\n[integrator]\nscheme = \"average_acceleration\"\ndt = 0.01\nduration = 1.0\n"),
+        )
+    };
+    let matrix = |file: &str| format!("[structure]\nmass = \"{file}\"\nstiffness = [[1.0]]\n{HARMONIC}");
+    let mut table = Vec::new();
+    for (kind, file) in [
+        ("/dev/zero", "/dev/zero"),
+        ("FIFO", "fifo"),
+        ("10^8-row record", "rows.txt"),
+    ] {
+        let key = kind.replace(['/', '^'], "_");
+        let write = |name: &str, text: String| {
+            let name = format!("{key}-{name}");
+            std::fs::write(dir.join(&name), text).unwrap();
+            name
+        };
+        let record_cfg = write("record.toml", sdof_with_record(file));
+        let matrix_cfg = write("matrix.toml", matrix(file));
+        let plan_cfg = write("plan.toml", tmd_with_record(file));
+        let base_cfg = write("base.toml", sdof_with_record(file));
+        let study_base = write(
+            "study_base.toml",
+            format!("base = \"{file}\"\n[grid]\n\"structure.sdof.mass\" = [1.0]\n"),
+        );
+        let study_record = write(
+            "study_record.toml",
+            format!("base = \"{base_cfg}\"\n[grid]\n\"structure.sdof.mass\" = [1.0]\n"),
+        );
+        let cases: Vec<(&str, Vec<String>)> = vec![
+            ("run CONFIG", vec!["run".into(), file.into()]),
+            ("run: ground_motion.file", vec!["run".into(), record_cfg.clone()]),
+            ("run: structure.mass (.mtx)", vec!["run".into(), matrix_cfg.clone()]),
+            (
+                "analyze plan CONFIG",
+                vec!["analyze".into(), "plan".into(), file.into()],
+            ),
+            (
+                "analyze plan: ground_motion.file",
+                vec!["analyze".into(), "plan".into(), plan_cfg],
+            ),
+            (
+                "model export CONFIG",
+                vec!["model".into(), "export".into(), file.into(), "--mtx".into(), "m".into()],
+            ),
+            (
+                "model export: structure.mass",
+                vec!["model".into(), "export".into(), matrix_cfg, "--mtx".into(), "m".into()],
+            ),
+            (
+                "model export: ground_motion.file",
+                vec!["model".into(), "export".into(), record_cfg, "--mtx".into(), "m".into()],
+            ),
+            ("study FILE", vec!["study".into(), file.into()]),
+            ("study: base", vec!["study".into(), study_base]),
+            ("study: the base's record", vec!["study".into(), study_record]),
+            (
+                "benchmark rths --config",
+                vec!["benchmark".into(), "rths".into(), "--config".into(), file.into()],
+            ),
+            (
+                "benchmark rths --record",
+                vec!["benchmark".into(), "rths".into(), "--record".into(), file.into()],
+            ),
+            (
+                "site serve FILE",
+                vec!["site".into(), "serve".into(), file.into(), "--once".into()],
+            ),
+        ];
+        for (what, mut args) in cases {
+            if args[0] == "run" || args[0] == "study" || args[0] == "benchmark" {
+                args.extend(["--out".into(), "out".into()]);
+            }
+            if args[0] == "run" || args[0] == "benchmark" {
+                args.push("--no-plots".into());
+            }
+            let (code, stderr, peak, took) = run_measured(&dir, &args);
+            let line = stderr.trim_end();
+            assert_eq!(code, 2, "{what} with {kind}: exit code; stderr: {stderr}");
+            assert_eq!(stderr.lines().count(), 1, "{what} with {kind}: one line: {stderr}");
+            assert!(
+                line.starts_with("error: ") && line.contains(&format!("{file}: ")),
+                "{what} with {kind}: names the file: {line}"
+            );
+            let reason_ok = [
+                "is not a regular file",
+                "a configuration file may have",
+                "holds more than limits.max_record_values",
+                "not a MatrixMarket file",
+            ]
+            .iter()
+            .any(|r| line.contains(r));
+            assert!(reason_ok, "{what} with {kind}: says why: {line}");
+            assert!(
+                peak < 64 << 20,
+                "{what} with {kind}: peak memory {:.1} MB",
+                peak as f64 / 1e6
+            );
+            assert!(!dir.join("out").exists(), "{what} with {kind}: nothing written");
+            table.push(format!(
+                "| {what} | {kind} | {:.3} | {:.1} |",
+                took.as_secs_f64(),
+                peak as f64 / 1e6
+            ));
+        }
+    }
+    println!("| command and file | input | wall [s] | peak memory [MB] |\n|---|---|---|---|");
+    for row in table {
+        println!("{row}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

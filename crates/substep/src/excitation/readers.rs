@@ -10,18 +10,20 @@
 use super::G;
 use super::record::{Record, from_located_samples};
 use crate::error::{Error, Result, require_positive};
+use crate::io::Limits;
 use std::path::Path;
 
-/// Read a whole file as text (a regular file of at most `max_bytes`); the path as given names
-/// the file in messages.
-fn read_text(path: &Path, max_bytes: f64) -> Result<(String, String)> {
-    let text = crate::io::limits::read_text(path, max_bytes)?;
+/// Read a whole record file as text within `limits` (a regular file of at most
+/// `max_file_bytes`, at most `max_record_values` numbers, counted before it is kept); the path
+/// as given names the file in messages.
+fn read_text(path: &Path, limits: &Limits) -> Result<(String, String)> {
+    let text = crate::io::limits::read_record_text(path, limits)?;
     Ok((path.display().to_string(), text))
 }
 
-/// The default file-size limit of the readers (`[limits] max_file_bytes` of a config).
-fn default_max_bytes() -> f64 {
-    crate::io::Limits::default().max_file_bytes
+/// The limits of the readers without a config (`[limits]` of a config: [`read_record_with`]).
+fn default_limits() -> Limits {
+    Limits::default()
 }
 
 /// The fields of one line, without a `#` comment (and without a byte-order mark).
@@ -56,7 +58,7 @@ fn data_value(field: &str, name: &str, line_no: usize, what: &str) -> Result<f64
 
 /// Read a two-column `t, a_g` file (s, m/s²); see [`parse_two_column`].
 pub fn read_two_column(path: impl AsRef<Path>) -> Result<Record> {
-    let (name, text) = read_text(path.as_ref(), default_max_bytes())?;
+    let (name, text) = read_text(path.as_ref(), &default_limits())?;
     parse_two_column(&text, &name)
 }
 
@@ -103,7 +105,7 @@ pub fn parse_two_column(text: &str, name: &str) -> Result<Record> {
 pub fn read_single_column(path: impl AsRef<Path>, dt: f64) -> Result<Record> {
     let path = path.as_ref();
     require_positive(&format!("{}: dt", path.display()), dt)?;
-    let (name, text) = read_text(path, default_max_bytes())?;
+    let (name, text) = read_text(path, &default_limits())?;
     parse_single_column(&text, dt, &name)
 }
 
@@ -132,7 +134,7 @@ pub fn parse_single_column(text: &str, dt: f64, name: &str) -> Result<Record> {
 /// Read a PEER NGA `.AT2` acceleration file (values in g, converted to m/s²); see
 /// [`parse_at2`].
 pub fn read_at2(path: impl AsRef<Path>) -> Result<Record> {
-    let (name, text) = read_text(path.as_ref(), default_max_bytes())?;
+    let (name, text) = read_text(path.as_ref(), &default_limits())?;
     parse_at2(&text, &name)
 }
 
@@ -227,11 +229,11 @@ fn keyed_number(s: &str, key: &str) -> Option<f64> {
 /// AT2 (a given `dt` must then agree with the header's DT); otherwise a single column sampled
 /// at `dt` if `dt` is given, else two columns `t, a_g`.
 pub fn read_record(path: impl AsRef<Path>, dt: Option<f64>) -> Result<Record> {
-    read_record_with(path, dt, default_max_bytes())
+    read_record_with(path, dt, &default_limits())
 }
 
-/// [`read_record`] of a file of at most `max_bytes` (`[limits] max_file_bytes`).
-pub fn read_record_with(path: impl AsRef<Path>, dt: Option<f64>, max_bytes: f64) -> Result<Record> {
+/// [`read_record`] within a config's `limits` (`[limits] max_file_bytes`, `max_record_values`).
+pub fn read_record_with(path: impl AsRef<Path>, dt: Option<f64>, limits: &Limits) -> Result<Record> {
     let path = path.as_ref();
     let name = path.display().to_string();
     let is_at2 = path
@@ -239,7 +241,7 @@ pub fn read_record_with(path: impl AsRef<Path>, dt: Option<f64>, max_bytes: f64)
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("at2"));
     if is_at2 {
-        let (_, text) = read_text(path, max_bytes)?;
+        let (_, text) = read_text(path, limits)?;
         let record = parse_at2(&text, &name)?;
         match dt {
             Some(dt) if dt.is_nan() || (dt - record.dt).abs() > 1e-9 * record.dt => Err(Error::file(
@@ -250,10 +252,10 @@ pub fn read_record_with(path: impl AsRef<Path>, dt: Option<f64>, max_bytes: f64)
         }
     } else if let Some(dt) = dt {
         require_positive(&format!("{name}: dt"), dt)?;
-        let (_, text) = read_text(path, max_bytes)?;
+        let (_, text) = read_text(path, limits)?;
         parse_single_column(&text, dt, &name)
     } else {
-        let (_, text) = read_text(path, max_bytes)?;
+        let (_, text) = read_text(path, limits)?;
         parse_two_column(&text, &name)
     }
 }

@@ -29,6 +29,9 @@ pub struct Limits {
     pub max_output_bytes: f64,
     /// Size of any one input file (config, `.mtx`, record) [bytes].
     pub max_file_bytes: f64,
+    /// Numbers in one record file (ground motion, replayed forces; a time and a value each
+    /// count), counted while the file is scanned, before it is read into memory.
+    pub max_record_values: f64,
 }
 
 impl Default for Limits {
@@ -38,6 +41,7 @@ impl Default for Limits {
             max_run_time: 3600.0,
             max_output_bytes: 4.0 * GIB,
             max_file_bytes: 256.0 * MIB,
+            max_record_values: 2.0e7,
         }
     }
 }
@@ -245,17 +249,34 @@ impl RunShape {
 /// Read an input file as UTF-8 text: a regular file of at most `max_bytes`, opened so that a
 /// FIFO swapped in after the check cannot block. Errors name the file (as given) and the reason.
 pub fn read_text(path: &Path, max_bytes: f64) -> Result<String> {
+    read_text_checked(path, max_bytes, &|_| Ok(()))
+}
+
+/// Bytes handed to the head check of [`read_text_checked`].
+pub const HEAD_BYTES: usize = 64 * 1024;
+
+/// [`read_text`], but the first [`HEAD_BYTES`] (or the whole file, if shorter) go to
+/// `check_head` before the rest is read: a 200 MB file that is plainly not of its kind (no
+/// MatrixMarket banner) is refused after 64 KiB instead of after reading all of it. The head
+/// may end inside a line or a UTF-8 character.
+pub fn read_text_checked(
+    path: &Path,
+    max_bytes: f64,
+    check_head: &dyn Fn(&[u8]) -> std::result::Result<(), String>,
+) -> Result<String> {
     let name = path.display().to_string();
     let fail = |reason: String| Error::file(&name, reason);
-    let meta = std::fs::metadata(path).map_err(|e| fail(format!("cannot read file: {e}")))?;
-    check_regular(&meta, max_bytes).map_err(fail)?;
-    let file = open_nonblocking(path).map_err(|e| fail(format!("cannot read file: {e}")))?;
-    // The path may have been replaced between the two looks: check what was opened.
-    let meta = file.metadata().map_err(|e| fail(format!("cannot read file: {e}")))?;
-    check_regular(&meta, max_bytes).map_err(fail)?;
+    let (file, len) = open_regular(path, max_bytes).map_err(fail)?;
     let cap = max_bytes.clamp(0.0, u64::MAX as f64) as u64;
-    let mut raw = Vec::with_capacity(meta.len().min(cap) as usize);
-    file.take(cap.saturating_add(1))
+    let mut raw = Vec::with_capacity(len.min(cap).min(HEAD_BYTES as u64) as usize);
+    let mut limited = file.take(cap.saturating_add(1));
+    (&mut limited)
+        .take(HEAD_BYTES as u64)
+        .read_to_end(&mut raw)
+        .map_err(|e| fail(format!("cannot read file: {e}")))?;
+    check_head(&raw).map_err(fail)?;
+    raw.reserve(len.min(cap) as usize - raw.len().min(len.min(cap) as usize));
+    limited
         .read_to_end(&mut raw)
         .map_err(|e| fail(format!("cannot read file: {e}")))?;
     if raw.len() as u64 > cap {
@@ -272,6 +293,55 @@ pub fn read_text(path: &Path, max_bytes: f64) -> Result<String> {
     })
 }
 
+/// Read a record file (ground motion, replayed forces) as text within `limits`: the file is
+/// first scanned in 64 KiB pieces, keeping nothing, and its numbers (fields between commas,
+/// semicolons and white space) are counted; more than `limits.max_record_values` are refused
+/// before anything is kept, so a 10⁸-row record costs a scan of its first 2·10⁷ fields, not its
+/// size in memory. Then it is read as by [`read_text`].
+pub fn read_record_text(path: &Path, limits: &Limits) -> Result<String> {
+    let name = path.display().to_string();
+    let fail = |reason: String| Error::file(&name, reason);
+    let (file, _) = open_regular(path, limits.max_file_bytes).map_err(fail)?;
+    let cap = limits.max_file_bytes.clamp(0.0, u64::MAX as f64) as u64;
+    let max_values = limits.max_record_values.clamp(0.0, u64::MAX as f64) as u64;
+    let mut reader = file.take(cap.saturating_add(1));
+    let mut buf = vec![0u8; HEAD_BYTES];
+    let (mut values, mut in_field) = (0u64, false);
+    loop {
+        let n = match reader.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(fail(format!("cannot read file: {e}"))),
+        };
+        for &b in &buf[..n] {
+            let separator = matches!(b, b',' | b';' | b' ' | b'\t' | b'\n' | b'\r');
+            values += u64::from(!separator && !in_field);
+            in_field = !separator;
+        }
+        if values > max_values {
+            return Err(fail(format!(
+                "holds more than limits.max_record_values = {} numbers (a time and a value each \
+                 count); set [limits] max_record_values to allow it",
+                number(limits.max_record_values)
+            )));
+        }
+    }
+    read_text(path, limits.max_file_bytes)
+}
+
+/// Open `path` if it is a regular file of at most `max_bytes` (checked on the path and again on
+/// the open handle); the handle and the file's length.
+fn open_regular(path: &Path, max_bytes: f64) -> std::result::Result<(std::fs::File, u64), String> {
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read file: {e}"))?;
+    check_regular(&meta, max_bytes)?;
+    let file = open_nonblocking(path).map_err(|e| format!("cannot read file: {e}"))?;
+    // The path may have been replaced between the two looks: check what was opened.
+    let meta = file.metadata().map_err(|e| format!("cannot read file: {e}"))?;
+    check_regular(&meta, max_bytes)?;
+    Ok((file, meta.len()))
+}
+
 fn check_regular(meta: &std::fs::Metadata, max_bytes: f64) -> std::result::Result<(), String> {
     let kind = meta.file_type();
     if kind.is_dir() {
@@ -281,6 +351,15 @@ fn check_regular(meta: &std::fs::Metadata, max_bytes: f64) -> std::result::Resul
         return Err("is not a regular file (a device, FIFO or socket is never read as input)".into());
     }
     if meta.len() as f64 > max_bytes {
+        // A configuration file's limit is fixed (its [limits] are inside it).
+        if max_bytes == CONFIG_MAX_BYTES {
+            return Err(format!(
+                "is {}, more than the {} a configuration file may have (large models belong in \
+                 .mtx files, records in their own files)",
+                bytes(meta.len() as f64),
+                bytes(max_bytes)
+            ));
+        }
         return Err(format!(
             "is {}, more than limits.max_file_bytes = {}; set [limits] max_file_bytes (bytes) to allow it",
             bytes(meta.len() as f64),

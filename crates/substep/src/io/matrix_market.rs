@@ -12,7 +12,7 @@
 //! Every error names the file and, where it has one, the line: `K.mtx: line 7: row index 4 is
 //! out of range 1..=3`.
 
-use super::limits::{CHAIN_BYTES_PER_DOF, Limits, MTX_BYTES_PER_ENTRY, bytes, read_text};
+use super::limits::{CHAIN_BYTES_PER_DOF, Limits, MTX_BYTES_PER_ENTRY, bytes, read_text_checked};
 use crate::error::{Error, Result};
 use crate::sparse::CscMatrix;
 use nalgebra::DMatrix;
@@ -39,7 +39,7 @@ pub fn read_matrix_market(path: impl AsRef<Path>) -> Result<DMatrix<f64>> {
 /// [`read_matrix_market`] within `limits` (file size, and the memory the size line asks for).
 pub fn read_matrix_market_with(path: impl AsRef<Path>, limits: &Limits) -> Result<DMatrix<f64>> {
     let path = path.as_ref();
-    let text = read_text(path, limits.max_file_bytes)?;
+    let text = read_text_checked(path, limits.max_file_bytes, &check_banner)?;
     parse_dense(&text, &path.display().to_string(), limits)
 }
 
@@ -68,7 +68,7 @@ pub fn read_matrix_market_sparse(path: impl AsRef<Path>) -> Result<CscMatrix> {
 /// asks for).
 pub fn read_matrix_market_sparse_with(path: impl AsRef<Path>, limits: &Limits) -> Result<CscMatrix> {
     let path = path.as_ref();
-    let text = read_text(path, limits.max_file_bytes)?;
+    let text = read_text_checked(path, limits.max_file_bytes, &check_banner)?;
     parse_sparse(&text, &path.display().to_string(), limits)
 }
 
@@ -397,6 +397,20 @@ fn stored_count(symmetry: Symmetry, rows: usize, cols: usize) -> usize {
         Symmetry::Symmetric => rows.saturating_mul(rows.saturating_add(1)) / 2,
         Symmetry::SkewSymmetric => rows.saturating_mul(rows.saturating_sub(1)) / 2,
     }
+}
+
+/// The head check of the readers: the first line must be a MatrixMarket banner, so a file of
+/// another kind is refused after its first 64 KiB, not after reading all of it.
+fn check_banner(head: &[u8]) -> std::result::Result<(), String> {
+    let first = head.split(|&b| b == b'\n').next().unwrap_or(&[]);
+    let first = String::from_utf8_lossy(first);
+    let first = first.trim_start_matches('\u{feff}');
+    if !first.trim_start().to_ascii_lowercase().starts_with("%%matrixmarket") {
+        // The parser's own message for a wrong first line (quoting at most 80 characters).
+        let shown: String = first.chars().take(80).collect();
+        return parse_header(&shown).map(|_| ()).map_err(|r| format!("line 1: {r}"));
+    }
+    Ok(())
 }
 
 fn parse_header(header: &str) -> std::result::Result<(Layout, Symmetry), String> {

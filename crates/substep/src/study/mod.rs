@@ -270,9 +270,14 @@ impl Study {
             .checked_mul(study.n_samples)
             .and_then(|x| x.checked_mul(study.seeds.len().max(1)));
         match n {
-            Some(n) if n <= MAX_RUNS => Ok(study),
-            _ => Err(Error::invalid(name, format!("more than {MAX_RUNS} runs"))),
+            Some(n) if n <= MAX_RUNS => {}
+            _ => return Err(Error::invalid(name, format!("more than {MAX_RUNS} runs"))),
         }
+        // The base must be a test definition by itself: a bad key, or a record or matrix it
+        // names that cannot be read, is one refusal here instead of one failed run per variant.
+        let text = toml::to_string(&study.base).map_err(|e| Error::invalid(&study.base_name, e.to_string()))?;
+        TestDefinition::from_toml(&text, &study.base_name, &study.base_dir)?;
+        Ok(study)
     }
 
     fn grid_points(&self) -> usize {

@@ -101,7 +101,7 @@ impl RawGroundMotion {
             (Some(file), None) => {
                 forbid(g, &generator_keys, "only used with generator = ...")?;
                 let path = base.join(file);
-                let record = excitation::read_record_with(&path, self.dt, limits.max_file_bytes)
+                let record = excitation::read_record_with(&path, self.dt, limits)
                     .map_err(|e| Error::invalid("ground_motion.file", e.to_string()))?;
                 (record, format!("record {}", path.display()))
             }

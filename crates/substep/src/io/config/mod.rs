@@ -238,6 +238,7 @@ pub(crate) struct RawRunLimits {
     pub(crate) max_run_time: Option<f64>,
     pub(crate) max_output_bytes: Option<f64>,
     pub(crate) max_file_bytes: Option<f64>,
+    pub(crate) max_record_values: Option<f64>,
 }
 
 impl RawRunLimits {
@@ -248,6 +249,7 @@ impl RawRunLimits {
             max_run_time: limits::limit_value("max_run_time", self.max_run_time, d.max_run_time)?,
             max_output_bytes: limits::limit_value("max_output_bytes", self.max_output_bytes, d.max_output_bytes)?,
             max_file_bytes: limits::limit_value("max_file_bytes", self.max_file_bytes, d.max_file_bytes)?,
+            max_record_values: limits::limit_value("max_record_values", self.max_record_values, d.max_record_values)?,
         })
     }
 }

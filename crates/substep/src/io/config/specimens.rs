@@ -172,7 +172,7 @@ impl RawSpecimen {
                 let (dt, values) = match (file, values) {
                     (Some(f), None) => {
                         let path = base.join(f);
-                        let rec = excitation::read_record_with(&path, *dt, limits.max_file_bytes)
+                        let rec = excitation::read_record_with(&path, *dt, limits)
                             .map_err(|e| Error::invalid(format!("{what}.file"), e.to_string()))?;
                         (rec.dt, rec.accel)
                     }
