@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use substep::benchmark::rths::{
-    Algorithm, Case, PUBLISHED_SAMPLE, RthsInput, RthsRow, StudyOptions, StudySetup, perturbed_stats, run,
+    Algorithm, Case, PUBLISHED_SAMPLE, RthsInput, RthsRow, RunHistory, StudyOptions, StudySetup, perturbed_stats, run,
 };
 
 #[derive(Debug, clap::Args)]
@@ -270,14 +270,81 @@ fn curve(label: &str, xy: (Vec<f64>, Vec<f64>), scale: f64) -> Curve {
     }
 }
 
-fn plots(base: &RthsInput, cases: &[Case], dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut files = Vec::new();
+/// The nominal run of every case again with its time histories kept (deterministic: the same
+/// numbers as the scored run); a case that diverged has none.
+fn histories(base: &RthsInput, cases: &[Case]) -> Result<Vec<(Case, RunHistory)>> {
+    let mut out = Vec::new();
     for case in cases {
         let mut input = base.clone();
         input.case = *case;
         input.keep_history = true;
-        let r = run(&input)?;
-        let Some(hist) = r.history else { continue };
+        if let Some(hist) = run(&input)?.history {
+            out.push((*case, hist));
+        }
+    }
+    Ok(out)
+}
+
+/// `trace_caseN.csv` (every controller sample) and `floors_caseN.csv` (the numerical
+/// substructure's grid) for comparisons sample by sample; SI units, numbers in their shortest
+/// exact form.
+fn traces(histories: &[(Case, RunHistory)], dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for (case, hist) in histories {
+        let c = case.number;
+        let n = hist.desired.len();
+        let mut text = String::with_capacity(n * 160);
+        text.push_str(
+            "t [s],target y_n [m],command u [m],measured x_m [m],actuator force F [N],reference floor 1 [m],reference floor 2 [m],reference floor 3 [m]\n",
+        );
+        for k in 0..n {
+            let _ = writeln!(
+                text,
+                "{},{},{},{},{},{},{},{}",
+                k as f64 * hist.h,
+                hist.desired[k],
+                hist.command[k],
+                hist.measured[k],
+                hist.actuator_force[k],
+                hist.reference[0][k],
+                hist.reference[1][k],
+                hist.reference[2][k]
+            );
+        }
+        let path = dir.join(format!("trace_case{c}.csv"));
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        files.push(path);
+        let stride = hist.floor_stride;
+        let m = hist.floors[0].len();
+        let mut text = String::with_capacity(m * 140);
+        text.push_str(
+            "t [s],floor 1 [m],floor 2 [m],floor 3 [m],reference floor 1 [m],reference floor 2 [m],reference floor 3 [m]\n",
+        );
+        for j in 0..m {
+            let k = j * stride;
+            let r = |i: usize| hist.reference[i].get(k).copied().unwrap_or(f64::NAN);
+            let _ = writeln!(
+                text,
+                "{},{},{},{},{},{},{}",
+                k as f64 * hist.h,
+                hist.floors[0][j],
+                hist.floors[1][j],
+                hist.floors[2][j],
+                r(0),
+                r(1),
+                r(2)
+            );
+        }
+        let path = dir.join(format!("floors_case{c}.csv"));
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        files.push(path);
+    }
+    Ok(files)
+}
+
+fn plots(histories: &[(Case, RunHistory)], dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for (case, hist) in histories {
         let h = hist.h;
         let n = hist.desired.len();
         let c = case.number;
@@ -386,13 +453,17 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     }
     out(&table(&setup, &rows));
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    if !args.no_plots {
+        crate::plots::check_format(args.plot_format, "--plot-format")?;
+    }
+    let base = setup.base.with_k_sub(setup.k_subs.first().copied().flatten());
+    let histories = histories(&base, &setup.cases)?;
+    let trace_files = traces(&histories, &args.out)?;
     let files = if args.no_plots {
         Vec::new()
     } else {
-        crate::plots::check_format(args.plot_format, "--plot-format")?;
         crate::plots::set_format(args.plot_format);
-        let base = setup.base.with_k_sub(setup.k_subs.first().copied().flatten());
-        plots(&base, &setup.cases, &args.out)?
+        plots(&histories, &args.out)?
     };
     let command = std::iter::once("substep".to_string())
         .chain(std::env::args().skip(1))
@@ -402,9 +473,10 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     let path = args.out.join("benchmark.md");
     std::fs::write(&path, md).with_context(|| format!("cannot write {}", path.display()))?;
     out(&format!(
-        "{} run(s) in {elapsed:.2} s; wrote {}{}\n",
+        "{} run(s) in {elapsed:.2} s; wrote {}, {} trace files (CSV){}\n",
         rows.len() * (1 + args.perturbed.unwrap_or(0)),
         path.display(),
+        trace_files.len(),
         if files.is_empty() {
             String::new()
         } else {

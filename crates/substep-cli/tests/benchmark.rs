@@ -286,3 +286,68 @@ fn no_score_fails_and_capacity_is_a_warning() {
     assert!(w.contains("beyond the benchmark's capacity of 8900 N"), "{w}");
     assert!(text(&out.stderr).contains("warning: case 1: the actuator force reached"));
 }
+
+/// Population standard deviation (the benchmark's `std`), written here independently of the
+/// library's metrics.
+fn population_std(v: &[f64]) -> f64 {
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    (v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// Issue 28: `--out` writes the traces, exact enough to score the run again: J2 (NRMS of
+/// measured − target) and J4 (NRMS of measured − the reference's first floor) recomputed from
+/// `trace_case1.csv` equal the unrounded `J_raw` of `--json` to 1e-9; `floors_case1.csv` has
+/// the numerical substructure on its grid. Both algorithms.
+#[test]
+fn traces_reproduce_the_reported_criteria() {
+    for algorithm in ["benchmark", "substep"] {
+        let dir = temp_dir(&format!("traces-{algorithm}"));
+        let args = ["benchmark", "rths", "--case", "1", "--algorithm", algorithm];
+        let json = substep(&dir, &[&args[..], &["--json"]].concat());
+        assert!(json.status.success(), "{}", text(&json.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+        let raw: Vec<f64> = v["J_raw"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert_eq!(raw.len(), 9);
+        let files = substep(&dir, &[&args[..], &["--no-plots", "--out", "out"]].concat());
+        assert!(files.status.success(), "{}", text(&files.stderr));
+        let trace = std::fs::read_to_string(dir.join("out/trace_case1.csv")).unwrap();
+        let mut lines = trace.lines();
+        assert_eq!(
+            lines.next().unwrap(),
+            "t [s],target y_n [m],command u [m],measured x_m [m],actuator force F [N],reference floor 1 [m],reference floor 2 [m],reference floor 3 [m]"
+        );
+        let rows: Vec<Vec<f64>> = lines
+            .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+            .collect();
+        assert_eq!(rows.len(), 168_674, "one row per controller sample of El Centro");
+        let column = |c: usize| rows.iter().map(|r| r[c]).collect::<Vec<f64>>();
+        let (target, command, measured, reference1) = (column(1), column(2), column(3), column(5));
+        let diff = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x - y).collect::<Vec<f64>>();
+        let j2 = 100.0 * population_std(&diff(&measured, &target)) / population_std(&target);
+        let j4 = 100.0 * population_std(&diff(&measured, &reference1)) / population_std(&reference1);
+        assert!(
+            (j2 - raw[1]).abs() < 1e-9,
+            "{algorithm}: J2 from the trace {j2} vs {}",
+            raw[1]
+        );
+        assert!(
+            (j4 - raw[3]).abs() < 1e-9,
+            "{algorithm}: J4 from the trace {j4} vs {}",
+            raw[3]
+        );
+        // The command is the controller's own signal, not a copy of the target.
+        assert!(
+            command.iter().zip(&target).any(|(u, y)| (u - y).abs() > 1e-6),
+            "{algorithm}"
+        );
+        let floors = std::fs::read_to_string(dir.join("out/floors_case1.csv")).unwrap();
+        let n_floors = floors.lines().count() - 1;
+        let expected = if algorithm == "benchmark" { 168_674 } else { 168_674 / 4 };
+        assert!(n_floors.abs_diff(expected) <= 1, "{algorithm}: {n_floors} floor rows");
+    }
+}

@@ -195,6 +195,8 @@ fn j_json(r: &RthsResult, obj: &mut Map<String, Value>) {
     for i in 0..9 {
         obj.insert(format!("J{}", i + 1), r.criteria.map_or(Value::Null, |c| json!(c.j[i])));
     }
+    // Unrounded, for comparisons with the traces (`--out`) or another implementation.
+    obj.insert("J_raw".into(), r.criteria.map_or(Value::Null, |c| json!(c.raw)));
     obj.insert("max_force".into(), json!(r.max_force));
     obj.insert("stable".into(), json!(r.stable));
     obj.insert("capacity_exceeded".into(), json!(r.capacity_exceeded));

@@ -166,6 +166,8 @@ pub struct Criteria {
 pub struct RunHistory {
     pub h: f64,
     pub desired: Vec<f64>,
+    /// The controller's output to the actuator (after the D/A) \[m\].
+    pub command: Vec<f64>,
     pub measured: Vec<f64>,
     pub actuator_force: Vec<f64>,
     pub floor_stride: usize,
@@ -409,6 +411,7 @@ pub fn run(input: &RthsInput) -> Result<RthsResult> {
     let mut desired = vec![0.0; n];
     let mut measured = vec![0.0; n];
     let mut force_hist = if input.keep_history { vec![0.0; n] } else { Vec::new() };
+    let mut command_hist = if input.keep_history { vec![0.0; n] } else { Vec::new() };
     let mut max_force = 0.0f64;
     let mut diverged_at = None;
 
@@ -437,6 +440,9 @@ pub fn run(input: &RthsInput) -> Result<RthsResult> {
                     force_hist[k] = big_f;
                 }
                 let u = controller.command(q[0], x_m);
+                if input.keep_history {
+                    command_hist[k] = u;
+                }
                 let f_in = f_delay;
                 f_delay = f_m;
                 lab.advance(u);
@@ -456,6 +462,7 @@ pub fn run(input: &RthsInput) -> Result<RthsResult> {
                 &mut desired,
                 &mut measured,
                 &mut force_hist,
+                &mut command_hist,
                 &mut max_force,
             )?;
             diverged_at = r.1;
@@ -503,6 +510,7 @@ pub fn run(input: &RthsInput) -> Result<RthsResult> {
         history: input.keep_history.then_some(RunHistory {
             h,
             desired,
+            command: command_hist,
             measured,
             actuator_force: force_hist,
             floor_stride: stride,
@@ -525,6 +533,7 @@ fn run_substep(
     desired: &mut [f64],
     measured: &mut [f64],
     force_hist: &mut [f64],
+    command_hist: &mut [f64],
     max_force: &mut f64,
 ) -> Result<([Vec<f64>; 3], Option<f64>)> {
     let h = SAMPLE_TIME;
@@ -609,6 +618,9 @@ fn run_substep(
             force_hist[k] = big_f;
         }
         let u = controller.command(y_n, x_m);
+        if !command_hist.is_empty() {
+            command_hist[k] = u;
+        }
         lab.advance(u);
     }
     // Steps whose end lies beyond the last sample are not completed; keep the grid consistent.
