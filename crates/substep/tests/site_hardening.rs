@@ -1251,10 +1251,10 @@ fn a_spoofed_udp_datagram_is_dropped_and_the_session_goes_on() {
     elsewhere.send_to(&good, site).unwrap();
     let mut buf = [0u8; 4096];
     let n = elsewhere.recv(&mut buf).unwrap();
-    assert!(matches!(
-        decode_frame(&buf[..n], None).unwrap().1,
-        Message::Error { .. }
-    ));
+    match decode_frame(&buf[..n], None).unwrap().1 {
+        Message::Error { reason } => assert!(reason.contains("no session with this address"), "{reason}"),
+        other => panic!("{other:?}"),
+    }
     // (replies to the shared address may go to either socket while both exist)
     std::thread::sleep(Duration::from_millis(50));
     drop(spoofer);
@@ -1294,9 +1294,8 @@ fn a_spoofed_udp_datagram_is_dropped_and_the_session_goes_on() {
         report.dropped, 4,
         "the forged tag, the two forged from the other socket, and the garbage"
     );
-    // one error: the version 2 frame from another address, refused as a bad datagram (as
-    // without a secret); the session itself was never ended
-    assert_eq!(report.errors, 1);
+    // the session was never ended
+    assert_eq!(report.errors, 0);
     assert_eq!(report.sessions, 1);
     let log = log.lock().unwrap();
     assert!(!log.iter().any(|l| l.contains("session ended")), "{log:?}");

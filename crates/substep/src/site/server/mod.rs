@@ -17,7 +17,7 @@ use super::auth::{MAC_LEN, NONCE_LEN, Role, Secret, SessionKeys, TAG_LEN, nonce}
 use super::limits::{SessionCost, SiteLimits};
 use super::protocol::{
     AUTH_FAILED, HEADER_LEN, Header, Hello, MAX_DATAGRAM, MAX_REASON, Message, MessageType, Mode, Session, StepReply,
-    as_auth_failure, decode_frame, hello_payload_len, open_sealed,
+    VERSION_AUTHENTICATED, as_auth_failure, decode_frame, hello_payload_len, open_sealed,
 };
 use super::transport::{LinkError, POLL, read_frame, read_full, write_all};
 use super::{CommandRamp, LogFn, SiteFactory, substep_ground_acceleration};

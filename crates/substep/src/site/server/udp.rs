@@ -121,7 +121,11 @@ impl UdpServer {
                 return self.sealed_datagram(frame, from, options);
             }
         }
-        let header = match Header::parse(frame) {
+        // With a secret, a session frame (version 2) from outside the session is still read
+        // as one: a repeat of an ended session's last request gets its cached reply, others
+        // "no session with this address".
+        let sealed = options.secret.is_some() && frame.get(4..6) == Some(&VERSION_AUTHENTICATED.to_le_bytes()[..]);
+        let header = match Header::parse_session(frame, sealed) {
             Ok(h) => h,
             Err(e) => {
                 self.send_error(from, 0, &e.to_string());
