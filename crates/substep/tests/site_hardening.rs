@@ -1062,6 +1062,9 @@ fn open_reply(frame: &[u8], keys: &SessionKeys) -> (u32, Message) {
     (header.seq, Message::decode(&header, payload, Some(&session)).unwrap())
 }
 
+/// Makes the frame sent after a good `Substep #2` (the session keys, that frame).
+type BadFrame = Box<dyn Fn(&SessionKeys, &[u8]) -> Vec<u8>>;
+
 #[test]
 fn replayed_reordered_and_changed_messages_end_a_tcp_session() {
     let key = secret("the lab's secret, 32 bytes long!");
@@ -1070,7 +1073,7 @@ fn replayed_reordered_and_changed_messages_end_a_tcp_session() {
     let (server, commands) = recording_site(Transport::Tcp, &opts);
     let h = hello(2, 4, 0.01, Mode::PerSubstep);
     let connect = || {
-        let mut c = TcpStream::connect(server.local_addr()).unwrap();
+        let c = TcpStream::connect(server.local_addr()).unwrap();
         c.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
         let keys = {
             let mut w = c.try_clone().unwrap();
@@ -1080,7 +1083,7 @@ fn replayed_reordered_and_changed_messages_end_a_tcp_session() {
         (c, keys)
     };
     // (frames to send after a good Substep #2, the reason the site gives)
-    let cases: [(&str, Box<dyn Fn(&SessionKeys, &[u8]) -> Vec<u8>>, &str); 3] = [
+    let cases: [(&str, BadFrame, &str); 3] = [
         (
             "replay",
             Box::new(|_, first| first.to_vec()),

@@ -213,6 +213,10 @@ pub(super) fn admit_hello(header: &Header, msg: Message, limits: &SiteLimits) ->
     }
 }
 
+/// With a secret, what an accepted `Auth` gives: the site's proof for `Accept` and the session
+/// keys.
+pub(super) type Proof = ([u8; MAC_LEN], SessionKeys);
+
 /// Check the client's `Auth` against the challenge; on success the site's proof for `Accept`
 /// and the session keys.
 pub(super) fn check_auth(
@@ -221,7 +225,7 @@ pub(super) fn check_auth(
     hello_payload: &[u8],
     header: &Header,
     msg: Message,
-) -> std::result::Result<([u8; MAC_LEN], SessionKeys), Refusal> {
+) -> std::result::Result<Proof, Refusal> {
     match msg {
         Message::Auth { nonce, mac } if header.seq == 1 => {
             if secret.verify(Role::Client, site_nonce, &nonce, hello_payload, &mac) {

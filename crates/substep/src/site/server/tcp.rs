@@ -399,7 +399,7 @@ pub(super) fn handshake_tcp(
     frame: &mut Vec<u8>,
     options: &ServeOptions,
     stop: Option<&AtomicBool>,
-) -> std::result::Result<(Hello, u32, Option<([u8; MAC_LEN], SessionKeys)>), Refusal> {
+) -> std::result::Result<(Hello, u32, Option<Proof>), Refusal> {
     let deadline = ServeOptions::deadline(Some(options.handshake_timeout));
     let link_refusal = |e: LinkError, what: &str| match e {
         LinkError::Protocol(err) => Refusal::reject(err.to_string(), 0),
