@@ -2,7 +2,7 @@
 //! `[substructure.remote]` give the same history as the local run, bit for bit; a site killed
 //! mid-test and a limit violation end in a controlled stop with intact records.
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 
@@ -559,5 +559,170 @@ fn remote_durations_and_secrets_are_checked() {
         let err = text(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{err}");
         assert!(err.starts_with("error: ") && err.contains(key), "{key}: {err}");
+    }
+}
+
+/// Whether an `SSTP` frame is a message of the session (not `Hello` = 1 or `Auth` = 12).
+fn is_session_message(frame: &[u8]) -> bool {
+    frame.len() >= 16 && !matches!(u16::from_le_bytes([frame[6], frame[7]]), 1 | 12)
+}
+
+/// A proxy in front of the site at `site` that passes the handshake and flips one bit (the
+/// lowest of the first payload byte: the first command's last mantissa bit) of every later
+/// client → site message; replies pass unchanged. Runs for at most 30 s.
+fn tampering_proxy(site: &str, udp: bool) -> String {
+    use std::io::Write;
+    use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
+    use std::time::{Duration, Instant};
+    let site: SocketAddr = site.parse().unwrap();
+    if udp {
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+        socket.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        let addr = socket.local_addr().unwrap().to_string();
+        std::thread::spawn(move || {
+            let start = Instant::now();
+            let (mut buf, mut client) = (vec![0u8; 70_000], None);
+            while start.elapsed() < Duration::from_secs(30) {
+                let Ok((n, from)) = socket.recv_from(&mut buf) else {
+                    continue;
+                };
+                if from == site {
+                    if let Some(c) = client {
+                        let _ = socket.send_to(&buf[..n], c);
+                    }
+                } else {
+                    client = Some(from);
+                    if is_session_message(&buf[..n]) {
+                        buf[16] ^= 1;
+                    }
+                    let _ = socket.send_to(&buf[..n], site);
+                }
+            }
+        });
+        return addr;
+    }
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    std::thread::spawn(move || {
+        let Ok((mut client, _)) = listener.accept() else {
+            return;
+        };
+        let mut upstream = TcpStream::connect(site).unwrap();
+        let (mut from_site, mut to_client) = (upstream.try_clone().unwrap(), client.try_clone().unwrap());
+        std::thread::spawn(move || {
+            let _ = std::io::copy(&mut from_site, &mut to_client);
+            let _ = to_client.shutdown(std::net::Shutdown::Both);
+        });
+        client.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        loop {
+            let mut frame = vec![0u8; 16];
+            if client.read_exact(&mut frame).is_err() {
+                break;
+            }
+            let len = u32::from_le_bytes(frame[12..16].try_into().unwrap()) as usize;
+            frame.resize(16 + len, 0);
+            if client.read_exact(&mut frame[16..]).is_err() {
+                break;
+            }
+            if is_session_message(&frame) && frame.len() > 16 {
+                frame[16] ^= 1;
+            }
+            if upstream.write_all(&frame).is_err() {
+                break;
+            }
+        }
+        let _ = upstream.shutdown(std::net::Shutdown::Both);
+    });
+    addr
+}
+
+/// Issue 25: a proxy that passes the authenticated handshake and then changes every command
+/// (the attack multiplied them by 1000; one flipped bit is enough) cannot move the site: the
+/// site refuses the first changed message and says why, and the run stops with exit 1 through
+/// the controlled stop (the ramp-down to the safe position is attempted; the site has ended the
+/// session, so it reports that the ramp could not be sent) with "message authentication failed"
+/// on both sides, over TCP and UDP.
+#[test]
+fn a_tampering_proxy_stops_an_authenticated_run_with_exit_1_on_both_sides() {
+    let dir = temp_dir("tamper");
+    std::fs::write(dir.join("site.key"), "3f9a1c07e2b84d6a95c3e1f0a7b2d4c6\n").unwrap();
+    let limits = "\n[substructure.limits]\ndisplacement = 0.05\nforce = 1e6\nramp_time = 0.2\n";
+    for transport in ["tcp", "udp"] {
+        // the site: `site serve --once` over `transport`, with the secret
+        let site_toml = format!(
+            "[site]\nprotocol = \"substep\"\ntransport = \"{transport}\"\nlisten = \"127.0.0.1:0\"\nsecret_file = \"site.key\"\nidle_timeout = 1.0\n{}",
+            SPECIMENS.replace("PREFIX", "")
+        );
+        std::fs::write(dir.join("site.toml"), site_toml).unwrap();
+        let mut site = bin()
+            .env_remove("SUBSTEP_SITE_SECRET")
+            .args(["site", "serve", "site.toml", "--once"])
+            .current_dir(&dir)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut site_out = BufReader::new(site.stdout.take().unwrap());
+        let mut line = String::new();
+        site_out.read_line(&mut line).unwrap();
+        let marker = format!("listening on {transport}://");
+        assert!(line.contains(&marker), "{line}");
+        let site_addr = line.trim().rsplit(&marker).next().unwrap().to_string();
+        let proxy = tampering_proxy(&site_addr, transport == "udp");
+        let config = client_config(2.0, Some((&proxy, "per_substep")), limits).replace(
+            "timeout = 1.0\n",
+            &format!("timeout = 0.3\ntransport = \"{transport}\"\nsecret_file = \"site.key\"\n"),
+        );
+        std::fs::write(dir.join("tamper.toml"), config).unwrap();
+        let out = run(&dir, "tamper.toml", transport);
+        let err = text(&out.stderr);
+        println!("{transport} client: {err}");
+        assert_eq!(out.status.code(), Some(1), "{transport}: {err}");
+        assert!(
+            err.starts_with("error: stopped at step 1 (t = 0.010000 s): experimental side failed: "),
+            "{transport}: {err}"
+        );
+        assert!(
+            err.contains(&format!("site {transport}://{proxy}")),
+            "names the site: {err}"
+        );
+        let reason = match transport {
+            "tcp" => {
+                "the site reported an error (reply to Substep #2): message authentication failed: Substep #2: the tag does not match"
+            }
+            _ => "message authentication failed: the site dropped Substep #2 as unauthenticated (4 of 4 attempts",
+        };
+        assert!(err.contains(reason), "{transport}: {err}");
+        // the controlled stop: the ramp to the safe position was attempted on the dead link
+        assert!(
+            err.contains("; the ramp to the safe position failed at 1/80: ")
+                && err.contains("connection unusable after an earlier failure"),
+            "{transport}: {err}"
+        );
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(transport).join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["completed"], false);
+        assert_eq!(summary["stopped_at_step"], 1);
+        // the site: ended (TCP) or dropped (UDP) with the reason and the peer, then exits
+        // after the session (UDP: after its idle timeout)
+        let status = site.wait().unwrap();
+        let mut log = String::new();
+        site_out.read_to_string(&mut log).unwrap();
+        println!("{transport} site: {line}{log}");
+        assert!(status.success(), "{transport}: site exit {status:?}");
+        let expected = match transport {
+            "tcp" => {
+                "session ended after 0 sub-steps, 0 steps: message authentication failed: Substep #2: the tag does not match"
+            }
+            _ => {
+                "message authentication failed: Substep #2: the tag does not match (the message was changed on the way, forged, or sealed with another key); the datagram was dropped, not executed"
+            }
+        };
+        assert!(
+            log.lines()
+                .any(|l| l.starts_with("site: 127.0.0.1:") && l.contains(expected)),
+            "{transport}: {log}"
+        );
+        assert!(log.contains("authenticated)"), "{log}");
     }
 }

@@ -336,17 +336,31 @@ fn lossy_udp_proxy(
 
 #[test]
 fn udp_lost_replies_are_retried_and_duplicates_ignored() {
+    lossy_udp_runs(None);
+}
+
+/// With a secret the retransmit rule holds for authentic repeats: the site answers a repeated
+/// sealed request with its cached reply and executes every sub-step once.
+#[test]
+fn authenticated_udp_lost_replies_are_retried_and_duplicates_ignored() {
+    lossy_udp_runs(Some(
+        substep::site::Secret::new(b"0123456789abcdef0123456789abcdef", "test").unwrap(),
+    ));
+}
+
+fn lossy_udp_runs(secret: Option<substep::site::Secret>) {
     let steps = 60;
     let ag = ground_motion(steps);
     let local = local_history(&ag);
-    let (options, log) = serve_options(true);
+    let (mut options, log) = serve_options(true);
+    options.secret = secret.clone();
     let server = SiteServer::spawn_udp(udp_socket(), lab_factory, &options).unwrap();
     let (proxy, stop, proxy_thread) = lossy_udp_proxy(server.local_addr(), 10, 5);
     let opts = ClientOptions {
         timeout: Duration::from_millis(50),
         connect_timeout: Duration::from_secs(1),
         udp_retries: 8,
-        secret: None,
+        secret: secret.clone(),
     };
     let t0 = Instant::now();
     // per sub-step: ~250 requests, every 10th reply lost, every 5th request duplicated
@@ -377,6 +391,16 @@ fn udp_lost_replies_are_retried_and_duplicates_ignored() {
     assert!(dropped > 10 && duplicated > 10 && dropped2 > 5 && duplicated2 > 5);
     assert_same(&remote, &local, "per-substep over lossy UDP");
     assert_same(&remote_step, &local, "per-step over lossy UDP");
+    let log = log.lock().unwrap();
+    let sessions: Vec<&String> = log.iter().filter(|l| l.contains("connected over UDP")).collect();
+    assert_eq!(sessions.len(), 2, "{log:?}");
+    let note = if secret.is_some() {
+        ", authenticated)"
+    } else {
+        ", messages not authenticated: no secret)"
+    };
+    assert!(sessions.iter().all(|l| l.ends_with(note)), "{sessions:?}");
+    assert_eq!(report.dropped + report2.dropped, 0, "no datagram failed authentication");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -10,9 +10,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use substep::error::require_duration;
-use substep::site::auth::{Role, Secret};
+use substep::site::auth::{Role, Secret, SessionKeys};
 use substep::site::openfresco::{ElementSpec, OpenFrescoServer, Sizes, action};
-use substep::site::protocol::{HEADER_LEN, Header, Session, decode_frame};
+use substep::site::protocol::{HEADER_LEN, Header, MessageType, Session, decode_frame, open_sealed};
 use substep::site::{
     ClientOptions, Hello, Message, Mode, RemoteSite, RemoteStepSite, ServeOptions, SiteClient, SiteLimits, SiteServer,
     Transport, VirtualLabSpec,
@@ -588,9 +588,10 @@ fn a_client_with_a_secret_refuses_a_site_without_it() {
 fn read_frame(s: &mut TcpStream) -> Vec<u8> {
     let mut head = [0u8; HEADER_LEN];
     s.read_exact(&mut head).unwrap();
-    let h = Header::parse(&head).unwrap();
+    // version 1 or 2 (sealed): the length is where it is in both
+    let len = u32::from_le_bytes(head[12..16].try_into().unwrap()) as usize;
     let mut frame = head.to_vec();
-    frame.resize(HEADER_LEN + h.len as usize, 0);
+    frame.resize(HEADER_LEN + len, 0);
     s.read_exact(&mut frame[HEADER_LEN..]).unwrap();
     frame
 }
@@ -754,4 +755,556 @@ fn secrets_are_checked() {
     bad[31] ^= 1;
     assert!(!a.verify(Role::Client, &n1, &n2, b"hello", &bad));
     assert_eq!(format!("{a:?}"), "Secret(20 bytes)", "never printed");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Authenticated session messages (issue 25): every message after the handshake carries a tag.
+
+/// Every command that reached the hosted specimen (what would move the actuators).
+type Commands = Arc<Mutex<Vec<Vec<f64>>>>;
+
+/// The hosted substructure, recording the commands it executes.
+struct Recording {
+    inner: Box<dyn ExperimentalSubstructure>,
+    commands: Commands,
+}
+
+impl ExperimentalSubstructure for Recording {
+    fn n_coupling(&self) -> usize {
+        self.inner.n_coupling()
+    }
+    fn substep(
+        &mut self,
+        command: &[f64],
+        ag: (f64, f64),
+        dtau: f64,
+        force: &mut [f64],
+        displacement: &mut [f64],
+    ) -> substep::Result<()> {
+        self.commands.lock().unwrap().push(command.to_vec());
+        self.inner.substep(command, ag, dtau, force, displacement)
+    }
+    fn is_linear(&self) -> substep::Result<()> {
+        self.inner.is_linear()
+    }
+    fn state_len(&self) -> usize {
+        self.inner.state_len()
+    }
+    fn write_state(&self, out: &mut [f64]) {
+        self.inner.write_state(out)
+    }
+    fn read_state(&mut self, state: &[f64]) {
+        self.inner.read_state(state)
+    }
+}
+
+/// A site of two ideal springs (`f = −K d` exactly) that records the commands it executes.
+fn recording_site(transport: Transport, options: &ServeOptions) -> (substep::site::ServerHandle, Commands) {
+    let commands: Commands = Arc::default();
+    let record = commands.clone();
+    let mut lab = VirtualLabSpec::ideal(vec![spring(0), spring(1)]).factory();
+    let factory = move |h: &Hello| -> substep::Result<Box<dyn ExperimentalSubstructure>> {
+        Ok(Box::new(Recording {
+            inner: lab(h)?,
+            commands: record.clone(),
+        }))
+    };
+    let server = match transport {
+        Transport::Tcp => SiteServer::spawn(TcpListener::bind("127.0.0.1:0").unwrap(), factory, options).unwrap(),
+        Transport::Udp => SiteServer::spawn_udp(UdpSocket::bind("127.0.0.1:0").unwrap(), factory, options).unwrap(),
+    };
+    (server, commands)
+}
+
+/// Whether a frame (header and payload) is a message of the session, not of the handshake.
+fn is_session_message(frame: &[u8]) -> bool {
+    let kind = u16::from_le_bytes([frame[6], frame[7]]);
+    !matches!(
+        MessageType::from_code(kind),
+        Some(MessageType::Hello | MessageType::Auth)
+    )
+}
+
+/// Flip the lowest bit of the first payload byte (the lowest bit of the first command of a
+/// `Substep`: a change a site without authentication executes as a plausible command).
+fn flip_one_bit(frame: &mut [u8]) {
+    if frame.len() > HEADER_LEN {
+        frame[HEADER_LEN] ^= 1;
+    }
+}
+
+/// A TCP proxy in front of `site` that passes the handshake and flips one bit of every later
+/// client → site message; site → client bytes pass unchanged. Serves one connection.
+fn tampering_tcp_proxy(site: SocketAddr) -> SocketAddr {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    std::thread::spawn(move || {
+        let Ok((mut client, _)) = listener.accept() else {
+            return;
+        };
+        let mut upstream = TcpStream::connect(site).unwrap();
+        let (mut from_site, mut to_client) = (upstream.try_clone().unwrap(), client.try_clone().unwrap());
+        std::thread::spawn(move || {
+            let _ = std::io::copy(&mut from_site, &mut to_client);
+            let _ = to_client.shutdown(std::net::Shutdown::Both);
+        });
+        client.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        loop {
+            let mut frame = vec![0u8; HEADER_LEN];
+            if client.read_exact(&mut frame).is_err() {
+                break;
+            }
+            let len = u32::from_le_bytes(frame[12..16].try_into().unwrap()) as usize;
+            frame.resize(HEADER_LEN + len, 0);
+            if client.read_exact(&mut frame[HEADER_LEN..]).is_err() {
+                break;
+            }
+            if is_session_message(&frame) {
+                flip_one_bit(&mut frame);
+            }
+            if upstream.write_all(&frame).is_err() {
+                break;
+            }
+        }
+        let _ = upstream.shutdown(std::net::Shutdown::Both);
+    });
+    addr
+}
+
+/// The UDP counterpart of [`tampering_tcp_proxy`]; runs for at most 20 s.
+fn tampering_udp_proxy(site: SocketAddr) -> SocketAddr {
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    socket.set_read_timeout(Some(Duration::from_millis(10))).unwrap();
+    let addr = socket.local_addr().unwrap();
+    std::thread::spawn(move || {
+        let start = Instant::now();
+        let mut buf = vec![0u8; 70_000];
+        let mut client = None;
+        while start.elapsed() < Duration::from_secs(20) {
+            let Ok((n, from)) = socket.recv_from(&mut buf) else {
+                continue;
+            };
+            if from == site {
+                if let Some(c) = client {
+                    let _ = socket.send_to(&buf[..n], c);
+                }
+            } else {
+                client = Some(from);
+                if n >= HEADER_LEN && is_session_message(&buf[..n]) {
+                    flip_one_bit(&mut buf[..n]);
+                }
+                let _ = socket.send_to(&buf[..n], site);
+            }
+        }
+    });
+    addr
+}
+
+#[test]
+fn a_tampering_proxy_ends_the_session_and_nothing_tampered_reaches_the_actuators() {
+    let key = secret("the lab's secret, 32 bytes long!");
+    for transport in [Transport::Tcp, Transport::Udp] {
+        let (mut opts, log) = options();
+        opts.secret = Some(key.clone());
+        let (server, commands) = recording_site(transport, &opts);
+        let proxy = match transport {
+            Transport::Tcp => tampering_tcp_proxy(server.local_addr()),
+            Transport::Udp => tampering_udp_proxy(server.local_addr()),
+        };
+        let client = ClientOptions {
+            timeout: Duration::from_millis(300),
+            ..with_secret(Some(&key))
+        };
+        let mut site = RemoteSite::connect(proxy, transport, hello(2, 4, 0.01, Mode::PerSubstep), &client).unwrap();
+        assert!(site.client().authenticated());
+        let (mut f, mut d) = ([0.0; 2], [0.0; 2]);
+        let err = site
+            .substep(&[1e-3, -1e-3], (0.0, 0.0), 0.0025, &mut f, &mut d)
+            .unwrap_err()
+            .to_string();
+        println!("{transport:?} client: {err}");
+        assert!(err.contains(&proxy.to_string()), "the error names the site: {err}");
+        assert!(err.contains("message authentication failed"), "{err}");
+        match transport {
+            // the site ended the session and said why, in an authenticated Error
+            Transport::Tcp => assert!(
+                err.contains("the site reported an error (reply to Substep #2): message authentication failed: Substep #2: the tag does not match"),
+                "{err}"
+            ),
+            // the site dropped both attempts and said so in authenticated notices
+            Transport::Udp => assert!(
+                err.contains("message authentication failed: the site dropped Substep #2 as unauthenticated (2 of 2 attempts"),
+                "{err}"
+            ),
+        }
+        // the connection is unusable from now on (the run's ramp-down finds it so at once)
+        let again = site
+            .substep(&[0.0, 0.0], (0.0, 0.0), 0.0025, &mut f, &mut d)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            again.contains("connection unusable after an earlier failure"),
+            "{again}"
+        );
+        drop(site);
+        std::thread::sleep(Duration::from_millis(100));
+        let report = server.stop().unwrap();
+        let log = log.lock().unwrap();
+        println!("{transport:?} site: {log:#?}");
+        assert!(
+            commands.lock().unwrap().is_empty(),
+            "{transport:?}: a tampered command was executed"
+        );
+        assert_eq!(report.substeps, 0);
+        let peer_says = |needle: &str| {
+            log.iter()
+                .any(|l| l.starts_with("site: 127.0.0.1:") && l.contains(needle))
+        };
+        match transport {
+            Transport::Tcp => {
+                assert!(
+                    peer_says(
+                        "session ended after 0 sub-steps, 0 steps: message authentication failed: Substep #2: the tag does not match"
+                    ),
+                    "{log:?}"
+                );
+                assert_eq!(report.errors, 1);
+            }
+            Transport::Udp => {
+                assert!(
+                    peer_says(
+                        "message authentication failed: Substep #2: the tag does not match (the message was changed on the way, forged, or sealed with another key); the datagram was dropped, not executed (the session goes on) [1 dropped in this session]"
+                    ),
+                    "{log:?}"
+                );
+                assert_eq!(report.dropped, 2);
+            }
+        }
+    }
+    // the attack without a secret: the changed command is executed, as before (what the secret
+    // is for)
+    let (opts, _log) = options();
+    let (server, commands) = recording_site(Transport::Tcp, &opts);
+    let proxy = tampering_tcp_proxy(server.local_addr());
+    let mut site = RemoteSite::connect(
+        proxy,
+        Transport::Tcp,
+        hello(2, 4, 0.01, Mode::PerSubstep),
+        &client_options(),
+    )
+    .unwrap();
+    assert!(!site.client().authenticated());
+    let (mut f, mut d) = ([0.0; 2], [0.0; 2]);
+    site.substep(&[1e-3, -1e-3], (0.0, 0.0), 0.0025, &mut f, &mut d)
+        .unwrap();
+    drop(site);
+    server.stop().unwrap();
+    let executed = commands.lock().unwrap()[0].clone();
+    assert_ne!(
+        executed[0].to_bits(),
+        1e-3f64.to_bits(),
+        "without a secret the change goes through"
+    );
+    assert_eq!(executed[0].to_bits(), 1e-3f64.to_bits() ^ 1);
+}
+
+/// A hand-made client: the handshake of [`substep::site::auth`] and sealed frames.
+fn raw_handshake(
+    key: &Secret,
+    h: &Hello,
+    mut send: impl FnMut(&[u8]),
+    mut recv: impl FnMut() -> Vec<u8>,
+) -> SessionKeys {
+    let mut hello_frame = Vec::new();
+    Message::Hello(h.clone()).encode(0, &mut hello_frame);
+    send(&hello_frame);
+    let Message::Challenge { nonce: site_nonce } = decode_frame(&recv(), None).unwrap().1 else {
+        panic!("expected a Challenge");
+    };
+    let client_nonce = [3u8; 32];
+    let payload = &hello_frame[HEADER_LEN..];
+    let mut auth = Vec::new();
+    Message::Auth {
+        nonce: client_nonce,
+        mac: key.mac(Role::Client, &site_nonce, &client_nonce, payload),
+    }
+    .encode(1, &mut auth);
+    send(&auth);
+    let session = Session {
+        n_coupling: h.n_coupling,
+        substeps: h.substeps,
+    };
+    let Message::Accept { mac: Some(_), .. } = decode_frame(&recv(), Some(&session)).unwrap().1 else {
+        panic!("expected an Accept");
+    };
+    key.session_keys(Role::Client, &site_nonce, &client_nonce, payload)
+}
+
+fn sealed_substep(seq: u32, command: [f64; 2], keys: &SessionKeys) -> Vec<u8> {
+    let mut frame = Vec::new();
+    Message::Substep {
+        command: command.to_vec(),
+        ag: (0.0, 0.0),
+        dtau: 0.0025,
+    }
+    .encode_session(seq, &mut frame, Some(keys));
+    frame
+}
+
+/// Open a sealed reply from the site (panics if it is not authentic).
+fn open_reply(frame: &[u8], keys: &SessionKeys) -> (u32, Message) {
+    let header = Header::parse_session(frame, true).unwrap();
+    let (header, payload) = open_sealed(frame, &header, keys).unwrap();
+    let session = Session {
+        n_coupling: 2,
+        substeps: 4,
+    };
+    (header.seq, Message::decode(&header, payload, Some(&session)).unwrap())
+}
+
+/// Makes the frame sent after a good `Substep #2` (the session keys, that frame).
+type BadFrame = Box<dyn Fn(&SessionKeys, &[u8]) -> Vec<u8>>;
+
+#[test]
+fn replayed_reordered_and_changed_messages_end_a_tcp_session() {
+    let key = secret("the lab's secret, 32 bytes long!");
+    let (mut opts, log) = options();
+    opts.secret = Some(key.clone());
+    let (server, commands) = recording_site(Transport::Tcp, &opts);
+    let h = hello(2, 4, 0.01, Mode::PerSubstep);
+    let connect = || {
+        let c = TcpStream::connect(server.local_addr()).unwrap();
+        c.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
+        let keys = {
+            let mut w = c.try_clone().unwrap();
+            let mut r = c.try_clone().unwrap();
+            raw_handshake(&key, &h, |b| w.write_all(b).unwrap(), || read_frame(&mut r))
+        };
+        (c, keys)
+    };
+    // (frames to send after a good Substep #2, the reason the site gives)
+    let cases: [(&str, BadFrame, &str); 3] = [
+        (
+            "replay",
+            Box::new(|_, first| first.to_vec()),
+            "message authentication failed: Substep #2 arrived where #3 was expected (a replayed or reordered message)",
+        ),
+        (
+            "reorder",
+            Box::new(|k, _| sealed_substep(4, [2e-3, 0.0], k)),
+            "message authentication failed: Substep #4 arrived where #3 was expected (a replayed or reordered message)",
+        ),
+        (
+            "changed sequence number",
+            Box::new(|k, _| {
+                let mut f = sealed_substep(4, [2e-3, 0.0], k);
+                f[8..12].copy_from_slice(&3u32.to_le_bytes());
+                f
+            }),
+            "message authentication failed: Substep #3: the tag does not match",
+        ),
+    ];
+    for (what, bad, reason) in cases {
+        let (mut c, keys) = connect();
+        let first = sealed_substep(2, [1e-3, -1e-3], &keys);
+        c.write_all(&first).unwrap();
+        let (seq, reply) = open_reply(&read_frame(&mut c), &keys);
+        assert_eq!(seq, 2);
+        let Message::Measured { force, .. } = reply else {
+            panic!("{what}: {reply:?}");
+        };
+        assert_eq!(force, vec![-K * 1e-3, K * 1e-3]);
+        let executed = commands.lock().unwrap().len();
+        c.write_all(&bad(&keys, &first)).unwrap();
+        // the site answers an authenticated Error for the request the client is at, and closes
+        let (seq, reply) = open_reply(&read_frame(&mut c), &keys);
+        assert_eq!(seq, 3, "{what}");
+        match reply {
+            Message::Error { reason: r } => assert!(r.starts_with(reason), "{what}: {r}"),
+            other => panic!("{what}: {other:?}"),
+        }
+        let mut rest = Vec::new();
+        assert_eq!(
+            c.read_to_end(&mut rest).unwrap(),
+            0,
+            "{what}: the site closed the connection"
+        );
+        assert_eq!(
+            commands.lock().unwrap().len(),
+            executed,
+            "{what}: nothing more was executed"
+        );
+        // the busy slot frees once the session ended
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    server.stop().unwrap();
+    // the site's log names the peer and the reason of each
+    let log = log.lock().unwrap();
+    let ended: Vec<&String> = log
+        .iter()
+        .filter(|l| {
+            l.starts_with("site: 127.0.0.1:")
+                && l.contains("session ended after 1 sub-steps, 0 steps: message authentication failed: ")
+        })
+        .collect();
+    assert_eq!(ended.len(), 3, "{log:?}");
+    assert!(ended[2].contains("Substep #3: the tag does not match"), "{ended:?}");
+}
+
+/// A UDP socket bound with `SO_REUSEPORT` (a second one can share its address and port).
+fn reuse_port_socket(addr: Option<SocketAddr>) -> UdpSocket {
+    use std::os::fd::FromRawFd;
+    // SAFETY: plain socket calls on a descriptor this function owns until it hands it to
+    // `UdpSocket`; the option value and the address point to live locals of the given sizes.
+    unsafe {
+        let fd = libc::socket(libc::AF_INET, libc::SOCK_DGRAM, 0);
+        assert!(fd >= 0);
+        let one: libc::c_int = 1;
+        let len = std::mem::size_of::<libc::c_int>() as libc::socklen_t;
+        assert_eq!(
+            libc::setsockopt(
+                fd,
+                libc::SOL_SOCKET,
+                libc::SO_REUSEPORT,
+                (&one as *const libc::c_int).cast(),
+                len
+            ),
+            0
+        );
+        let port = addr.map_or(0, |a| a.port());
+        let sin = libc::sockaddr_in {
+            sin_family: libc::AF_INET as libc::sa_family_t,
+            sin_port: port.to_be(),
+            sin_addr: libc::in_addr {
+                s_addr: u32::from_ne_bytes([127, 0, 0, 1]),
+            },
+            sin_zero: [0; 8],
+        };
+        let size = std::mem::size_of::<libc::sockaddr_in>() as libc::socklen_t;
+        assert_eq!(libc::bind(fd, (&sin as *const libc::sockaddr_in).cast(), size), 0);
+        UdpSocket::from_raw_fd(fd)
+    }
+}
+
+#[test]
+fn a_spoofed_udp_datagram_is_dropped_and_the_session_goes_on() {
+    let key = secret("the lab's secret, 32 bytes long!");
+    let (mut opts, log) = options();
+    opts.secret = Some(key.clone());
+    let (server, commands) = recording_site(Transport::Udp, &opts);
+    let site = server.local_addr();
+    let client = reuse_port_socket(None);
+    client.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+    let recv = |s: &UdpSocket| {
+        let mut buf = vec![0u8; 70_000];
+        let (n, from) = s.recv_from(&mut buf).unwrap();
+        assert_eq!(from, site);
+        buf.truncate(n);
+        buf
+    };
+    let keys = raw_handshake(
+        &key,
+        &hello(2, 4, 0.01, Mode::PerSubstep),
+        |b| {
+            client.send_to(b, site).unwrap();
+        },
+        || recv(&client),
+    );
+    let executed = || commands.lock().unwrap().clone();
+    let good = sealed_substep(2, [1e-3, -1e-3], &keys);
+    client.send_to(&good, site).unwrap();
+    assert!(matches!(
+        open_reply(&recv(&client), &keys),
+        (2, Message::Measured { .. })
+    ));
+    assert_eq!(executed(), vec![vec![1e-3, -1e-3]]);
+
+    // 1. the right source, a wrong tag: the client's Substep #3 with the command × 1000
+    let mut forged = sealed_substep(3, [1e-3, -1e-3], &keys);
+    forged[HEADER_LEN..HEADER_LEN + 8].copy_from_slice(&1.0f64.to_le_bytes());
+    client.send_to(&forged, site).unwrap();
+    // … answered with an authenticated notice, not executed
+    match open_reply(&recv(&client), &keys) {
+        (3, Message::Dropped { reason }) => assert!(
+            reason.starts_with("message authentication failed: Substep #3: the tag does not match"),
+            "{reason}"
+        ),
+        other => panic!("{other:?}"),
+    }
+    // 2. another socket sending from the client's own address and port, with a forged tag
+    let spoofer = reuse_port_socket(Some(client.local_addr().unwrap()));
+    assert_eq!(spoofer.local_addr().unwrap(), client.local_addr().unwrap());
+    let mut forged = sealed_substep(3, [1.0, -1.0], &keys);
+    let last = forged.len() - 1;
+    forged[last] ^= 0x55;
+    spoofer.send_to(&forged, site).unwrap();
+    // and an unauthenticated (version 1) Substep, and garbage
+    let mut plain = Vec::new();
+    Message::Substep {
+        command: vec![1.0, -1.0],
+        ag: (0.0, 0.0),
+        dtau: 0.0025,
+    }
+    .encode(3, &mut plain);
+    spoofer.send_to(&plain, site).unwrap();
+    spoofer.send_to(b"SSTP garbage", site).unwrap();
+    // 3. a replay of the authentic #2 from another address: no session with that address
+    let elsewhere = UdpSocket::bind("127.0.0.1:0").unwrap();
+    elsewhere.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+    elsewhere.send_to(&good, site).unwrap();
+    let mut buf = [0u8; 4096];
+    let n = elsewhere.recv(&mut buf).unwrap();
+    match decode_frame(&buf[..n], None).unwrap().1 {
+        Message::Error { reason } => assert!(reason.contains("no session with this address"), "{reason}"),
+        other => panic!("{other:?}"),
+    }
+    // (replies to the shared address may go to either socket while both exist)
+    std::thread::sleep(Duration::from_millis(50));
+    drop(spoofer);
+    // 4. a replay of the authentic #2 from the client's address: the last number the site
+    // executed (the forged #3s were not), so it is answered from the cache and not executed
+    // again (the notices of the drops may arrive first, here or at the spoofer's socket)
+    client.send_to(&good, site).unwrap();
+    loop {
+        match open_reply(&recv(&client), &keys) {
+            (2, Message::Measured { .. }) => break,
+            (_, Message::Dropped { .. }) => {}
+            other => panic!("{other:?}"),
+        }
+    }
+    assert_eq!(executed().len(), 1, "no spoofed or replayed datagram was executed");
+
+    // the session goes on: the genuine #3 is executed with the genuine command (the notices of
+    // the drops may arrive first)
+    client.send_to(&sealed_substep(3, [2e-3, 0.0], &keys), site).unwrap();
+    let force = loop {
+        match open_reply(&recv(&client), &keys) {
+            (3, Message::Measured { force, .. }) => break force,
+            (_, Message::Dropped { .. }) => {}
+            other => panic!("{other:?}"),
+        }
+    };
+    assert_eq!(force, vec![-K * 2e-3, 0.0]);
+    // an authentic repeat of #3 (its reply lost) gets the cached reply, not a second move
+    client.send_to(&sealed_substep(3, [2e-3, 0.0], &keys), site).unwrap();
+    assert!(matches!(
+        open_reply(&recv(&client), &keys),
+        (3, Message::Measured { .. })
+    ));
+    assert_eq!(executed(), vec![vec![1e-3, -1e-3], vec![2e-3, 0.0]]);
+    let report = server.stop().unwrap();
+    assert_eq!(
+        report.dropped, 4,
+        "the forged tag, the two forged from the other socket, and the garbage"
+    );
+    // the session was never ended
+    assert_eq!(report.errors, 0);
+    assert_eq!(report.sessions, 1);
+    let log = log.lock().unwrap();
+    assert!(!log.iter().any(|l| l.contains("session ended")), "{log:?}");
+    assert_eq!(
+        log.iter().filter(|l| l.contains("the datagram was dropped")).count(),
+        4,
+        "{log:?}"
+    );
 }

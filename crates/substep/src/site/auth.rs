@@ -1,5 +1,6 @@
 //! Shared-secret authentication of `SSTP` sessions: an HMAC-SHA256 challenge–response in the
-//! handshake, mutual and bound to the session parameters.
+//! handshake, mutual and bound to the session parameters, and a MAC on every message of the
+//! session after it.
 //!
 //! ```text
 //! client                                   site (started with the secret)
@@ -9,15 +10,24 @@
 //!                                          specimen built
 //!                                   ◀──   Accept #1 (n_c, MAC_s)   (or Reject)
 //! MAC_s checked: the site knows the secret too
+//! Substep/Step/… #2, #3, …  (each with a tag under K_C)  ──▶  tag and number checked
+//!                   ◀──  Measured/StepResult/… #2, #3, …  (each with a tag under K_S)
 //! ```
 //!
 //! `MAC_r = HMAC-SHA256(secret, "SSTP-1 auth" ‖ r ‖ Ns ‖ Nc ‖ len(H) ‖ H)` with the role byte
 //! `r` (`C` client, `S` site) and `H` the Hello payload exactly as sent. A recorded handshake
 //! does not authenticate a later session (the site's nonce is new each time), a client MAC
 //! cannot be reflected as a site MAC (role byte), and a proof is valid only for the parameters
-//! it was made for (`H` is inside the MAC). Only the handshake is authenticated; the messages
-//! of a session carry no MAC, so the step and sub-step paths cost nothing extra
-//! (`docs/security.md`).
+//! it was made for (`H` is inside the MAC).
+//!
+//! After the handshake every message in both directions carries a tag ([`SessionKeys`]): the
+//! session key of the sender's direction is
+//! `K_r = HMAC-SHA256(secret, "SSTP-1 session" ‖ r ‖ Ns ‖ Nc ‖ len(H) ‖ H)` (`r` = `C` for
+//! client → site, `S` for site → client), and the tag is the first [`TAG_LEN`] bytes of
+//! `HMAC-SHA256(K_r, header ‖ payload)`: the header includes the type and the sequence number,
+//! so a changed, injected, replayed, reordered or reflected message is detected (the frame
+//! layout is in [`super::protocol`]). Without a secret nothing is authenticated, and the
+//! frames are those of protocol version 1 byte for byte (`docs/security.md`).
 
 use crate::error::{Error, Result};
 use hmac::{Hmac, Mac};
@@ -28,6 +38,8 @@ use std::sync::Arc;
 
 pub const NONCE_LEN: usize = 32;
 pub const MAC_LEN: usize = 32;
+/// Length of the tag of a session message: HMAC-SHA256 truncated to 128 bits.
+pub const TAG_LEN: usize = 16;
 /// Shortest secret accepted, in bytes (128 bits).
 pub const MIN_SECRET_LEN: usize = 16;
 /// Longest secret file read, in bytes.
@@ -107,13 +119,14 @@ impl Secret {
 
     fn hmac(
         &self,
+        label: &[u8],
         role: Role,
         site_nonce: &[u8; NONCE_LEN],
         client_nonce: &[u8; NONCE_LEN],
         hello: &[u8],
     ) -> Hmac<Sha256> {
         let mut m = <Hmac<Sha256> as Mac>::new_from_slice(&self.0).expect("HMAC accepts keys of any length");
-        m.update(b"SSTP-1 auth");
+        m.update(label);
         m.update(match role {
             Role::Client => b"C",
             Role::Site => b"S",
@@ -133,7 +146,7 @@ impl Secret {
         client_nonce: &[u8; NONCE_LEN],
         hello: &[u8],
     ) -> [u8; MAC_LEN] {
-        self.hmac(role, site_nonce, client_nonce, hello)
+        self.hmac(b"SSTP-1 auth", role, site_nonce, client_nonce, hello)
             .finalize()
             .into_bytes()
             .into()
@@ -148,9 +161,73 @@ impl Secret {
         hello: &[u8],
         tag: &[u8; MAC_LEN],
     ) -> bool {
-        self.hmac(role, site_nonce, client_nonce, hello)
+        self.hmac(b"SSTP-1 auth", role, site_nonce, client_nonce, hello)
             .verify_slice(tag)
             .is_ok()
+    }
+
+    /// The session keys of `role` after a successful handshake: `role`'s own direction to
+    /// seal, the peer's to open.
+    pub fn session_keys(
+        &self,
+        role: Role,
+        site_nonce: &[u8; NONCE_LEN],
+        client_nonce: &[u8; NONCE_LEN],
+        hello: &[u8],
+    ) -> SessionKeys {
+        let key = |direction: Role| -> Hmac<Sha256> {
+            let k = self
+                .hmac(b"SSTP-1 session", direction, site_nonce, client_nonce, hello)
+                .finalize()
+                .into_bytes();
+            <Hmac<Sha256> as Mac>::new_from_slice(&k).expect("HMAC accepts keys of any length")
+        };
+        let peer = match role {
+            Role::Client => Role::Site,
+            Role::Site => Role::Client,
+        };
+        SessionKeys {
+            send: key(role),
+            receive: key(peer),
+        }
+    }
+}
+
+/// The keys of one authenticated session, as keyed HMAC states: computing a tag clones one
+/// (a copy of two SHA-256 states on the stack), so the per-message cost is the hashing of the
+/// header and payload, with no allocation.
+#[derive(Clone)]
+pub struct SessionKeys {
+    send: Hmac<Sha256>,
+    receive: Hmac<Sha256>,
+}
+
+impl std::fmt::Debug for SessionKeys {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "SessionKeys(..)")
+    }
+}
+
+impl SessionKeys {
+    /// The tag of an outgoing message `header ‖ payload`.
+    pub fn tag(&self, message: &[u8]) -> [u8; TAG_LEN] {
+        let mut m = self.send.clone();
+        m.update(message);
+        let full = m.finalize().into_bytes();
+        let mut tag = [0u8; TAG_LEN];
+        tag.copy_from_slice(&full[..TAG_LEN]);
+        tag
+    }
+
+    /// Whether `tag` is the peer's tag of the incoming message `header ‖ payload` (constant
+    /// time).
+    pub fn verify(&self, message: &[u8], tag: &[u8]) -> bool {
+        if tag.len() != TAG_LEN {
+            return false;
+        }
+        let mut m = self.receive.clone();
+        m.update(message);
+        m.verify_truncated_left(tag).is_ok()
     }
 }
 

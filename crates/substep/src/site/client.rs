@@ -8,9 +8,16 @@
 //!
 //! Every error names the site's address. A failed request leaves the connection unusable
 //! (its state is unknown); later requests fail at once with the original reason.
+//!
+//! With a secret every message after the handshake is sealed and every reply's tag and
+//! sequence number are checked ([`super::auth`], [`super::protocol`]): a bad reply is an error
+//! starting with `message authentication failed` (over UDP a datagram that fails its tag is
+//! dropped and the request waits on, see the protocol docs).
 
-use super::auth::{Role, Secret, nonce};
-use super::protocol::{HEADER_LEN, Header, Hello, MAX_DATAGRAM, Message, Mode, Session, StepReply, StepRequest};
+use super::auth::{Role, Secret, SessionKeys, TAG_LEN, nonce};
+use super::protocol::{
+    AUTH_FAILED, HEADER_LEN, Header, Hello, MAX_DATAGRAM, Message, Mode, Session, StepReply, StepRequest, open_sealed,
+};
 use super::transport::{LinkError, read_frame, write_all};
 use crate::error::{Error, Result};
 use crate::model::ModelRef;
@@ -82,6 +89,9 @@ pub struct SiteClient {
     rx: Vec<u8>,
     broken: Option<String>,
     closed: bool,
+    /// The session keys once an authenticated handshake is complete: every later message is
+    /// sealed and every reply checked.
+    keys: Option<SessionKeys>,
 }
 
 fn resolve(addr: impl ToSocketAddrs) -> Result<SocketAddr> {
@@ -148,6 +158,7 @@ impl SiteClient {
             rx: Vec::new(),
             broken: None,
             closed: false,
+            keys: None,
         };
         match client.handshake() {
             Ok(()) => Ok(client),
@@ -197,6 +208,8 @@ impl SiteClient {
                     )),
                     (_, Some((secret, site_nonce, client_nonce)), Some(mac)) => {
                         if secret.verify(Role::Site, &site_nonce, &client_nonce, hello_payload, &mac) {
+                            self.keys =
+                                Some(secret.session_keys(Role::Client, &site_nonce, &client_nonce, hello_payload));
                             Ok(())
                         } else {
                             Err(self.err("the site's proof of the secret is wrong (refused): it holds a different secret"))
@@ -223,6 +236,11 @@ impl SiteClient {
     pub fn options(&self) -> &ClientOptions {
         &self.options
     }
+    /// Whether the session's messages are authenticated (a secret was configured and the
+    /// handshake proved it on both sides).
+    pub fn authenticated(&self) -> bool {
+        self.keys.is_some()
+    }
 
     fn err(&self, reason: impl Into<String>) -> Error {
         Error::invalid(format!("site {}://{}", self.transport.name(), self.peer), reason)
@@ -234,10 +252,19 @@ impl SiteClient {
             return Err(self.err(format!("connection unusable after an earlier failure: {reason}")));
         }
         let seq = self.seq;
-        msg.encode(seq, &mut self.tx);
+        msg.encode_session(seq, &mut self.tx, self.keys.as_ref());
         let what = format!("{} #{seq}", msg.kind().name());
+        let keys = self.keys.as_ref();
         let result = match &mut self.link {
-            Link::Tcp(stream) => request_tcp(stream, &self.tx, &mut self.rx, seq, &self.limits, self.options.timeout),
+            Link::Tcp(stream) => request_tcp(
+                stream,
+                &self.tx,
+                &mut self.rx,
+                seq,
+                &self.limits,
+                self.options.timeout,
+                keys,
+            ),
             Link::Udp(socket) => request_udp(
                 socket,
                 &self.tx,
@@ -246,6 +273,7 @@ impl SiteClient {
                 &self.limits,
                 self.options.timeout,
                 self.options.udp_retries,
+                keys,
             ),
         };
         let result = result.map_err(|e| e.describe(&what)).and_then(|m| match m {
@@ -303,7 +331,7 @@ impl Drop for SiteClient {
         Message::Stop {
             reason: "client closed".into(),
         }
-        .encode(self.seq, &mut self.tx);
+        .encode_session(self.seq, &mut self.tx, self.keys.as_ref());
         match &mut self.link {
             Link::Tcp(s) => {
                 let _ = write_all(s, &self.tx, Duration::from_millis(100));
@@ -319,8 +347,20 @@ impl Drop for SiteClient {
 enum RequestError {
     Link(LinkError),
     BadReply(Error),
-    Timeout { timeout: Duration, attempts: u32 },
+    Timeout {
+        timeout: Duration,
+        attempts: u32,
+    },
     Unreachable(io::Error),
+    /// A reply failed authentication (its error starts with [`AUTH_FAILED`]).
+    Auth(Error),
+    /// UDP: no reply, and the site said (authentically) that it dropped `count` of the
+    /// request's datagrams as unauthenticated, the last time with `reason`.
+    DroppedBySite {
+        attempts: u32,
+        count: u32,
+        reason: String,
+    },
 }
 
 impl RequestError {
@@ -354,6 +394,14 @@ impl RequestError {
                 }
             ),
             RequestError::Unreachable(e) => format!("the site is unreachable during {what} ({e}); the site is gone"),
+            RequestError::Auth(e) => format!("{e} (reply to {what})"),
+            RequestError::DroppedBySite {
+                attempts,
+                count,
+                reason,
+            } => format!(
+                "{AUTH_FAILED}: the site dropped {what} as unauthenticated ({count} of {attempts} attempts; the site says: {reason}): something on the way changes the messages"
+            ),
         }
     }
 }
@@ -365,6 +413,7 @@ fn request_tcp(
     seq: u32,
     limits: &Session,
     timeout: Duration,
+    keys: Option<&SessionKeys>,
 ) -> std::result::Result<Message, RequestError> {
     let deadline = Instant::now().checked_add(timeout).unwrap_or_else(Instant::now);
     write_all(stream, tx, timeout).map_err(RequestError::Link)?;
@@ -373,21 +422,42 @@ fn request_tcp(
         rx,
         Some(deadline),
         Duration::ZERO,
-        limits.max_payload(),
+        limits.max_payload() + if keys.is_some() { TAG_LEN } else { 0 },
         "the largest reply of this session",
         None,
+        keys.is_some(),
     ) {
         Ok(h) => h,
         Err(LinkError::TimedOut { got: 0 }) => return Err(RequestError::Timeout { timeout, attempts: 1 }),
+        Err(LinkError::Protocol(e)) if keys.is_some() => {
+            return Err(RequestError::Auth(super::protocol::as_auth_failure(e)));
+        }
         Err(e) => return Err(RequestError::Link(e)),
     };
-    check_seq(&header, seq)?;
-    Message::decode(&header, &rx[HEADER_LEN..], Some(limits)).map_err(RequestError::BadReply)
+    let Some(keys) = keys else {
+        check_seq(&header, seq, false)?;
+        return Message::decode(&header, &rx[HEADER_LEN..], Some(limits)).map_err(RequestError::BadReply);
+    };
+    // The tag first: until it checks, nothing in the frame (its number included) is the site's.
+    let (header, payload) = open_sealed(rx, &header, keys).map_err(RequestError::Auth)?;
+    check_seq(&header, seq, true)?;
+    Message::decode(&header, payload, Some(limits)).map_err(RequestError::BadReply)
 }
 
-fn check_seq(header: &Header, seq: u32) -> std::result::Result<(), RequestError> {
+/// The reply's sequence number must be the request's. In an authenticated session another
+/// number on an authentic reply is a replayed or reordered message.
+fn check_seq(header: &Header, seq: u32, authenticated: bool) -> std::result::Result<(), RequestError> {
     if header.seq == seq {
         Ok(())
+    } else if authenticated {
+        Err(RequestError::Auth(Error::invalid(
+            AUTH_FAILED,
+            format!(
+                "the reply {} carries sequence number {}, expected {seq} (a replayed or reordered message)",
+                header.kind.name(),
+                header.seq
+            ),
+        )))
     } else {
         Err(RequestError::BadReply(Error::invalid(
             "site protocol: header.seq",
@@ -396,6 +466,7 @@ fn check_seq(header: &Header, seq: u32) -> std::result::Result<(), RequestError>
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn request_udp(
     socket: &UdpSocket,
     tx: &[u8],
@@ -404,9 +475,13 @@ fn request_udp(
     limits: &Session,
     timeout: Duration,
     retries: u32,
+    keys: Option<&SessionKeys>,
 ) -> std::result::Result<Message, RequestError> {
     rx.resize(MAX_DATAGRAM + 1, 0);
     let attempts = retries + 1;
+    // The site's authentic notices that it dropped this request's datagrams (see below).
+    let mut dropped_by_site: u32 = 0;
+    let mut dropped_reason = String::new();
     for _ in 0..attempts {
         match socket.send(tx) {
             Ok(_) => {}
@@ -436,15 +511,44 @@ fn request_udp(
                 Err(e) => return Err(RequestError::Link(LinkError::Io(e))),
             };
             let frame = &rx[..n];
-            let header = Header::parse(frame).map_err(RequestError::BadReply)?;
+            let Some(keys) = keys else {
+                let header = Header::parse(frame).map_err(RequestError::BadReply)?;
+                if header.seq != seq && seq.wrapping_sub(header.seq) < (1 << 31) {
+                    continue; // a duplicate reply to an earlier request
+                }
+                check_seq(&header, seq, false)?;
+                return super::protocol::decode_frame(frame, Some(limits))
+                    .map(|(_, m)| m)
+                    .map_err(RequestError::BadReply);
+            };
+            // Authenticated: a datagram that fails its tag is not the site's (anyone can send
+            // one with the site's address as its source): drop it and wait on, so a forged
+            // datagram cannot end the session.
+            let Ok((header, payload)) = Header::parse_session(frame, true).and_then(|h| open_sealed(frame, &h, keys))
+            else {
+                continue;
+            };
             if header.seq != seq && seq.wrapping_sub(header.seq) < (1 << 31) {
                 continue; // a duplicate reply to an earlier request
             }
-            check_seq(&header, seq)?;
-            return super::protocol::decode_frame(frame, Some(limits))
-                .map(|(_, m)| m)
-                .map_err(RequestError::BadReply);
+            check_seq(&header, seq, true)?;
+            match Message::decode(&header, payload, Some(limits)).map_err(RequestError::BadReply)? {
+                Message::Dropped { reason } => {
+                    // Not fatal (a forged request with this number gets the same notice); it
+                    // explains a timeout if every attempt is dropped.
+                    dropped_by_site += 1;
+                    dropped_reason = reason;
+                }
+                m => return Ok(m),
+            }
         }
+    }
+    if dropped_by_site > 0 {
+        return Err(RequestError::DroppedBySite {
+            attempts,
+            count: dropped_by_site,
+            reason: dropped_reason,
+        });
     }
     Err(RequestError::Timeout { timeout, attempts })
 }

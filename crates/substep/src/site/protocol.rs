@@ -1,14 +1,14 @@
-//! The `substep` site protocol (`SSTP`, version 1).
+//! The `substep` site protocol (`SSTP`, version 1; version 2 frames in authenticated sessions).
 //!
 //! Every message is one frame: a 16-byte header and a payload, all little-endian.
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `b"SSTP"` |
-//! | 4 | 2 | protocol version (u16, = [`VERSION`]) |
+//! | 4 | 2 | protocol version (u16, = [`VERSION`], or [`VERSION_AUTHENTICATED`] see below) |
 //! | 6 | 2 | message type (u16, [`MessageType`]) |
 //! | 8 | 4 | sequence number (u32) |
-//! | 12 | 4 | payload length in bytes (u32, ≤ [`MAX_PAYLOAD`]) |
+//! | 12 | 4 | payload length in bytes (u32, ≤ [`MAX_PAYLOAD`]; with the tag in version 2) |
 //!
 //! Payloads (`n` = `n_c`, `k` = `k_sub` of the handshake; `f64` IEEE-754, `u32`; strings are a
 //! u32 byte count and UTF-8 bytes):
@@ -27,22 +27,49 @@
 //! | `Error` | 10 | string reason |
 //! | `Challenge` | 11 | `u8 nonce[32]` (a site with a secret answers `Hello` with it) |
 //! | `Auth` | 12 | `u8 nonce[32], u8 MAC_c[32]` (the client's proof, see [`super::auth`]) |
+//! | `Dropped` | 13 | string reason; version 2 only: a UDP site's notice that a datagram with this sequence number failed authentication and was not executed |
+//!
+//! **Authenticated sessions.** Without a secret every frame is version 1 and carries no MAC.
+//! With a secret, the handshake (`Hello`, `Challenge`, `Auth`, `Accept`/`Reject`) is version 1
+//! as above, and every later frame in both directions is a *version 2* frame: the header with
+//! version [`VERSION_AUTHENTICATED`], the payload as above, then a [`TAG_LEN`]-byte tag; the
+//! header's length counts payload and tag. The tag is HMAC-SHA256 under the sender's session
+//! key over the header and the payload, truncated ([`super::auth::SessionKeys`]), so the type,
+//! the sequence number, the length and every payload byte are authenticated. A receiver checks
+//! the tag before anything else, then the sequence number. A frame of the other version is
+//! refused in either kind of session (so a MAC cannot be stripped, and a peer that does not
+//! authenticate its messages is detected at its first message).
 //!
 //! Sequence numbers: the client numbers its requests 0, 1, 2, … (`Hello` is 0); every reply
 //! carries the number of the request it answers. With authentication the handshake is
 //! `Hello #0 → Challenge #0`, `Auth #1 → Accept #1`, and the session's requests start at 2. Over UDP a request that times out is sent
 //! again with the same number; the server answers a repeated number with its cached reply
-//! (the site is not moved twice) and the client ignores replies to older numbers.
+//! (the site is not moved twice) and the client ignores replies to older numbers. In an
+//! authenticated session only an *authentic* repeat (its tag checks) gets the cached reply.
+//!
+//! What a bad message does in an authenticated session (tag mismatch, version 1 frame, or an
+//! authentic frame with an unexpected sequence number, i.e. a replay or reordering): over TCP
+//! it ends the session at once, and the site answers an authenticated `Error` that starts
+//! with `message authentication failed:`; a client that receives a bad reply stops with the
+//! same words. Over UDP a datagram that fails its tag is dropped and not executed, and the
+//! session goes on (anyone who can send to the site's port could otherwise end a session with
+//! one forged datagram); the site logs it and answers an authenticated `Dropped` notice, which
+//! the client only remembers: if its request then gets no reply (every attempt was changed on
+//! the way), it stops with `message authentication failed: the site dropped …`. An authentic
+//! UDP datagram with an unexpected (newer) number ends the session as it does without a secret.
 //!
 //! Decoding validates everything and never panics: magic, version, type, length limits,
 //! payload length against the handshake's `n_c`/`k_sub`, finite numbers, UTF-8 strings.
 //! Errors are [`Error::InvalidInput`] whose `what` names the offending field.
 
-use super::auth::{MAC_LEN, NONCE_LEN};
+use super::auth::{MAC_LEN, NONCE_LEN, SessionKeys, TAG_LEN};
 use crate::error::{Error, Result};
 
 pub const MAGIC: [u8; 4] = *b"SSTP";
 pub const VERSION: u16 = 1;
+/// The header version of the frames of an authenticated session after the handshake: they
+/// end with a [`TAG_LEN`]-byte tag.
+pub const VERSION_AUTHENTICATED: u16 = 2;
 pub const HEADER_LEN: usize = 16;
 /// Largest payload accepted on any transport, in bytes.
 pub const MAX_PAYLOAD: usize = 1 << 24;
@@ -69,6 +96,7 @@ pub enum MessageType {
     Error = 10,
     Challenge = 11,
     Auth = 12,
+    Dropped = 13,
 }
 
 impl MessageType {
@@ -87,6 +115,7 @@ impl MessageType {
             10 => Error,
             11 => Challenge,
             12 => Auth,
+            13 => Dropped,
             _ => return None,
         })
     }
@@ -108,12 +137,31 @@ impl MessageType {
             Error => "Error",
             Challenge => "Challenge",
             Auth => "Auth",
+            Dropped => "Dropped",
         }
     }
 }
 
 fn perr(what: impl AsRef<str>, reason: impl Into<String>) -> Error {
     Error::invalid(format!("site protocol: {}", what.as_ref()), reason)
+}
+
+/// The words every authentication failure of a session message starts with.
+pub const AUTH_FAILED: &str = "message authentication failed";
+
+fn auth_err(reason: impl Into<String>) -> Error {
+    Error::invalid(AUTH_FAILED, reason)
+}
+
+/// `e` as an authentication failure (starting with [`AUTH_FAILED`]), for errors of frames of
+/// an authenticated session.
+pub fn as_auth_failure(e: Error) -> Error {
+    let text = e.to_string();
+    if text.starts_with(AUTH_FAILED) {
+        e
+    } else {
+        auth_err(text)
+    }
 }
 
 /// A frame header.
@@ -135,8 +183,30 @@ impl Header {
         out.extend_from_slice(&self.len.to_le_bytes());
     }
 
-    /// Parse and validate the first [`HEADER_LEN`] bytes of `bytes`.
+    /// Parse and validate the first [`HEADER_LEN`] bytes of `bytes` (a version 1 frame).
     pub fn parse(bytes: &[u8]) -> Result<Header> {
+        Self::parse_version(bytes, false)
+    }
+
+    /// Parse the header of a frame of a session: an authenticated session's frames must be
+    /// version 2 ([`VERSION_AUTHENTICATED`], the tag still to be checked with [`open_sealed`]),
+    /// the others version 1 ([`Header::parse`]).
+    pub fn parse_session(bytes: &[u8], authenticated: bool) -> Result<Header> {
+        Self::parse_version(bytes, authenticated)
+    }
+
+    fn parse_version(bytes: &[u8], authenticated: bool) -> Result<Header> {
+        let header = Self::parse_fields(bytes, authenticated);
+        if authenticated {
+            // In an authenticated session a frame that does not even parse was changed or
+            // forged just the same.
+            header.map_err(as_auth_failure)
+        } else {
+            header
+        }
+    }
+
+    fn parse_fields(bytes: &[u8], authenticated: bool) -> Result<Header> {
         if bytes.len() < HEADER_LEN {
             return Err(perr("header", format!("{} bytes, need {HEADER_LEN}", bytes.len())));
         }
@@ -150,22 +220,31 @@ impl Header {
             ));
         }
         let version = u16::from_le_bytes([bytes[4], bytes[5]]);
-        if version != VERSION {
+        let code = u16::from_le_bytes([bytes[6], bytes[7]]);
+        let seq = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+        if authenticated && version != VERSION_AUTHENTICATED {
+            let kind = MessageType::from_code(code).map_or_else(|| format!("type {code}"), |k| k.name().to_string());
+            return Err(auth_err(format!(
+                "{kind} #{seq} is a version {version} frame without a MAC, but this session is authenticated (version {VERSION_AUTHENTICATED} frames)"
+            )));
+        }
+        if !authenticated && version != VERSION {
             return Err(perr(
                 "header.version",
                 format!("is {version}, this program speaks version {VERSION}"),
             ));
         }
-        let code = u16::from_le_bytes([bytes[6], bytes[7]]);
         let kind = MessageType::from_code(code)
+            .filter(|k| authenticated || *k != MessageType::Dropped)
             .ok_or_else(|| perr("header.type", format!("{code} is not a known message type (1..=12)")))?;
-        let seq = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
         let len = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]);
-        if len as usize > MAX_PAYLOAD {
-            return Err(perr(
-                "header.length",
-                format!("{len} bytes exceeds the limit of {MAX_PAYLOAD}"),
-            ));
+        let max = if authenticated {
+            MAX_PAYLOAD + TAG_LEN
+        } else {
+            MAX_PAYLOAD
+        };
+        if len as usize > max {
+            return Err(perr("header.length", format!("{len} bytes exceeds the limit of {max}")));
         }
         Ok(Header {
             version,
@@ -410,6 +489,10 @@ pub enum Message {
         nonce: [u8; NONCE_LEN],
         mac: [u8; MAC_LEN],
     },
+    /// Only sealed (version 2): see the module docs.
+    Dropped {
+        reason: String,
+    },
 }
 
 fn put_u32(out: &mut Vec<u8>, v: u32) {
@@ -445,6 +528,7 @@ impl Message {
             Message::Error { .. } => MessageType::Error,
             Message::Challenge { .. } => MessageType::Challenge,
             Message::Auth { .. } => MessageType::Auth,
+            Message::Dropped { .. } => MessageType::Dropped,
         }
     }
 
@@ -481,7 +565,10 @@ impl Message {
                 out.extend_from_slice(nonce);
                 out.extend_from_slice(mac);
             }
-            Message::Reject { reason } | Message::Stop { reason } | Message::Error { reason } => put_str(out, reason),
+            Message::Reject { reason }
+            | Message::Stop { reason }
+            | Message::Error { reason }
+            | Message::Dropped { reason } => put_str(out, reason),
             Message::Substep { command, ag, dtau } => {
                 put_f64s(out, command);
                 put_f64s(out, &[ag.0, ag.1, *dtau]);
@@ -505,6 +592,15 @@ impl Message {
         }
         let len = (out.len() - HEADER_LEN) as u32;
         out[12..16].copy_from_slice(&len.to_le_bytes());
+    }
+
+    /// Encode as one frame of an authenticated session (version 2, with the tag under
+    /// `keys`) into `out` (cleared first); `keys = None` is [`Message::encode`].
+    pub fn encode_session(&self, seq: u32, out: &mut Vec<u8>, keys: Option<&SessionKeys>) {
+        self.encode(seq, out);
+        if let Some(keys) = keys {
+            seal(out, keys);
+        }
     }
 
     /// Decode a payload. Messages that depend on the handshake (`Substep`, `Measured`, `Step`,
@@ -615,6 +711,9 @@ impl Message {
             MessageType::Error => Message::Error {
                 reason: r.string(name)?,
             },
+            MessageType::Dropped => Message::Dropped {
+                reason: r.string(name)?,
+            },
             MessageType::Heartbeat => {
                 expect_len(0, "empty".into())?;
                 Message::Heartbeat
@@ -687,6 +786,51 @@ pub fn decode_frame(frame: &[u8], session: Option<&Session>) -> Result<(Header, 
     Ok((header, msg))
 }
 
+/// Turn the version 1 frame in `frame` into a version 2 frame of an authenticated session:
+/// version [`VERSION_AUTHENTICATED`], the length counting the tag, and the tag appended.
+pub fn seal(frame: &mut Vec<u8>, keys: &SessionKeys) {
+    frame[4..6].copy_from_slice(&VERSION_AUTHENTICATED.to_le_bytes());
+    let len = (frame.len() - HEADER_LEN + TAG_LEN) as u32;
+    frame[12..16].copy_from_slice(&len.to_le_bytes());
+    let tag = keys.tag(frame);
+    frame.extend_from_slice(&tag);
+}
+
+/// Check the tag of a whole frame of an authenticated session (header, payload and tag, as
+/// received; the header already parsed with [`Header::parse_session`]); returns the header
+/// with the payload's length (without the tag) and the payload, ready for [`Message::decode`].
+/// Every error starts with [`AUTH_FAILED`] and names the message as its header claims it.
+pub fn open_sealed<'a>(frame: &'a [u8], header: &Header, keys: &SessionKeys) -> Result<(Header, &'a [u8])> {
+    // Named only on the error paths: the good path allocates nothing.
+    let what = || format!("{} #{}", header.kind.name(), header.seq);
+    let len = header.len as usize;
+    if frame.len() != HEADER_LEN + len {
+        return Err(auth_err(format!(
+            "{}: the header announces {len} bytes after it, the frame carries {}",
+            what(),
+            frame.len().saturating_sub(HEADER_LEN)
+        )));
+    }
+    if len < TAG_LEN {
+        return Err(auth_err(format!(
+            "{}: {len} bytes after the header, too short for the {TAG_LEN}-byte tag",
+            what()
+        )));
+    }
+    let (message, tag) = frame.split_at(frame.len() - TAG_LEN);
+    if !keys.verify(message, tag) {
+        return Err(auth_err(format!(
+            "{}: the tag does not match (the message was changed on the way, forged, or sealed with another key)",
+            what()
+        )));
+    }
+    let header = Header {
+        len: (len - TAG_LEN) as u32,
+        ..*header
+    };
+    Ok((header, &message[HEADER_LEN..]))
+}
+
 /// Bounds-checked little-endian reader. Lengths are checked before reading numbers, but every
 /// access is still checked so that no input can panic.
 struct Reader<'a> {
@@ -754,5 +898,204 @@ impl Reader<'_> {
         let bytes = &self.buf[self.pos..];
         self.pos = self.buf.len();
         String::from_utf8(bytes.to_vec()).map_err(|_| perr(format!("{name}.reason"), "is not valid UTF-8"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The MAC framing of authenticated sessions: any change of a sealed frame is detected,
+    //! a frame is valid only in its direction and its session, and a replay or reordering
+    //! is an authentic frame whose sequence number the receiver refuses (tested at the session
+    //! level in `tests/site_hardening.rs`).
+    use super::*;
+    use crate::site::auth::{Role, Secret};
+
+    const SITE_NONCE: [u8; NONCE_LEN] = [7; NONCE_LEN];
+    const CLIENT_NONCE: [u8; NONCE_LEN] = [9; NONCE_LEN];
+    const SESSION: Session = Session {
+        n_coupling: 2,
+        substeps: 4,
+    };
+
+    fn keys(role: Role, site_nonce: &[u8; NONCE_LEN]) -> SessionKeys {
+        Secret::new(b"a shared secret of the lab, 32 b", "test")
+            .unwrap()
+            .session_keys(role, site_nonce, &CLIENT_NONCE, b"the Hello payload")
+    }
+
+    fn substep(seq: u32, keys: &SessionKeys) -> Vec<u8> {
+        let mut frame = Vec::new();
+        Message::Substep {
+            command: vec![1e-3, -2e-3],
+            ag: (0.5, 0.25),
+            dtau: 0.0025,
+        }
+        .encode_session(seq, &mut frame, Some(keys));
+        frame
+    }
+
+    /// What the site makes of a frame from the client.
+    fn open(frame: &[u8], keys: &SessionKeys) -> Result<(Header, Message)> {
+        let header = Header::parse_session(frame, true)?;
+        let (header, payload) = open_sealed(frame, &header, keys)?;
+        Ok((header, Message::decode(&header, payload, Some(&SESSION))?))
+    }
+
+    fn assert_refused(frame: &[u8], keys: &SessionKeys, what: &str) {
+        match open(frame, keys) {
+            Err(e) => assert!(e.to_string().starts_with(AUTH_FAILED), "{what}: {e}"),
+            Ok(m) => panic!("{what}: accepted {m:?}"),
+        }
+    }
+
+    #[test]
+    fn a_sealed_frame_opens_to_the_same_message() {
+        let (client, site) = (keys(Role::Client, &SITE_NONCE), keys(Role::Site, &SITE_NONCE));
+        let frame = substep(5, &client);
+        let mut plain = Vec::new();
+        Message::Substep {
+            command: vec![1e-3, -2e-3],
+            ag: (0.5, 0.25),
+            dtau: 0.0025,
+        }
+        .encode(5, &mut plain);
+        // version 2, the length counts the tag, the rest is the version 1 frame
+        assert_eq!(frame.len(), plain.len() + TAG_LEN);
+        assert_eq!(u16::from_le_bytes([frame[4], frame[5]]), VERSION_AUTHENTICATED);
+        assert_eq!(frame[HEADER_LEN..plain.len()], plain[HEADER_LEN..]);
+        let (header, msg) = open(&frame, &site).unwrap();
+        assert_eq!(
+            (header.kind, header.seq, header.len as usize),
+            (MessageType::Substep, 5, plain.len() - HEADER_LEN)
+        );
+        assert_eq!(decode_frame(&plain, Some(&SESSION)).unwrap().1, msg);
+        // and the other direction
+        let mut reply = Vec::new();
+        Message::Measured {
+            force: vec![3.0, 4.0],
+            displacement: vec![1e-3, -2e-3],
+        }
+        .encode_session(5, &mut reply, Some(&site));
+        let header = Header::parse_session(&reply, true).unwrap();
+        assert!(open_sealed(&reply, &header, &client).is_ok());
+        // without keys, encode_session is the version 1 encoding byte for byte
+        let mut unsealed = Vec::new();
+        Message::Heartbeat.encode_session(3, &mut unsealed, None);
+        let mut v1 = Vec::new();
+        Message::Heartbeat.encode(3, &mut v1);
+        assert_eq!(unsealed, v1);
+    }
+
+    #[test]
+    fn every_changed_bit_of_a_sealed_frame_is_detected() {
+        let (client, site) = (keys(Role::Client, &SITE_NONCE), keys(Role::Site, &SITE_NONCE));
+        let frame = substep(2, &client);
+        // magic, version, type, sequence number, length, payload and tag: every bit
+        for bit in 0..8 * frame.len() {
+            let mut bad = frame.clone();
+            bad[bit / 8] ^= 1 << (bit % 8);
+            assert_refused(&bad, &site, &format!("bit {bit}"));
+        }
+    }
+
+    #[test]
+    fn a_changed_type_sequence_number_payload_or_tag_is_refused_with_a_reason() {
+        let (client, site) = (keys(Role::Client, &SITE_NONCE), keys(Role::Site, &SITE_NONCE));
+        let frame = substep(2, &client);
+        let reason = |f: &[u8]| open(f, &site).unwrap_err().to_string();
+        // type: a Substep passed off as a Step (the payload would not even fit) or Heartbeat
+        let mut bad = frame.clone();
+        bad[6..8].copy_from_slice(&MessageType::Heartbeat.code().to_le_bytes());
+        assert!(
+            reason(&bad).contains("Heartbeat #2: the tag does not match"),
+            "{}",
+            reason(&bad)
+        );
+        // sequence number
+        let mut bad = frame.clone();
+        bad[8..12].copy_from_slice(&3u32.to_le_bytes());
+        assert!(
+            reason(&bad).contains("Substep #3: the tag does not match"),
+            "{}",
+            reason(&bad)
+        );
+        // payload: the command × 1000 (the attack of the issue)
+        let mut bad = frame.clone();
+        let command = f64::from_le_bytes(bad[HEADER_LEN..HEADER_LEN + 8].try_into().unwrap());
+        bad[HEADER_LEN..HEADER_LEN + 8].copy_from_slice(&(command * 1000.0).to_le_bytes());
+        assert!(reason(&bad).contains("the tag does not match"), "{}", reason(&bad));
+        // tag
+        let mut bad = frame.clone();
+        let last = bad.len() - 1;
+        bad[last] ^= 0x80;
+        assert!(reason(&bad).contains("the tag does not match"), "{}", reason(&bad));
+        // the tag stripped: a version 1 frame in an authenticated session
+        let mut plain = Vec::new();
+        Message::Heartbeat.encode(2, &mut plain);
+        assert_eq!(
+            reason(&plain),
+            "message authentication failed: Heartbeat #2 is a version 1 frame without a MAC, but this session is authenticated (version 2 frames)"
+        );
+        // the tag stripped but the header made version 2: too short, or a tag over other bytes
+        let mut bad = plain.clone();
+        bad[4..6].copy_from_slice(&VERSION_AUTHENTICATED.to_le_bytes());
+        assert!(
+            reason(&bad).contains("too short for the 16-byte tag"),
+            "{}",
+            reason(&bad)
+        );
+        // truncated and extended frames
+        assert!(open(&frame[..frame.len() - 1], &site).is_err());
+        let mut longer = frame.clone();
+        longer.push(0);
+        assert!(reason(&longer).contains("the frame carries"), "{}", reason(&longer));
+        // and a version 2 frame outside an authenticated session is refused as before
+        assert!(
+            Header::parse(&frame)
+                .unwrap_err()
+                .to_string()
+                .contains("header.version: is 2")
+        );
+        let mut dropped = Vec::new();
+        Message::Dropped { reason: "x".into() }.encode(0, &mut dropped);
+        assert!(
+            Header::parse(&dropped)
+                .unwrap_err()
+                .to_string()
+                .contains("13 is not a known message type")
+        );
+    }
+
+    #[test]
+    fn a_frame_is_valid_only_in_its_direction_and_its_session() {
+        let (client, site) = (keys(Role::Client, &SITE_NONCE), keys(Role::Site, &SITE_NONCE));
+        // reflected: the client's own frame sent back to it as if it were the site's
+        let frame = substep(2, &client);
+        assert_refused(&frame, &client, "reflected to the client");
+        // the site's reply fed to the site
+        let mut reply = Vec::new();
+        Message::Heartbeat.encode_session(2, &mut reply, Some(&site));
+        assert_refused(&reply, &site, "reflected to the site");
+        // another session (another site nonce): the keys differ
+        let other_site = keys(Role::Site, &[8; NONCE_LEN]);
+        assert_refused(&frame, &other_site, "from another session");
+    }
+
+    #[test]
+    fn a_replayed_or_reordered_frame_is_authentic_but_carries_its_old_number() {
+        // The tag covers the sequence number, so a replay or reordering cannot renumber a
+        // frame: the receiver sees the old number and refuses it (tests/site_hardening.rs).
+        let (client, site) = (keys(Role::Client, &SITE_NONCE), keys(Role::Site, &SITE_NONCE));
+        let (first, second) = (substep(2, &client), substep(3, &client));
+        assert_eq!(open(&first, &site).unwrap().0.seq, 2);
+        assert_eq!(open(&second, &site).unwrap().0.seq, 3);
+        // renumbering the replay to the expected number breaks its tag
+        let mut renumbered = first.clone();
+        renumbered[8..12].copy_from_slice(&4u32.to_le_bytes());
+        assert_refused(&renumbered, &site, "renumbered replay");
+        // splicing the payload of one frame under the header of another
+        let mut spliced = second.clone();
+        spliced[HEADER_LEN..].copy_from_slice(&first[HEADER_LEN..]);
+        assert_refused(&spliced, &site, "spliced");
     }
 }

@@ -120,7 +120,9 @@ pub(crate) fn write_all(stream: &mut TcpStream, data: &[u8], timeout: Duration) 
 /// `first_deadline`; the payload before the later of `first_deadline` and `rest_timeout` after
 /// the header (a client passes its request deadline and zero). A payload longer than
 /// `max_len` (what this connection can legitimately receive, `max_what` in words) is refused
-/// before anything is allocated for it.
+/// before anything is allocated for it. In an `authenticated` session the frame must be a
+/// version 2 frame (its tag, counted in `max_len` by the caller, is checked by the caller).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn read_frame(
     stream: &mut TcpStream,
     frame: &mut Vec<u8>,
@@ -129,11 +131,12 @@ pub(crate) fn read_frame(
     max_len: usize,
     max_what: &str,
     stop: Option<&AtomicBool>,
+    authenticated: bool,
 ) -> Result<Header, LinkError> {
     frame.clear();
     frame.resize(HEADER_LEN, 0);
     read_full(stream, &mut frame[..HEADER_LEN], first_deadline, stop)?;
-    let header = Header::parse(frame).map_err(LinkError::Protocol)?;
+    let header = Header::parse_session(frame, authenticated).map_err(LinkError::Protocol)?;
     let len = header.len as usize;
     if len > max_len {
         return Err(LinkError::Protocol(Error::invalid(

@@ -13,11 +13,11 @@
 //! connection), `udp.rs`, `session.rs` (a session and the handshake checks, shared by both
 //! transports), `lab_spec.rs` ([`VirtualLabSpec`]).
 
-use super::auth::{MAC_LEN, NONCE_LEN, Role, Secret, nonce};
+use super::auth::{MAC_LEN, NONCE_LEN, Role, Secret, SessionKeys, TAG_LEN, nonce};
 use super::limits::{SessionCost, SiteLimits};
 use super::protocol::{
-    HEADER_LEN, Header, Hello, MAX_DATAGRAM, MAX_REASON, Message, MessageType, Mode, Session, StepReply, decode_frame,
-    hello_payload_len,
+    AUTH_FAILED, HEADER_LEN, Header, Hello, MAX_DATAGRAM, MAX_REASON, Message, MessageType, Mode, Session, StepReply,
+    VERSION_AUTHENTICATED, as_auth_failure, decode_frame, hello_payload_len, open_sealed,
 };
 use super::transport::{LinkError, POLL, read_frame, read_full, write_all};
 use super::{CommandRamp, LogFn, SiteFactory, substep_ground_acceleration};
@@ -131,6 +131,9 @@ pub struct ServeReport {
     /// Sub-steps executed by the hosted substructures (both modes), and per-step requests.
     pub substeps: u64,
     pub steps: u64,
+    /// UDP datagrams from a session's client address dropped because they failed
+    /// authentication (not executed).
+    pub dropped: u64,
 }
 
 /// A server running in its own thread. Dropping the handle stops the server.
@@ -276,9 +279,8 @@ impl SiteServer {
             if let (Some(s), Some(limit)) = (&udp.session, options.idle_timeout)
                 && s.last_seen.elapsed() > limit
             {
-                let peer = s.peer;
+                udp.send_session_error(0, "session ended: idle timeout");
                 udp.end_session(options, &format!("idle for more than {:.3} s", limit.as_secs_f64()));
-                udp.send_error(peer, 0, "session ended: idle timeout");
                 udp.report.errors += 1;
                 if options.once {
                     return Ok(udp.report);

@@ -213,18 +213,26 @@ pub(super) fn admit_hello(header: &Header, msg: Message, limits: &SiteLimits) ->
     }
 }
 
-/// Check the client's `Auth` against the challenge; on success the site's proof for `Accept`.
+/// With a secret, what an accepted `Auth` gives: the site's proof for `Accept` and the session
+/// keys.
+pub(super) type Proof = ([u8; MAC_LEN], SessionKeys);
+
+/// Check the client's `Auth` against the challenge; on success the site's proof for `Accept`
+/// and the session keys.
 pub(super) fn check_auth(
     secret: &Secret,
     site_nonce: &[u8; NONCE_LEN],
     hello_payload: &[u8],
     header: &Header,
     msg: Message,
-) -> std::result::Result<[u8; MAC_LEN], Refusal> {
+) -> std::result::Result<Proof, Refusal> {
     match msg {
         Message::Auth { nonce, mac } if header.seq == 1 => {
             if secret.verify(Role::Client, site_nonce, &nonce, hello_payload, &mac) {
-                Ok(secret.mac(Role::Site, site_nonce, &nonce, hello_payload))
+                Ok((
+                    secret.mac(Role::Site, site_nonce, &nonce, hello_payload),
+                    secret.session_keys(Role::Site, site_nonce, &nonce, hello_payload),
+                ))
             } else {
                 Err(Refusal::reject(
                     "authentication failed: wrong proof (a different secret, or a replayed handshake)".into(),

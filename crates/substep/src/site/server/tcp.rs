@@ -228,16 +228,18 @@ pub(super) fn serve_tcp_connection(
     let _ = stream.set_nodelay(true);
     let mut frame = Vec::new();
     let mut tx = Vec::new();
-    let mut send = |stream: &mut TcpStream, msg: &Message, seq: u32| {
-        msg.encode(seq, &mut tx);
+    // `keys`: the session's, once the handshake is complete (the handshake itself is sent
+    // unsealed).
+    let mut send = |stream: &mut TcpStream, msg: &Message, seq: u32, keys: Option<&SessionKeys>| {
+        msg.encode_session(seq, &mut tx, keys);
         write_all(stream, &tx, io)
     };
-    let handshake = handshake_tcp(&mut stream, &mut frame, options, stop).and_then(|(hello, accept_seq, mac)| {
+    let handshake = handshake_tcp(&mut stream, &mut frame, options, stop).and_then(|(hello, accept_seq, proof)| {
         let session =
             Hosted::open(hello, factory, &options.limits, false).map_err(|r| Refusal::reject(r, accept_seq))?;
-        Ok((session, accept_seq, mac))
+        Ok((session, accept_seq, proof))
     });
-    let (mut session, accept_seq, mac) = match handshake {
+    let (mut session, accept_seq, proof) = match handshake {
         Ok(x) => x,
         Err(refusal) => {
             if let Some(seq) = refusal.reply {
@@ -247,6 +249,7 @@ pub(super) fn serve_tcp_connection(
                         reason: refusal.log.clone(),
                     },
                     seq,
+                    None,
                 );
             }
             options.log(&format!("site: {peer} rejected: {}", refusal.log));
@@ -254,11 +257,16 @@ pub(super) fn serve_tcp_connection(
             return false;
         }
     };
+    let (mac, keys) = match proof {
+        Some((mac, keys)) => (Some(mac), Some(keys)),
+        None => (None, None),
+    };
+    let keys = keys.as_ref();
     let accept = Message::Accept {
         n_coupling: session.hello.n_coupling,
         mac,
     };
-    if let Err(e) = send(&mut stream, &accept, accept_seq) {
+    if let Err(e) = send(&mut stream, &accept, accept_seq, None) {
         options.log(&format!("site: {peer}: cannot send Accept: {e}"));
         report.errors += 1;
         return false;
@@ -267,10 +275,14 @@ pub(super) fn serve_tcp_connection(
     options.log(&format!(
         "site: {peer} connected ({}{})",
         session.describe(),
-        if mac.is_some() { ", authenticated" } else { "" }
+        if keys.is_some() {
+            ", authenticated"
+        } else {
+            ", messages not authenticated: no secret"
+        }
     ));
     let limits = session.limits();
-    let max_request = limits.max_request_payload();
+    let max_request = limits.max_request_payload() + if keys.is_some() { TAG_LEN } else { 0 };
     let mut expect: u32 = accept_seq + 1;
     let end = loop {
         let idle = ServeOptions::deadline(options.idle_timeout);
@@ -282,6 +294,7 @@ pub(super) fn serve_tcp_connection(
             max_request,
             "the largest request of this session",
             stop,
+            keys.is_some(),
         ) {
             Ok(h) => h,
             Err(LinkError::Closed { got: 0 }) => break "client disconnected".to_string(),
@@ -291,13 +304,19 @@ pub(super) fn serve_tcp_connection(
                     "idle for more than {:.3} s",
                     options.idle_timeout.unwrap_or_default().as_secs_f64()
                 );
-                let _ = send(&mut stream, &Message::Error { reason: reason.clone() }, expect);
+                let _ = send(&mut stream, &Message::Error { reason: reason.clone() }, expect, keys);
                 report.errors += 1;
                 break reason;
             }
             Err(LinkError::Protocol(e)) => {
-                let _ = send(&mut stream, &Message::Error { reason: e.to_string() }, expect);
+                // In an authenticated session a frame refused from its header (e.g. a length
+                // beyond the limit) is a changed or forged one like any other.
+                let e = if keys.is_some() { as_auth_failure(e) } else { e };
+                let _ = send(&mut stream, &Message::Error { reason: e.to_string() }, expect, keys);
                 report.errors += 1;
+                if keys.is_some() {
+                    break e.to_string(); // names the failed authentication
+                }
                 break format!("bad frame: {e}");
             }
             Err(e) => {
@@ -305,20 +324,43 @@ pub(super) fn serve_tcp_connection(
                 break e.to_string();
             }
         };
+        // Authenticated: the tag first (until it checks, not even the sequence number is the
+        // client's); a bad one ends the session, answered with `expect` so that the client
+        // waiting for that reply reads the reason.
+        let (header, payload) = match keys {
+            None => (header, &frame[HEADER_LEN..]),
+            Some(k) => match open_sealed(&frame, &header, k) {
+                Ok(x) => x,
+                Err(e) => {
+                    let reason = e.to_string();
+                    let _ = send(&mut stream, &Message::Error { reason: reason.clone() }, expect, keys);
+                    report.errors += 1;
+                    break reason;
+                }
+            },
+        };
         if header.seq != expect {
-            let reason = format!(
-                "site protocol: {}: sequence number {}, expected {expect}",
-                header.kind.name(),
-                header.seq
-            );
-            let _ = send(&mut stream, &Message::Error { reason: reason.clone() }, header.seq);
+            let reason = match keys {
+                None => format!(
+                    "site protocol: {}: sequence number {}, expected {expect}",
+                    header.kind.name(),
+                    header.seq
+                ),
+                Some(_) => format!(
+                    "{AUTH_FAILED}: {} #{} arrived where #{expect} was expected (a replayed or reordered message)",
+                    header.kind.name(),
+                    header.seq
+                ),
+            };
+            let reply_seq = if keys.is_some() { expect } else { header.seq };
+            let _ = send(&mut stream, &Message::Error { reason: reason.clone() }, reply_seq, keys);
             report.errors += 1;
             break reason;
         }
-        let msg = match Message::decode(&header, &frame[HEADER_LEN..], Some(&limits)) {
+        let msg = match Message::decode(&header, payload, Some(&limits)) {
             Ok(m) => m,
             Err(e) => {
-                let _ = send(&mut stream, &Message::Error { reason: e.to_string() }, header.seq);
+                let _ = send(&mut stream, &Message::Error { reason: e.to_string() }, header.seq, keys);
                 report.errors += 1;
                 break format!("bad frame: {e}");
             }
@@ -327,7 +369,7 @@ pub(super) fn serve_tcp_connection(
             Outcome::Reply(m) => (m, None),
             Outcome::Close(m, why) => (m, Some(why)),
         };
-        if let Err(e) = send(&mut stream, &reply, header.seq) {
+        if let Err(e) = send(&mut stream, &reply, header.seq, keys) {
             report.errors += 1;
             break format!("cannot send {}: {e}", reply.kind().name());
         }
@@ -350,13 +392,14 @@ pub(super) fn serve_tcp_connection(
 
 /// The TCP handshake up to (not including) building the site: the Hello, checked against the
 /// limits, and with a secret the challenge–response, all within `handshake_timeout`. Returns
-/// the Hello, the sequence number of the `Accept` and the site's proof.
+/// the Hello, the sequence number of the `Accept`, and with a secret the site's proof and the
+/// session keys.
 pub(super) fn handshake_tcp(
     stream: &mut TcpStream,
     frame: &mut Vec<u8>,
     options: &ServeOptions,
     stop: Option<&AtomicBool>,
-) -> std::result::Result<(Hello, u32, Option<[u8; MAC_LEN]>), Refusal> {
+) -> std::result::Result<(Hello, u32, Option<Proof>), Refusal> {
     let deadline = ServeOptions::deadline(Some(options.handshake_timeout));
     let link_refusal = |e: LinkError, what: &str| match e {
         LinkError::Protocol(err) => Refusal::reject(err.to_string(), 0),
@@ -381,6 +424,7 @@ pub(super) fn handshake_tcp(
         max_hello,
         "a Hello for at most site.max_coupling coupling DOFs",
         stop,
+        false,
     )
     .map_err(|e| link_refusal(e, "Hello"))?;
     let msg = decode_frame(frame, None)
@@ -406,6 +450,7 @@ pub(super) fn handshake_tcp(
         NONCE_LEN + MAC_LEN + MAX_REASON,
         "an Auth",
         stop,
+        false,
     )
     .map_err(|e| match e {
         LinkError::Closed { got: 0 } => Refusal {
@@ -417,6 +462,6 @@ pub(super) fn handshake_tcp(
     let msg = decode_frame(frame, None)
         .map_err(|e| Refusal::reject(e.to_string(), header.seq))?
         .1;
-    let mac = check_auth(secret, &site_nonce, &hello_payload, &header, msg)?;
-    Ok((hello, 1, Some(mac)))
+    let proof = check_auth(secret, &site_nonce, &hello_payload, &header, msg)?;
+    Ok((hello, 1, Some(proof)))
 }
