@@ -34,7 +34,7 @@ pub struct RthsArgs {
     /// Scale of the record (eq_intensity)
     #[arg(long, default_value_t = 0.4)]
     pub intensity: f64,
-    /// Tracking controller: none, sample, arx, polynomial, inverse_fir (default: the config's, else sample)
+    /// Tracking controller: none, sample, arx, polynomial, inverse_fir, ats (default: the config's, else sample)
     #[arg(long)]
     pub controller: Option<String>,
     /// Settings of the controller and the sub-step algorithm (TOML, docs/benchmark.md)

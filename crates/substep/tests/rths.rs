@@ -109,6 +109,52 @@ fn arx_without_noise_is_at_least_as_good_as_with_noise() {
     }
 }
 
+/// Issue 28: ATS (the field's reference compensator) on the benchmark, with and without sensor
+/// noise: stable and under capacity in every case and far better than the sample controller.
+/// Against the thesis method (ARX), measured and documented in docs/benchmark.md: ARX is better
+/// on J4 (the test against the true structure) in every case; ATS tracks its target better (J2)
+/// in every case — by 0.13–0.17 points with noise, by about 0.5 without.
+#[test]
+fn ats_is_stable_and_arx_is_at_least_as_good() {
+    for noise in [true, false] {
+        for case in 1..=4u8 {
+            let result = |kind| {
+                let mut input = RthsInput::nominal(Case::new(case).unwrap(), ControllerSpec::preset(kind));
+                input.noise = noise;
+                run(&input).unwrap()
+            };
+            let ats = result(ControllerKind::Ats);
+            assert!(
+                ats.stable && !ats.capacity_exceeded && ats.guard_trip.is_none(),
+                "case {case}: {:?}",
+                ats.warnings()
+            );
+            let ats = ats.criteria.unwrap().j;
+            let arx = result(ControllerKind::Arx).criteria.unwrap().j;
+            let sample = nominal(case, ControllerKind::Sample).criteria.unwrap().j;
+            println!(
+                "noise {noise}, case {case}: J2 ARX {:.2} / ATS {:.2} / sample {:.2}, J4 {:.2} / {:.2} / {:.2}",
+                arx[1], ats[1], sample[1], arx[3], ats[3], sample[3]
+            );
+            assert!(
+                arx[3] <= ats[3],
+                "noise {noise}, case {case} J4: ARX {} vs ATS {}",
+                arx[3],
+                ats[3]
+            );
+            assert!(
+                ats[1] <= arx[1],
+                "noise {noise}, case {case} J2: ATS {} vs ARX {}",
+                ats[1],
+                arx[1]
+            );
+            for i in [1, 3] {
+                assert!(ats[i] < sample[i] / 1.5, "noise {noise}, case {case} J{}", i + 1);
+            }
+        }
+    }
+}
+
 #[test]
 fn perturbed_plants_are_seeded_and_spread_as_specified() {
     let nominal = ServoParams::benchmark();

@@ -36,7 +36,7 @@
 use super::converged::converged_parameters;
 use super::frequency::{Peak, continuous_response, find_peaks};
 use super::{FrequencyResponse, StepMap};
-use crate::compensate::{ArxPhaseLagSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
+use crate::compensate::{ArxPhaseLagSpec, AtsSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use crate::error::{Error, Result};
 use crate::io::SubstructureDefinition;
 use crate::model::StructuralModel;
@@ -295,6 +295,18 @@ fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64, la
             s.lead = lead;
             PhaseLagSpec::InverseFir(s)
         }
+        // Its defaults for the setting's lag (bounds and rate limits scale with it); the
+        // analysis sees it at its starting coefficients a₁ = L, a₂ = L²/2, which a delay of L
+        // sub-steps converges close to (a₂ → L²/2 + L/2).
+        PhaseLagSpec::Ats(s) => PhaseLagSpec::Ats(AtsSpec {
+            window: s.window,
+            subsample: s.subsample,
+            span: s.span,
+            smoothing: s.smoothing,
+            threshold: s.threshold,
+            guard_factor: s.guard_factor,
+            ..AtsSpec::new(lag / dtau)
+        }),
     };
     PhaseLagDefinition {
         spec,

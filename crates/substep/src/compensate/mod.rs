@@ -22,7 +22,9 @@
 //! * [`Polynomial`] — Horiuchi's extrapolation of the target `lead` sub-steps ahead;
 //! * [`ArxPhaseLag`] — the dissertation's on-line identification method;
 //! * [`InverseFir`] — an RLS-identified FIR inverse of the actuator applied to the extrapolated
-//!   target (baseline).
+//!   target (baseline);
+//! * [`Ats`] — the adaptive time-series compensator of Chae et al. (2013), the field's common
+//!   reference: a feed-forward `a₀ d + a₁ ḋ + a₂ d̈` fitted by moving-window least squares.
 //!
 //! Every compensator has a [`Guard`]: a non-finite input or correction, or a sent correction
 //! `h Δu` larger than `factor ×` the range of targets seen so far, disables it (the correction is
@@ -40,12 +42,14 @@
 //! command noise as well; [`InverseFir`] ≈ 1150× / 13×.
 
 mod arx_lag;
+mod ats;
 mod inverse;
 mod polynomial;
 mod site;
 mod spec;
 
 pub use arx_lag::{ArxPhaseLag, ArxPhaseLagSpec, ErrorPairing, MAX_HISTORY, Regressor};
+pub use ats::{Ats, AtsSpec};
 pub use inverse::{InverseFir, InverseFirSpec};
 pub use polynomial::{Polynomial, lagrange_extrapolation_weights};
 pub use site::CompensatedSite;

@@ -1,7 +1,7 @@
 //! Descriptions of phase-lag compensation (for test definitions): which compensator, with which
 //! parameters, and the ramp; built into a [`CompensatedSite`] around an experimental side.
 
-use super::{ArxPhaseLagSpec, CompensatedSite, Guard, InverseFirSpec, PhaseLagCompensator, Polynomial, Ramp};
+use super::{ArxPhaseLagSpec, AtsSpec, CompensatedSite, Guard, InverseFirSpec, PhaseLagCompensator, Polynomial, Ramp};
 use crate::error::Result;
 use crate::substructure::ExperimentalSubstructure;
 
@@ -15,15 +15,18 @@ pub enum PhaseLagSpec {
     Arx(ArxPhaseLagSpec),
     /// [`super::InverseFir`].
     InverseFir(InverseFirSpec),
+    /// [`super::Ats`].
+    Ats(AtsSpec),
 }
 
 impl PhaseLagSpec {
-    /// `polynomial`, `arx` or `inverse_fir` (the config's `kind`).
+    /// `polynomial`, `arx`, `inverse_fir` or `ats` (the config's `kind`).
     pub fn kind(&self) -> &'static str {
         match self {
             PhaseLagSpec::Polynomial { .. } => "polynomial",
             PhaseLagSpec::Arx(_) => "arx",
             PhaseLagSpec::InverseFir(_) => "inverse_fir",
+            PhaseLagSpec::Ats(_) => "ats",
         }
     }
 
@@ -37,6 +40,7 @@ impl PhaseLagSpec {
             } => Box::new(Polynomial::new(order, lead)?.with_guard(Guard::new(guard_factor, 1e-6)?)),
             PhaseLagSpec::Arx(spec) => Box::new(spec.build()?),
             PhaseLagSpec::InverseFir(spec) => Box::new(spec.build()?),
+            PhaseLagSpec::Ats(spec) => Box::new(spec.build()?),
         })
     }
 

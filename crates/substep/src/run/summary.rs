@@ -267,6 +267,11 @@ pub(super) fn phase_lag_json(p: &PhaseLagDefinition) -> Value {
             "kind": "inverse_fir", "lead_substeps": f.lead, "taps": f.taps, "order": f.order,
             "forgetting_factor": f.lambda, "ramp": ramp,
         }),
+        PhaseLagSpec::Ats(a) => json!({
+            "kind": "ats", "initial_lead_substeps": a.initial_lead, "window_substeps": a.window,
+            "subsample": a.subsample, "smoothing_substeps": a.smoothing, "threshold": a.threshold,
+            "guard_factor": a.guard_factor, "ramp": ramp,
+        }),
     }
 }
 

@@ -3,7 +3,7 @@
 //!
 //! ```toml
 //! [controller]
-//! kind = "arx"                  # none | sample | arx | polynomial | inverse_fir (--controller wins)
+//! kind = "arx"                  # none | sample | arx | polynomial | inverse_fir | ats (--controller wins)
 //! converters = true             # the benchmark's A/D and D/A (±3.8, q = 2^-18)
 //! # feedforward = { num = [...], den = [...] }  # the shaping filter of kind none | sample only
 //! feedback = { num = [2.0, 95.0], den = [1.0, 0.0] }   # continuous TFs in s, Tustin at 1/4096 s
@@ -38,6 +38,15 @@
 //! order = 2
 //! forgetting_factor = 0.995
 //! p0 = 100.0
+//!
+//! [controller.ats]              # compensate::AtsSpec, in samples
+//! initial_lead = 97.0           # a₁ at the start (a₂ = a₁²/2, a₀ = 1)
+//! window = 4096                 # samples in the least-squares window (1 s)
+//! subsample = 16                # one regression row every 16 samples
+//! span = 32                     # samples per difference of the derivatives
+//! smoothing = 48.5              # low-pass time constant of each of two stages [samples]
+//! threshold = 1e-4              # adaptation starts above this |x_m| [m]
+//! guard_factor = 10.0
 //!
 //! [plant]
 //! kind = "servo"                # or "ideal": x = desired exactly (the loop's own error)
@@ -99,6 +108,19 @@ struct RawController {
     arx: Option<RawArx>,
     polynomial: Option<RawPolynomial>,
     inverse_fir: Option<RawInverseFir>,
+    ats: Option<RawAts>,
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAts {
+    initial_lead: Option<f64>,
+    window: Option<usize>,
+    subsample: Option<usize>,
+    span: Option<usize>,
+    smoothing: Option<f64>,
+    threshold: Option<f64>,
+    guard_factor: Option<f64>,
 }
 
 #[derive(Debug, Clone, Default, Deserialize)]
@@ -310,6 +332,28 @@ impl BenchmarkConfig {
                     *order = r.order.unwrap_or(*order);
                     *lead = r.lead.unwrap_or(*lead);
                     *guard_factor = r.guard_factor.unwrap_or(*guard_factor);
+                }
+            }
+            (Some(PhaseLagSpec::Ats(s)), ControllerKind::Ats) => {
+                if let Some(r) = &c.ats {
+                    if let Some(l) = r.initial_lead {
+                        // Bounds and rate limits follow the expected delay.
+                        *s = crate::compensate::AtsSpec {
+                            window: s.window,
+                            subsample: s.subsample,
+                            span: s.span,
+                            smoothing: s.smoothing,
+                            threshold: s.threshold,
+                            guard_factor: s.guard_factor,
+                            ..crate::compensate::AtsSpec::new(l)
+                        };
+                    }
+                    s.window = r.window.unwrap_or(s.window);
+                    s.subsample = r.subsample.unwrap_or(s.subsample);
+                    s.span = r.span.unwrap_or(s.span);
+                    s.smoothing = r.smoothing.unwrap_or(s.smoothing);
+                    s.threshold = r.threshold.unwrap_or(s.threshold);
+                    s.guard_factor = r.guard_factor.unwrap_or(s.guard_factor);
                 }
             }
             (Some(PhaseLagSpec::InverseFir(s)), ControllerKind::InverseFir) => {

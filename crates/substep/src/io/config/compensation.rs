@@ -2,7 +2,7 @@
 //! same names): the compensation methods.
 
 use super::{forbid, one, prefixed};
-use crate::compensate::{ArxPhaseLagSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
+use crate::compensate::{ArxPhaseLagSpec, AtsSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use crate::error::{Error, Result, require_non_negative};
 use crate::substructure::ErrorForceSpec;
 use serde::Deserialize;
@@ -60,6 +60,8 @@ pub(crate) struct RawPhaseLag {
     pub(crate) smoothing: Option<f64>,
     pub(crate) max_lead: Option<f64>,
     pub(crate) supervisor: Option<bool>,
+    pub(crate) window: Option<f64>,
+    pub(crate) threshold: Option<f64>,
     pub(crate) ramp_start: Option<usize>,
     pub(crate) ramp_steps: Option<usize>,
     pub(crate) fade_out: Option<[usize; 2]>,
@@ -86,6 +88,8 @@ impl RawErrorForce {
 
 /// The keys of `kind = "arx"` alone (refused with the other kinds).
 const ARX_ONLY: &[&str] = &["span", "smoothing", "max_lead", "supervisor"];
+/// The keys of `kind = "ats"` alone.
+const ATS_ONLY: &[&str] = &["window", "threshold"];
 
 /// Default ramp-in of the phase-lag compensation [steps].
 pub(crate) const DEFAULT_RAMP_STEPS: usize = 100;
@@ -114,6 +118,8 @@ impl RawPhaseLag {
                         "smoothing" => self.smoothing.is_some(),
                         "max_lead" => self.max_lead.is_some(),
                         "supervisor" => self.supervisor.is_some(),
+                        "window" => self.window.is_some(),
+                        "threshold" => self.threshold.is_some(),
                         "ramp_start" => self.ramp_start.is_some(),
                         "ramp_steps" => self.ramp_steps.is_some(),
                         "fade_out" => self.fade_out.is_some(),
@@ -161,6 +167,8 @@ impl RawPhaseLag {
                         "smoothing",
                         "max_lead",
                         "supervisor",
+                        "window",
+                        "threshold",
                         "ramp_start",
                         "ramp_steps",
                         "fade_out",
@@ -172,6 +180,7 @@ impl RawPhaseLag {
             "polynomial" => {
                 forbid(p, &keys(&["k_lag", "n_u", "forgetting_factor", "taps"]), &unused)?;
                 forbid(p, &keys(ARX_ONLY), &unused)?;
+                forbid(p, &keys(ATS_ONLY), &unused)?;
                 PhaseLagSpec::Polynomial {
                     order: self.order.unwrap_or(3),
                     lead: lead()?,
@@ -180,6 +189,7 @@ impl RawPhaseLag {
             }
             "arx" => {
                 forbid(p, &keys(&["order", "lead", "lead_substeps", "taps"]), &unused)?;
+                forbid(p, &keys(ATS_ONLY), &unused)?;
                 // The actuator's lag in sub-steps, or the k_lag given.
                 let lag = self.k_lag.map_or(lag / dtau, |k| k as f64);
                 let mut spec = ArxPhaseLagSpec::for_substeps(lag, k_sub);
@@ -217,6 +227,7 @@ impl RawPhaseLag {
             "inverse_fir" => {
                 forbid(p, &keys(&["k_lag", "n_u", "guard_factor"]), &unused)?;
                 forbid(p, &keys(ARX_ONLY), &unused)?;
+                forbid(p, &keys(ATS_ONLY), &unused)?;
                 let mut spec = InverseFirSpec::new(lead()?);
                 if let Some(o) = self.order {
                     spec.order = o;
@@ -229,10 +240,44 @@ impl RawPhaseLag {
                 }
                 PhaseLagSpec::InverseFir(spec)
             }
+            "ats" => {
+                forbid(
+                    p,
+                    &keys(&["order", "k_lag", "n_u", "forgetting_factor", "taps"]),
+                    &unused,
+                )?;
+                forbid(p, &keys(&["span", "max_lead", "supervisor"]), &unused)?;
+                // The initial a₁: `lead`/`lead_substeps` if given, else the actuator's
+                // low-frequency lag (delay plus dynamics), what the actuator's inverse starts from.
+                let initial = if self.lead.is_some() || self.lead_substeps.is_some() {
+                    lead()?
+                } else {
+                    lag / dtau
+                };
+                let mut spec = AtsSpec::new(initial);
+                // A 1 s window (Chae et al. 2013), about 250 rows of it.
+                let window_s = self.window.unwrap_or(1.0);
+                if !(window_s.is_finite() && window_s > 0.0 && window_s / dtau <= (1u64 << 22) as f64) {
+                    return Err(Error::invalid(
+                        format!("{p}window"),
+                        format!("must be a finite time > 0 s of at most 4194304 sub-steps, got {window_s}"),
+                    ));
+                }
+                spec.window = (window_s / dtau).round() as usize;
+                spec.subsample = (spec.window / 250).max(1);
+                if let Some(t) = self.threshold {
+                    spec.threshold = t;
+                }
+                if let Some(t) = self.smoothing {
+                    spec.smoothing = t;
+                }
+                spec.guard_factor = guard_factor;
+                PhaseLagSpec::Ats(spec)
+            }
             other => {
                 return Err(Error::invalid(
                     format!("{p}kind"),
-                    format!("unknown kind '{other}' (expected none, polynomial, arx or inverse_fir)"),
+                    format!("unknown kind '{other}' (expected none, polynomial, arx, inverse_fir or ats)"),
                 ));
             }
         };
