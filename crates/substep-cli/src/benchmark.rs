@@ -7,7 +7,8 @@ use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use substep::benchmark::rths::{
-    Algorithm, Case, PUBLISHED_SAMPLE, RthsInput, RthsRow, RunHistory, StudyOptions, StudySetup, perturbed_stats, run,
+    Algorithm, COMPARED, Case, FORCE_CAPACITY, PUBLISHED_SAMPLE, RthsInput, RthsRow, RunHistory, StudyOptions,
+    StudySetup, compare, perturbed_stats, run,
 };
 
 #[derive(Debug, clap::Args)]
@@ -34,7 +35,8 @@ pub struct RthsArgs {
     /// Scale of the record (eq_intensity)
     #[arg(long, default_value_t = 0.4)]
     pub intensity: f64,
-    /// Tracking controller: none, sample, arx, polynomial, inverse_fir, ats (default: the config's, else sample)
+    /// Tracking controller: none, sample, arx, polynomial, ats (default: the config's, else sample;
+    /// inverse_fir is refused on this benchmark, with the reason)
     #[arg(long)]
     pub controller: Option<String>,
     /// Settings of the controller and the sub-step algorithm (TOML, docs/benchmark.md)
@@ -52,6 +54,12 @@ pub struct RthsArgs {
     /// With --algorithm substep: run these k_sub values (comma-separated) and print J4–J9 per k_sub
     #[arg(long, value_name = "LIST", value_delimiter = ',')]
     pub k_sub: Vec<usize>,
+    /// Every controller side by side (none, sample, polynomial, ats, arx; each with its one
+    /// preset setting), with and without sensor noise, nominal and on --perturbed N plants
+    /// (default 20): J2, J4, peak force, stable and under-capacity counts, CPU time per sample;
+    /// prints the table and writes comparison.md to --out
+    #[arg(long)]
+    pub compare: bool,
     /// Print one JSON object instead of the table (no files written)
     #[arg(long)]
     pub json: bool,
@@ -414,6 +422,89 @@ fn plots(histories: &[(Case, RunHistory)], dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// `--compare`: the controllers side by side (substep::benchmark::rths::compare).
+fn comparison(args: &RthsArgs) -> Result<()> {
+    let conflicting = [
+        ("--controller", args.controller.is_some()),
+        ("--config", args.config.is_some()),
+        ("--k-sub", !args.k_sub.is_empty()),
+        ("--json", args.json),
+        ("--algorithm", args.algorithm != "benchmark"),
+    ];
+    if let Some((flag, _)) = conflicting.iter().find(|(_, set)| *set) {
+        anyhow::bail!(substep::Error::invalid(
+            "--compare",
+            format!(
+                "compares every controller with its preset setting on the benchmark loop; {flag} is not used with it"
+            )
+        ));
+    }
+    let args = RthsArgs {
+        perturbed: Some(args.perturbed.unwrap_or(20)),
+        ..args.clone()
+    };
+    let setup = setup(&args)?;
+    let perturbed = setup.perturbed.unwrap_or(0);
+    let t0 = std::time::Instant::now();
+    let rows = compare(&setup.base, &setup.cases, COMPARED, perturbed, setup.seed)?;
+    let elapsed = t0.elapsed().as_secs_f64();
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "| controller | noise | case | J2 [%] | J4 [%] | max F [N] | stable | perturbed stable | under {FORCE_CAPACITY} N | worst J2 [%] | worst J4 [%] | worst F [N] | CPU [µs/sample] |"
+    );
+    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let num = |x: f64, digits: usize| {
+        if x.is_finite() {
+            format!("{x:.digits$}")
+        } else {
+            "–".to_string()
+        }
+    };
+    for r in &rows {
+        let j = r.nominal.criteria.map(|c| c.j);
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} | {} | {}/{} | {}/{} | {} | {} | {} | {} |",
+            r.kind.name(),
+            if r.noise { "on" } else { "off" },
+            r.case,
+            j.map_or("–".into(), |j| num(j[1], 2)),
+            j.map_or("–".into(), |j| num(j[3], 2)),
+            num(r.nominal.max_force, 0),
+            if r.nominal.stable { "yes" } else { "no" },
+            r.stable,
+            r.perturbed,
+            r.under_capacity,
+            r.perturbed,
+            num(r.worst_j2, 2),
+            num(r.worst_j4, 2),
+            num(r.worst_force, 0),
+            num(r.cpu_per_sample * 1e6, 3),
+        );
+    }
+    out(&md);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    let command = std::iter::once("substep".to_string())
+        .chain(std::env::args().skip(1))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let path = args.out.join("comparison.md");
+    let text = format!(
+        "# RTHS benchmark: the controllers side by side\n\n`{command}`\n\nRecord {} × {}; {perturbed} perturbed plants per case (seed {}). Each controller with its one preset setting (docs/benchmark.md). J2, J4 of the nominal plant; worst J2, J4 and force over the stable perturbed runs; CPU time of the controller alone per sample (replayed on the nominal run's signals, median of 5).\n\n{md}",
+        setup.base.record.name, setup.base.intensity, setup.seed
+    );
+    std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    out(&format!(
+        "{} controllers × 2 noise settings × {} case(s), {} runs in {elapsed:.1} s; wrote {}\n",
+        COMPARED.len(),
+        setup.cases.len(),
+        rows.len() * (1 + perturbed),
+        path.display()
+    ));
+    Ok(())
+}
+
 /// Write to stdout; a closed pipe (`| head`) is not an error worth a panic.
 fn out(text: &str) {
     use std::io::Write;
@@ -421,6 +512,9 @@ fn out(text: &str) {
 }
 
 pub fn rths(args: &RthsArgs) -> Result<()> {
+    if args.compare {
+        return comparison(args);
+    }
     let setup = setup(args)?;
     let t0 = std::time::Instant::now();
     let rows = setup.run()?;

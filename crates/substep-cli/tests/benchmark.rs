@@ -351,3 +351,58 @@ fn traces_reproduce_the_reported_criteria() {
         assert!(n_floors.abs_diff(expected) <= 1, "{algorithm}: {n_floors} floor rows");
     }
 }
+
+/// Issue 28: `--compare` in a reduced form (case 1, one perturbed plant): every compared
+/// controller with and without noise in `comparison.md`, the numbers equal to the single
+/// controller's own run (`--controller K --json`), `none` diverging, and the flags that do not
+/// apply refused in one line.
+#[test]
+fn compare_writes_the_side_by_side_table() {
+    let dir = temp_dir("compare");
+    let out = substep(
+        &dir,
+        &[
+            "benchmark",
+            "rths",
+            "--compare",
+            "--case",
+            "1",
+            "--perturbed",
+            "1",
+            "--out",
+            "out",
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let md = std::fs::read_to_string(dir.join("out/comparison.md")).unwrap();
+    let rows: Vec<Vec<String>> = md
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| controller"))
+        .map(|l| l.trim_matches('|').split('|').map(|c| c.trim().to_string()).collect())
+        .collect();
+    let names: Vec<(&str, &str)> = rows.iter().map(|r| (r[0].as_str(), r[1].as_str())).collect();
+    let mut expected = Vec::new();
+    for k in ["none", "sample", "polynomial", "ats", "arx"] {
+        expected.push((k, "on"));
+        expected.push((k, "off"));
+    }
+    assert_eq!(names, expected);
+    let none = &rows[0];
+    assert_eq!((none[3].as_str(), none[6].as_str()), ("–", "no"), "{none:?}");
+    for (k, row) in ["ats", "arx"].iter().zip([&rows[6], &rows[8]]) {
+        let single = substep(&dir, &["benchmark", "rths", "--controller", k, "--case", "1", "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&single.stdout).unwrap();
+        assert_eq!(row[3], format!("{:.2}", v["J2"].as_f64().unwrap()), "{k} J2");
+        assert_eq!(row[4], format!("{:.2}", v["J4"].as_f64().unwrap()), "{k} J4");
+        assert_eq!(row[7], "1/1", "{k}: the perturbed plant is stable");
+        let cpu: f64 = row[12].parse().unwrap();
+        assert!(cpu > 0.0 && cpu < 100.0, "{k}: {cpu} µs per sample");
+    }
+    let bad = substep(&dir, &["benchmark", "rths", "--compare", "--controller", "arx"]);
+    assert_bad_input(&bad, "--compare: compares every controller with its preset setting");
+    let refused = substep(
+        &dir,
+        &["benchmark", "rths", "--controller", "inverse_fir", "--case", "1"],
+    );
+    assert_bad_input(&refused, "--controller: inverse_fir cannot run on this benchmark");
+}

@@ -707,3 +707,20 @@ fn arx_variant_survey() {
         }
     }
 }
+
+/// Nodes `s` sub-steps apart: an order-2 extrapolation is exact on a quadratic target for any
+/// spacing and lead (here 49 and 97, the benchmark's), and uses the targets `d_{j−s}, d_{j−2s}`.
+#[test]
+fn polynomial_with_spaced_nodes_is_exact_on_a_quadratic() {
+    let q = |j: f64| 1e-6 * j * j - 2e-4 * j + 0.01;
+    let mut c = Polynomial::new(2, 97.0).unwrap().with_spacing(49).unwrap();
+    assert_eq!(c.state_len(), 98);
+    for j in 0..400 {
+        let du = c.correction(q(j as f64), 0.0, 1.0);
+        if j >= 98 {
+            let exact = q(j as f64 + 97.0) - q(j as f64);
+            assert!((du - exact).abs() < 1e-12, "j {j}: {du} vs {exact}");
+        }
+    }
+    assert!(Polynomial::new(2, 1.0).unwrap().with_spacing(0).is_err());
+}

@@ -264,10 +264,14 @@ fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64, la
     let lead = delay / dtau;
     let spec = match def.spec {
         PhaseLagSpec::Polynomial {
-            order, guard_factor, ..
+            order,
+            spacing,
+            guard_factor,
+            ..
         } => PhaseLagSpec::Polynomial {
             order,
             lead,
+            spacing,
             guard_factor,
         },
         PhaseLagSpec::Arx(s) => {
@@ -729,6 +733,7 @@ fn what_if_polynomial(sub: &SubstructureDefinition, model: &StructuralModel, p: 
         spec: PhaseLagSpec::Polynomial {
             order: 3,
             lead: 0.0,
+            spacing: 1,
             guard_factor: 10.0,
         },
         ramp: Ramp::full(),

@@ -8,9 +8,14 @@ use crate::substructure::ExperimentalSubstructure;
 /// One compensator kind with its parameters; one compensator per coupling DOF is built from it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PhaseLagSpec {
-    /// [`Polynomial`] extrapolation of order `order` (1..=3), `lead` sub-steps ahead, guard
-    /// factor `guard_factor`.
-    Polynomial { order: usize, lead: f64, guard_factor: f64 },
+    /// [`Polynomial`] extrapolation of order `order` (1..=3), `lead` sub-steps ahead, nodes
+    /// `spacing` sub-steps apart, guard factor `guard_factor`.
+    Polynomial {
+        order: usize,
+        lead: f64,
+        spacing: usize,
+        guard_factor: f64,
+    },
     /// [`super::ArxPhaseLag`].
     Arx(ArxPhaseLagSpec),
     /// [`super::InverseFir`].
@@ -36,8 +41,13 @@ impl PhaseLagSpec {
             PhaseLagSpec::Polynomial {
                 order,
                 lead,
+                spacing,
                 guard_factor,
-            } => Box::new(Polynomial::new(order, lead)?.with_guard(Guard::new(guard_factor, 1e-6)?)),
+            } => Box::new(
+                Polynomial::new(order, lead)?
+                    .with_spacing(spacing)?
+                    .with_guard(Guard::new(guard_factor, 1e-6)?),
+            ),
             PhaseLagSpec::Arx(spec) => Box::new(spec.build()?),
             PhaseLagSpec::InverseFir(spec) => Box::new(spec.build()?),
             PhaseLagSpec::Ats(spec) => Box::new(spec.build()?),

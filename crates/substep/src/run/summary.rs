@@ -255,9 +255,10 @@ pub(super) fn phase_lag_json(p: &PhaseLagDefinition) -> Value {
         PhaseLagSpec::Polynomial {
             order,
             lead,
+            spacing,
             guard_factor,
         } => {
-            json!({ "kind": "polynomial", "order": order, "lead_substeps": lead, "guard_factor": guard_factor, "ramp": ramp })
+            json!({ "kind": "polynomial", "order": order, "lead_substeps": lead, "spacing_substeps": spacing, "guard_factor": guard_factor, "ramp": ramp })
         }
         PhaseLagSpec::Arx(a) => json!({
             "kind": "arx", "n_u": a.n_u, "k_lag": a.k_lag, "forgetting_factor": a.lambda,

@@ -30,6 +30,7 @@
 //! [controller.polynomial]
 //! order = 2
 //! lead = 97.0                   # samples
+//! spacing = 49                  # samples between the interpolation nodes
 //! guard_factor = 10.0
 //!
 //! [controller.inverse_fir]
@@ -146,6 +147,7 @@ struct RawArx {
 struct RawPolynomial {
     order: Option<usize>,
     lead: Option<f64>,
+    spacing: Option<usize>,
     guard_factor: Option<f64>,
 }
 
@@ -324,6 +326,7 @@ impl BenchmarkConfig {
                 Some(PhaseLagSpec::Polynomial {
                     order,
                     lead,
+                    spacing,
                     guard_factor,
                 }),
                 ControllerKind::Polynomial,
@@ -331,6 +334,7 @@ impl BenchmarkConfig {
                 if let Some(r) = &c.polynomial {
                     *order = r.order.unwrap_or(*order);
                     *lead = r.lead.unwrap_or(*lead);
+                    *spacing = r.spacing.unwrap_or(*spacing);
                     *guard_factor = r.guard_factor.unwrap_or(*guard_factor);
                 }
             }

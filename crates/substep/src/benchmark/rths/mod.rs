@@ -49,6 +49,7 @@
 //! Nothing in the per-sample loop allocates (the histories are sized before it).
 
 mod case;
+mod compare;
 mod config;
 mod controller;
 mod options;
@@ -57,8 +58,12 @@ mod run;
 mod study;
 
 pub use case::{Case, ELCENTRO_CSV, GroundRecord, MAX_DURATION, Specimen, numerical_matrices};
+pub use compare::{COMPARED, ComparisonRow, compare};
 pub use config::{BenchmarkConfig, CONFIG_KEYS};
-pub use controller::{Controller, ControllerKind, ControllerSpec, arx_default, sample_feedback, sample_feedforward};
+pub use controller::{
+    Controller, ControllerKind, ControllerSpec, INVERSE_FIR_REFUSED, arx_default, ats_default, sample_feedback,
+    sample_feedforward,
+};
 pub use options::{StudyOptions, StudySetup};
 pub use perturb::{PERTURBATION_SIGMA, perturbed_plant, run_perturbed};
 pub use run::{

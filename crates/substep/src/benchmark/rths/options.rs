@@ -80,6 +80,9 @@ impl StudyOptions<'_> {
         };
         let controller = config.controller(kind)?;
         let kind = controller.kind;
+        if kind == ControllerKind::InverseFir {
+            return Err(Error::invalid(name("controller"), super::INVERSE_FIR_REFUSED));
+        }
         let (noise, noise_seed) = config.noise()?;
         let algorithm = match self.algorithm {
             "benchmark" => Algorithm::Benchmark,

@@ -62,6 +62,7 @@ pub(crate) struct RawPhaseLag {
     pub(crate) supervisor: Option<bool>,
     pub(crate) window: Option<f64>,
     pub(crate) threshold: Option<f64>,
+    pub(crate) spacing: Option<usize>,
     pub(crate) ramp_start: Option<usize>,
     pub(crate) ramp_steps: Option<usize>,
     pub(crate) fade_out: Option<[usize; 2]>,
@@ -120,6 +121,7 @@ impl RawPhaseLag {
                         "supervisor" => self.supervisor.is_some(),
                         "window" => self.window.is_some(),
                         "threshold" => self.threshold.is_some(),
+                        "spacing" => self.spacing.is_some(),
                         "ramp_start" => self.ramp_start.is_some(),
                         "ramp_steps" => self.ramp_steps.is_some(),
                         "fade_out" => self.fade_out.is_some(),
@@ -169,6 +171,7 @@ impl RawPhaseLag {
                         "supervisor",
                         "window",
                         "threshold",
+                        "spacing",
                         "ramp_start",
                         "ramp_steps",
                         "fade_out",
@@ -184,11 +187,16 @@ impl RawPhaseLag {
                 PhaseLagSpec::Polynomial {
                     order: self.order.unwrap_or(3),
                     lead: lead()?,
+                    spacing: self.spacing.unwrap_or(1),
                     guard_factor,
                 }
             }
             "arx" => {
-                forbid(p, &keys(&["order", "lead", "lead_substeps", "taps"]), &unused)?;
+                forbid(
+                    p,
+                    &keys(&["order", "lead", "lead_substeps", "taps", "spacing"]),
+                    &unused,
+                )?;
                 forbid(p, &keys(ATS_ONLY), &unused)?;
                 // The actuator's lag in sub-steps, or the k_lag given.
                 let lag = self.k_lag.map_or(lag / dtau, |k| k as f64);
@@ -225,7 +233,7 @@ impl RawPhaseLag {
                 PhaseLagSpec::Arx(spec)
             }
             "inverse_fir" => {
-                forbid(p, &keys(&["k_lag", "n_u", "guard_factor"]), &unused)?;
+                forbid(p, &keys(&["k_lag", "n_u", "guard_factor", "spacing"]), &unused)?;
                 forbid(p, &keys(ARX_ONLY), &unused)?;
                 forbid(p, &keys(ATS_ONLY), &unused)?;
                 let mut spec = InverseFirSpec::new(lead()?);
@@ -243,7 +251,7 @@ impl RawPhaseLag {
             "ats" => {
                 forbid(
                     p,
-                    &keys(&["order", "k_lag", "n_u", "forgetting_factor", "taps"]),
+                    &keys(&["order", "k_lag", "n_u", "forgetting_factor", "taps", "spacing"]),
                     &unused,
                 )?;
                 forbid(p, &keys(&["span", "max_lead", "supervisor"]), &unused)?;

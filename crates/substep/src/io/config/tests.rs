@@ -445,6 +445,7 @@ fn phase_lag_kinds_and_defaults() {
         PhaseLagSpec::Polynomial {
             order: 3,
             lead: 2.0,
+            spacing: 1,
             guard_factor: 10.0
         }
     );

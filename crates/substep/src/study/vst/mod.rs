@@ -136,6 +136,7 @@ pub fn methods(s: &VstSettings) -> Vec<Method> {
     let poly = |order, lead| PhaseLagSpec::Polynomial {
         order,
         lead,
+        spacing: 1,
         guard_factor: 10.0,
     };
     let m = |key, name, error_force, phase_lag| Method {
