@@ -1129,13 +1129,22 @@ fn replayed_reordered_and_changed_messages_end_a_tcp_session() {
             0,
             "{what}: the site closed the connection"
         );
-        assert_eq!(
-            commands.lock().unwrap().len(),
-            executed,
-            "{what}: nothing more was executed"
-        );
-        // the busy slot frees once the session ended
+        // the busy slot frees once the session ended (and the site's ramp to rest is done)
         std::thread::sleep(Duration::from_millis(50));
+        // Nothing the client sent after the bad frame was executed: what follows the last
+        // authentic command is the site's own ramp to rest (1 s of 2.5 ms sub-steps), that
+        // command scaled down to 0.
+        let after = commands.lock().unwrap().clone();
+        let last = &after[executed - 1];
+        assert_eq!(after.len(), executed + 400, "{what}: the ramp to rest");
+        for (s, c) in after[executed..].iter().enumerate() {
+            let left = 1.0 - (s + 1) as f64 / 400.0;
+            assert!(
+                (c[0] - left * last[0]).abs() < 1e-15 && (c[1] - left * last[1]).abs() < 1e-15,
+                "{what}: ramp sub-step {s}: {c:?}"
+            );
+        }
+        assert_eq!(after.last().unwrap(), &vec![0.0, 0.0], "{what}: at rest");
     }
     server.stop().unwrap();
     // the site's log names the peer and the reason of each
@@ -1149,6 +1158,11 @@ fn replayed_reordered_and_changed_messages_end_a_tcp_session() {
         .collect();
     assert_eq!(ended.len(), 3, "{log:?}");
     assert!(ended[2].contains("Substep #3: the tag does not match"), "{ended:?}");
+    assert!(
+        ended.iter().all(|l| l
+            .ends_with("; the site ramped its actuators to rest from |command| ≤ 1.000e-3 m over 400 sub-steps (1 s)")),
+        "{ended:?}"
+    );
 }
 
 /// A UDP socket bound with `SO_REUSEPORT` (a second one can share its address and port).

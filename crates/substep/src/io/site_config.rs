@@ -95,6 +95,8 @@ struct RawSiteSection {
     /// [MB]
     max_session_memory: Option<f64>,
     max_request_work: Option<f64>,
+    /// [s]
+    ramp_time: Option<f64>,
     /// Time step assumed for velocities of a specimen hosted for OpenFresco clients [s].
     dt: Option<f64>,
 }
@@ -186,6 +188,7 @@ impl RawSiteSection {
             max_dt: require_positive("site.max_dt", self.max_dt.unwrap_or(d.max_dt))?,
             max_session_bytes,
             max_request_work,
+            ramp_time: self.ramp_time.unwrap_or(d.ramp_time),
         };
         limits
             .validate()

@@ -20,7 +20,14 @@ pub struct SiteLimits {
     /// Largest estimated work of one request, in inner-step × actuator-history operations
     /// (`max_request_work`): bounds the CPU time of one `Step` or `Substep`.
     pub max_request_work: u64,
+    /// Time over which the site ramps its actuators to rest when a session that moved them
+    /// ends without the client's `Stop` \[s\] (`ramp_time`; at most [`MAX_SITE_RAMP_SUBSTEPS`]
+    /// sub-steps).
+    pub ramp_time: f64,
 }
+
+/// Most sub-steps of the site's own ramp to rest (a longer `ramp_time` takes longer sub-steps).
+pub const MAX_SITE_RAMP_SUBSTEPS: usize = 10_000;
 
 impl Default for SiteLimits {
     fn default() -> Self {
@@ -31,6 +38,7 @@ impl Default for SiteLimits {
             max_dt: 10.0,
             max_session_bytes: 32 << 20,
             max_request_work: 20_000_000,
+            ramp_time: 1.0,
         }
     }
 }
@@ -58,6 +66,12 @@ impl SiteLimits {
             return Err((
                 "max_substeps",
                 format!("is {}, must be 1..={MAX_SUBSTEPS}", self.max_substeps),
+            ));
+        }
+        if !(self.ramp_time.is_finite() && self.ramp_time > 0.0 && self.ramp_time <= 600.0) {
+            return Err((
+                "ramp_time",
+                format!("must be a number of seconds in (0, 600], got {}", self.ramp_time),
             ));
         }
         if !(self.min_dtau.is_finite() && self.min_dtau > 0.0) {
@@ -147,5 +161,24 @@ impl SiteLimits {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_site_ramp_time_is_bounded() {
+        assert!(SiteLimits::default().validate().is_ok());
+        for bad in [0.0, -1.0, 601.0, f64::NAN, f64::INFINITY] {
+            let limits = SiteLimits {
+                ramp_time: bad,
+                ..SiteLimits::default()
+            };
+            let (key, reason) = limits.validate().unwrap_err();
+            assert_eq!(key, "ramp_time");
+            assert!(reason.starts_with("must be a number of seconds in (0, 600]"), "{reason}");
+        }
     }
 }

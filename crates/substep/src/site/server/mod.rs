@@ -14,7 +14,7 @@
 //! transports), `lab_spec.rs` ([`VirtualLabSpec`]).
 
 use super::auth::{MAC_LEN, NONCE_LEN, Role, Secret, SessionKeys, TAG_LEN, nonce};
-use super::limits::{SessionCost, SiteLimits};
+use super::limits::{MAX_SITE_RAMP_SUBSTEPS, SessionCost, SiteLimits};
 use super::protocol::{
     AUTH_FAILED, HEADER_LEN, Header, Hello, MAX_DATAGRAM, MAX_REASON, Message, MessageType, Mode, Session, StepReply,
     VERSION_AUTHENTICATED, as_auth_failure, decode_frame, hello_payload_len, open_sealed,

@@ -15,6 +15,11 @@ pub(super) struct Hosted {
     pub(super) min_dtau: f64,
     pub(super) substeps: u64,
     pub(super) steps: u64,
+    /// The site's ramp to rest (`SiteLimits::ramp_time`) and the last sub-step length used.
+    ramp_time: f64,
+    last_dtau: f64,
+    /// The client ended the session with `Stop` (its own controlled end).
+    client_stopped: bool,
 }
 
 pub(super) enum Outcome {
@@ -62,6 +67,9 @@ impl Hosted {
             disp: vec![0.0; n],
             command: vec![0.0; n],
             min_dtau: limits.min_dtau,
+            ramp_time: limits.ramp_time,
+            last_dtau: hello.dtau,
+            client_stopped: false,
             hello,
             substeps: 0,
             steps: 0,
@@ -88,6 +96,7 @@ impl Hosted {
             .substep(&self.command, ag, dtau, &mut self.force, &mut self.disp)
             .map_err(|e| format!("the site failed at sub-step {}: {e}", self.substeps + 1))?;
         self.substeps += 1;
+        self.last_dtau = dtau;
         // Never a non-finite value on the wire: refuse instead.
         if let Some(i) = self.force.iter().position(|f| !f.is_finite()) {
             return Err(format!(
@@ -157,12 +166,15 @@ impl Hosted {
                 Outcome::error(format!("{} message in a {} session", msg.kind().name(), mode.name()))
             }
             Message::Heartbeat => Outcome::Reply(Message::Heartbeat),
-            Message::Stop { reason } => Outcome::Close(
-                Message::Stop {
-                    reason: "stop acknowledged".into(),
-                },
-                format!("client stopped ({reason})"),
-            ),
+            Message::Stop { reason } => {
+                self.client_stopped = true;
+                Outcome::Close(
+                    Message::Stop {
+                        reason: "stop acknowledged".into(),
+                    },
+                    format!("client stopped ({reason})"),
+                )
+            }
             Message::Error { reason } => Outcome::Close(
                 Message::Stop {
                     reason: "error acknowledged".into(),
@@ -172,6 +184,34 @@ impl Hosted {
             Message::Hello(_) => Outcome::error("handshake repeated within a session".to_string()),
             other => Outcome::error(format!("unexpected {} message from a client", other.kind().name())),
         }
+    }
+
+    /// After the session ended: if it moved the actuators and did not end with the client's
+    /// `Stop` (a lost client, a message that failed authentication, a protocol or site error),
+    /// ramp the commands linearly to 0 over `ramp_time` (no ground motion), so that the
+    /// specimen is not left where an interrupted test put it; the client cannot do it when its
+    /// link is what failed. What was done, for the log (empty if nothing).
+    pub(super) fn ramp_to_rest(&mut self) -> String {
+        if self.client_stopped || self.substeps == 0 || self.command.iter().all(|c| *c == 0.0) {
+            return String::new();
+        }
+        let dtau = self.last_dtau.max(self.ramp_time / MAX_SITE_RAMP_SUBSTEPS as f64);
+        let n = ((self.ramp_time / dtau).ceil() as usize).clamp(1, MAX_SITE_RAMP_SUBSTEPS);
+        let start = self.command.clone();
+        let largest = start.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+        for s in 1..=n {
+            let left = 1.0 - s as f64 / n as f64;
+            for (c, c0) in self.command.iter_mut().zip(&start) {
+                *c = c0 * left;
+            }
+            if let Err(e) = self.run_substep((0.0, 0.0), dtau) {
+                return format!("; the site's ramp to rest failed at {s}/{n}: {e}");
+            }
+        }
+        format!(
+            "; the site ramped its actuators to rest from |command| ≤ {largest:.3e} m over {n} sub-steps ({} s)",
+            self.ramp_time
+        )
     }
 
     pub(super) fn summary(&self) -> String {

@@ -381,12 +381,12 @@ pub(super) fn serve_tcp_connection(
         }
         expect = expect.wrapping_add(1);
     };
-    report.substeps += session.substeps;
-    report.steps += session.steps;
-    options.log(&format!(
-        "site: {peer} session ended after {}: {end}",
-        session.summary()
-    ));
+    let summary = session.summary();
+    let (substeps, steps) = (session.substeps, session.steps);
+    let ramp = session.ramp_to_rest();
+    report.substeps += substeps;
+    report.steps += steps;
+    options.log(&format!("site: {peer} session ended after {summary}: {end}{ramp}"));
     true
 }
 

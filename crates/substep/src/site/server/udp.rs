@@ -85,18 +85,19 @@ impl UdpServer {
     }
 
     pub(super) fn end_session(&mut self, options: &ServeOptions, why: &str) {
-        if let Some(s) = self.session.take() {
+        if let Some(mut s) = self.session.take() {
             self.report.substeps += s.session.substeps;
             self.report.steps += s.session.steps;
+            let summary = s.session.summary();
+            let ramp = s.session.ramp_to_rest();
             let dropped = if s.dropped > 0 {
                 format!(" ({} unauthenticated datagrams dropped)", s.dropped)
             } else {
                 String::new()
             };
             options.log(&format!(
-                "site: {} session ended after {}{dropped}: {why}",
-                s.peer,
-                s.session.summary()
+                "site: {} session ended after {summary}{dropped}: {why}{ramp}",
+                s.peer
             ));
             self.closed = Some((s.peer, s.last_seq, s.last_reply));
         }
