@@ -178,7 +178,10 @@ mod tests {
             };
             let (key, reason) = limits.validate().unwrap_err();
             assert_eq!(key, "ramp_time");
-            assert!(reason.starts_with("must be a number of seconds in (0, 600]"), "{reason}");
+            assert!(
+                reason.starts_with("must be a number of seconds in (0, 600]"),
+                "{reason}"
+            );
         }
     }
 }
