@@ -4,7 +4,7 @@
 
 use crate::to_py;
 use pyo3::prelude::*;
-use substep::benchmark::rths::StudyOptions;
+use substep::benchmark::rths::{COMPARED, StudyOptions, compare};
 
 fn read(path: Option<&str>) -> substep::Result<Option<(String, String)>> {
     path.map(|p| {
@@ -47,4 +47,43 @@ pub fn rths(
     let setup = options.setup(|name| name.to_string()).map_err(|e| to_py(&e))?;
     let rows = py.detach(|| setup.run()).map_err(|e| to_py(&e))?;
     serde_json::to_string(&setup.json(&rows)).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
+}
+
+/// `substep benchmark rths --compare --json` for the same options: the controllers side by side
+/// (`substep.benchmark.compare`); Python parses the JSON text.
+#[pyfunction]
+#[pyo3(signature = (case, intensity, record, perturbed, seed))]
+pub fn rths_compare(
+    py: Python<'_>,
+    case: Option<u8>,
+    intensity: f64,
+    record: Option<&str>,
+    perturbed: usize,
+    seed: u64,
+) -> PyResult<String> {
+    let record = read(record).map_err(|e| to_py(&e))?;
+    let options = StudyOptions {
+        case,
+        record: record.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
+        intensity,
+        controller: None,
+        config: None,
+        algorithm: "benchmark",
+        perturbed: (perturbed > 0).then_some(perturbed),
+        seed,
+        k_sub: &[],
+    };
+    let setup = options.setup(|name| name.to_string()).map_err(|e| to_py(&e))?;
+    let rows = py
+        .detach(|| compare(&setup.base, &setup.cases, COMPARED, perturbed, setup.seed))
+        .map_err(|e| to_py(&e))?;
+    let v = serde_json::json!({
+        "benchmark": "rths",
+        "record": setup.base.record.name,
+        "intensity": setup.base.intensity,
+        "perturbed": perturbed,
+        "seed": setup.seed,
+        "comparison": rows.iter().map(|r| r.json()).collect::<Vec<_>>(),
+    });
+    serde_json::to_string(&v).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
 }

@@ -8,7 +8,7 @@ from typing import Any, Dict, Optional, Sequence
 
 from . import _substep
 
-__all__ = ["rths"]
+__all__ = ["rths", "compare"]
 
 
 def _count(what: str, x, top: int = 2**63 - 1) -> int:
@@ -57,4 +57,32 @@ def rths(
     n = None if perturbed is None else _count("perturbed", perturbed)
     c = None if case is None else _count("case", case, 255)
     text = _substep.rths(c, float(intensity), controller, cfg, algorithm, rec, n, _count("seed", seed, 2**64 - 1), ks)
+    return json.loads(text)
+
+
+def compare(
+    *,
+    case: Optional[int] = None,
+    intensity: float = 0.4,
+    record: Optional["os.PathLike[str] | str"] = None,
+    perturbed: int = 20,
+    seed: int = 1,
+) -> Dict[str, Any]:
+    """The controllers side by side on the RTHS benchmark (``substep benchmark rths --compare``,
+    docs/benchmark.md "Comparison"): none, sample, polynomial, ats and arx, each with its one
+    preset setting, with and without sensor noise, on the nominal plant and ``perturbed`` plants
+    per case (seed ``seed``; 0: none).
+
+    Returns the dict of ``substep benchmark rths --compare --json``: ``record``, ``intensity``,
+    ``perturbed``, ``seed`` and ``comparison``, one dict per controller, noise setting and case
+    with ``J2``, ``J4`` [%] and ``max_force`` [N] of the nominal plant (None if it diverged),
+    ``stable``, ``perturbed_stable``, ``under_capacity``, the worst ``J2``/``J4``/force over the
+    stable perturbed runs and ``cpu_us_per_sample`` (the controller alone, replayed on the nominal
+    run's signals). ``pandas.DataFrame(result["comparison"])`` makes it a table.
+    """
+    rec = None if record is None else os.fspath(record)
+    if rec == "elcentro":
+        rec = None
+    c = None if case is None else _count("case", case, 255)
+    text = _substep.rths_compare(c, float(intensity), rec, _count("perturbed", perturbed), _count("seed", seed, 2**64 - 1))
     return json.loads(text)

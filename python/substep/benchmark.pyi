@@ -13,3 +13,12 @@ def rths(
     seed: int = 1,
     k_sub: Optional[Sequence[int]] = None,
 ) -> Dict[str, Any]: ...
+
+def compare(
+    *,
+    case: Optional[int] = None,
+    intensity: float = 0.4,
+    record: Optional[Union[str, os.PathLike[str]]] = None,
+    perturbed: int = 20,
+    seed: int = 1,
+) -> Dict[str, Any]: ...

@@ -170,3 +170,22 @@ def test_verify_equals_verify_csv(cli, tmp_path):
     assert (rho[outside] > 1).all() and (growth[outside] > 1).all()
     pid = rho[check == "pid"]
     assert len(pid) == 2 and pid[0] > 1 > pid[1]
+
+
+def test_compare_equals_the_cli_json(cli):
+    # The controllers side by side, reduced (case 1, one perturbed plant): the same numbers as
+    # the CLI's --compare --json; the CPU times are measured, so they only have to be there.
+    p = run_cli(cli, "benchmark", "rths", "--compare", "--case", "1", "--perturbed", "1", "--json")
+    assert p.returncode == 0, p.stderr
+    expected = json.loads(p.stdout)
+    got = substep.benchmark.compare(case=1, perturbed=1)
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "cpu_us_per_sample"} for r in rows]
+    assert strip(got["comparison"]) == strip(expected["comparison"])
+    assert [(r["controller"], r["noise"]) for r in got["comparison"]] == [
+        (k, n) for k in ("none", "sample", "polynomial", "ats", "arx") for n in (True, False)
+    ]
+    arx = got["comparison"][8]
+    assert arx["stable"] and 0 < arx["J4"] < 10 and arx["cpu_us_per_sample"] > 0
+    assert got["comparison"][0]["J2"] is None  # none diverges
+    with pytest.raises(substep.ConfigError, match="^perturbed: must be a whole number"):
+        substep.benchmark.compare(perturbed=-1)

@@ -57,7 +57,7 @@ pub struct RthsArgs {
     /// Every controller side by side (none, sample, polynomial, ats, arx; each with its one
     /// preset setting), with and without sensor noise, nominal and on --perturbed N plants
     /// (default 20): J2, J4, peak force, stable and under-capacity counts, CPU time per sample;
-    /// prints the table and writes comparison.md to --out
+    /// prints the table and writes comparison.md to --out (with --json: one JSON object, no file)
     #[arg(long)]
     pub compare: bool,
     /// Print one JSON object instead of the table (no files written)
@@ -428,7 +428,6 @@ fn comparison(args: &RthsArgs) -> Result<()> {
         ("--controller", args.controller.is_some()),
         ("--config", args.config.is_some()),
         ("--k-sub", !args.k_sub.is_empty()),
-        ("--json", args.json),
         ("--algorithm", args.algorithm != "benchmark"),
     ];
     if let Some((flag, _)) = conflicting.iter().find(|(_, set)| *set) {
@@ -448,6 +447,18 @@ fn comparison(args: &RthsArgs) -> Result<()> {
     let t0 = std::time::Instant::now();
     let rows = compare(&setup.base, &setup.cases, COMPARED, perturbed, setup.seed)?;
     let elapsed = t0.elapsed().as_secs_f64();
+    if args.json {
+        let v = serde_json::json!({
+            "benchmark": "rths",
+            "record": setup.base.record.name,
+            "intensity": setup.base.intensity,
+            "perturbed": perturbed,
+            "seed": setup.seed,
+            "comparison": rows.iter().map(|r| r.json()).collect::<Vec<_>>(),
+        });
+        out(&format!("{}\n", serde_json::to_string_pretty(&v)?));
+        return Ok(());
+    }
     let mut md = String::new();
     let _ = writeln!(
         md,

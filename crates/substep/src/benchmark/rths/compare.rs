@@ -10,6 +10,7 @@
 
 use super::{ControllerKind, ControllerSpec, RthsInput, RthsResult, SAMPLE_TIME, perturbed_stats, run, run_study};
 use crate::error::Result;
+use serde_json::{Value, json};
 use std::time::Instant;
 
 /// The controllers of the comparison, in table order (`inverse_fir` is refused on the
@@ -40,6 +41,32 @@ pub struct ComparisonRow {
     /// CPU time of the controller per sample \[s\] (replayed on the nominal run's signals; NaN
     /// if the nominal run diverged before a full record).
     pub cpu_per_sample: f64,
+}
+
+impl ComparisonRow {
+    /// One row as JSON (`substep benchmark rths --compare --json`, Python's
+    /// `substep.benchmark.compare`): J in %, forces in N, CPU time in µs per sample; null where
+    /// a value does not exist (a diverged run, no stable perturbed run).
+    pub fn json(&self) -> Value {
+        let finite = |x: f64| if x.is_finite() { json!(x) } else { Value::Null };
+        let j = |i: usize| self.nominal.criteria.map_or(Value::Null, |c| json!(c.j[i]));
+        json!({
+            "controller": self.kind.name(),
+            "noise": self.noise,
+            "case": self.case,
+            "J2": j(1),
+            "J4": j(3),
+            "max_force": finite(self.nominal.max_force),
+            "stable": self.nominal.stable,
+            "perturbed": self.perturbed,
+            "perturbed_stable": self.stable,
+            "under_capacity": self.under_capacity,
+            "worst_J2": finite(self.worst_j2),
+            "worst_J4": finite(self.worst_j4),
+            "worst_force": finite(self.worst_force),
+            "cpu_us_per_sample": finite(self.cpu_per_sample * 1e6),
+        })
+    }
 }
 
 /// Run the comparison of `kinds` on the cases of `base` (its controller is replaced by each
