@@ -4,7 +4,7 @@
 
 use crate::to_py;
 use pyo3::prelude::*;
-use substep::benchmark::rths::{COMPARED, StudyOptions, compare};
+use substep::benchmark::rths::StudyOptions;
 
 fn read(path: Option<&str>) -> substep::Result<Option<(String, String)>> {
     path.map(|p| {
@@ -74,16 +74,6 @@ pub fn rths_compare(
         k_sub: &[],
     };
     let setup = options.setup(|name| name.to_string()).map_err(|e| to_py(&e))?;
-    let rows = py
-        .detach(|| compare(&setup.base, &setup.cases, COMPARED, perturbed, setup.seed))
-        .map_err(|e| to_py(&e))?;
-    let v = serde_json::json!({
-        "benchmark": "rths",
-        "record": setup.base.record.name,
-        "intensity": setup.base.intensity,
-        "perturbed": perturbed,
-        "seed": setup.seed,
-        "comparison": rows.iter().map(|r| r.json()).collect::<Vec<_>>(),
-    });
-    serde_json::to_string(&v).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
+    let rows = py.detach(|| setup.compare()).map_err(|e| to_py(&e))?;
+    serde_json::to_string(&setup.comparison_json(&rows)).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
 }

@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use substep::benchmark::rths::{
     Algorithm, COMPARED, Case, FORCE_CAPACITY, PUBLISHED_SAMPLE, RthsInput, RthsRow, RunHistory, StudyOptions,
-    StudySetup, compare, perturbed_stats, run,
+    StudySetup, perturbed_stats, run,
 };
 
 #[derive(Debug, clap::Args)]
@@ -445,18 +445,13 @@ fn comparison(args: &RthsArgs) -> Result<()> {
     let setup = setup(&args)?;
     let perturbed = setup.perturbed.unwrap_or(0);
     let t0 = std::time::Instant::now();
-    let rows = compare(&setup.base, &setup.cases, COMPARED, perturbed, setup.seed)?;
+    let rows = setup.compare()?;
     let elapsed = t0.elapsed().as_secs_f64();
     if args.json {
-        let v = serde_json::json!({
-            "benchmark": "rths",
-            "record": setup.base.record.name,
-            "intensity": setup.base.intensity,
-            "perturbed": perturbed,
-            "seed": setup.seed,
-            "comparison": rows.iter().map(|r| r.json()).collect::<Vec<_>>(),
-        });
-        out(&format!("{}\n", serde_json::to_string_pretty(&v)?));
+        out(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(&setup.comparison_json(&rows))?
+        ));
         return Ok(());
     }
     let mut md = String::new();

@@ -23,29 +23,9 @@ fn run(dir: &Path, config: &str) -> (i32, String) {
 
 /// The binary with `args` in `dir`: exit code and stderr, failing the test if it does not end.
 fn run_args(dir: &Path, args: &[&str]) -> (i32, String) {
-    let config = args.join(" ");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_substep"))
-        .args(args)
-        .current_dir(dir)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("the substep binary runs");
-    let started = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        if started.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            panic!("substep {config} did not finish (hang or runaway work)");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    };
-    let mut stderr = String::new();
-    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
-    (status.code().unwrap_or(-1), stderr)
+    let args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+    let (code, stderr, _, _) = run_measured(dir, &args);
+    (code, stderr)
 }
 
 /// Write `text` as `name` in a fresh dir, run it, and check the refusal: exit 2, one line

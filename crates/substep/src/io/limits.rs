@@ -275,7 +275,7 @@ pub fn read_text_checked(
         .read_to_end(&mut raw)
         .map_err(|e| fail(format!("cannot read file: {e}")))?;
     check_head(&raw).map_err(fail)?;
-    raw.reserve(len.min(cap) as usize - raw.len().min(len.min(cap) as usize));
+    raw.reserve((len.min(cap) as usize).saturating_sub(raw.len()));
     limited
         .read_to_end(&mut raw)
         .map_err(|e| fail(format!("cannot read file: {e}")))?;

@@ -8,7 +8,9 @@
 //! substructure and the evaluation do not count. (A clock per sample inside the loop would cost
 //! as much as the cheaper controllers.)
 
-use super::{ControllerKind, ControllerSpec, RthsInput, RthsResult, SAMPLE_TIME, perturbed_stats, run, run_study};
+use super::{
+    ControllerKind, ControllerSpec, RthsInput, RthsResult, SAMPLE_TIME, StudySetup, perturbed_stats, run, run_study,
+};
 use crate::error::Result;
 use serde_json::{Value, json};
 use std::time::Instant;
@@ -65,6 +67,32 @@ impl ComparisonRow {
             "worst_J4": finite(self.worst_j4),
             "worst_force": finite(self.worst_force),
             "cpu_us_per_sample": finite(self.cpu_per_sample * 1e6),
+        })
+    }
+}
+
+impl StudySetup {
+    /// The comparison of [`COMPARED`] on this setup's cases, record and perturbed plants (the
+    /// setup's own controller is not used).
+    pub fn compare(&self) -> Result<Vec<ComparisonRow>> {
+        compare(
+            &self.base,
+            &self.cases,
+            COMPARED,
+            self.perturbed.unwrap_or(0),
+            self.seed,
+        )
+    }
+
+    /// The object of `--compare --json` for `rows` of [`Self::compare`].
+    pub fn comparison_json(&self, rows: &[ComparisonRow]) -> Value {
+        json!({
+            "benchmark": "rths",
+            "record": self.base.record.name,
+            "intensity": self.base.intensity,
+            "perturbed": self.perturbed.unwrap_or(0),
+            "seed": self.seed,
+            "comparison": rows.iter().map(ComparisonRow::json).collect::<Vec<_>>(),
         })
     }
 }
