@@ -34,7 +34,7 @@ def rths(
     control-structure interaction, J1-J9 against the exact reference.
 
     ``case``: reference structure 1..4 (default: all four); ``intensity``: scale of the record;
-    ``controller``: none, sample, arx, polynomial, ats (default: the config's, else
+    ``controller``: none, sample, arx, polynomial, ats, amb (default: the config's, else
     sample); ``config``: a benchmark settings file (TOML, docs/benchmark.md); ``algorithm``:
     ``benchmark`` (the original loop) or ``substep``; ``record``: a two-column ``t,a_g`` CSV in
     m/s² (default: the shipped El Centro record); ``perturbed``: also run that many perturbed
@@ -69,7 +69,7 @@ def compare(
     seed: int = 1,
 ) -> Dict[str, Any]:
     """The controllers side by side on the RTHS benchmark (``substep benchmark rths --compare``,
-    docs/benchmark.md "Comparison"): none, sample, polynomial, ats and arx, each with its one
+    docs/benchmark.md "Comparison"): none, sample, polynomial, ats, amb and arx, each with its one
     preset setting, with and without sensor noise, on the nominal plant and ``perturbed`` plants
     per case (seed ``seed``; 0: none).
 

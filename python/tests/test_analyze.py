@@ -182,9 +182,9 @@ def test_compare_equals_the_cli_json(cli):
     strip = lambda rows: [{k: v for k, v in r.items() if k != "cpu_us_per_sample"} for r in rows]
     assert strip(got["comparison"]) == strip(expected["comparison"])
     assert [(r["controller"], r["noise"]) for r in got["comparison"]] == [
-        (k, n) for k in ("none", "sample", "polynomial", "ats", "arx") for n in (True, False)
+        (k, n) for k in ("none", "sample", "polynomial", "ats", "amb", "arx") for n in (True, False)
     ]
-    arx = got["comparison"][8]
+    arx = got["comparison"][10]
     assert arx["stable"] and 0 < arx["J4"] < 10 and arx["cpu_us_per_sample"] > 0
     assert got["comparison"][0]["J2"] is None  # none diverges
     with pytest.raises(substep.ConfigError, match="^perturbed: must be a whole number"):

@@ -35,7 +35,7 @@ pub struct RthsArgs {
     /// Scale of the record (eq_intensity)
     #[arg(long, default_value_t = 0.4)]
     pub intensity: f64,
-    /// Tracking controller: none, sample, arx, polynomial, ats (default: the config's, else sample;
+    /// Tracking controller: none, sample, arx, polynomial, ats, amb (default: the config's, else sample;
     /// inverse_fir is refused on this benchmark, with the reason)
     #[arg(long)]
     pub controller: Option<String>,
@@ -54,7 +54,7 @@ pub struct RthsArgs {
     /// With --algorithm substep: run these k_sub values (comma-separated) and print J4–J9 per k_sub
     #[arg(long, value_name = "LIST", value_delimiter = ',')]
     pub k_sub: Vec<usize>,
-    /// Every controller side by side (none, sample, polynomial, ats, arx; each with its one
+    /// Every controller side by side (none, sample, polynomial, ats, amb, arx; each with its one
     /// preset setting), with and without sensor noise, nominal and on --perturbed N plants
     /// (default 20): J2, J4, peak force, stable and under-capacity counts, CPU time per sample;
     /// prints the table and writes comparison.md to --out (with --json: one JSON object, no file)

@@ -382,14 +382,14 @@ fn compare_writes_the_side_by_side_table() {
         .collect();
     let names: Vec<(&str, &str)> = rows.iter().map(|r| (r[0].as_str(), r[1].as_str())).collect();
     let mut expected = Vec::new();
-    for k in ["none", "sample", "polynomial", "ats", "arx"] {
+    for k in ["none", "sample", "polynomial", "ats", "amb", "arx"] {
         expected.push((k, "on"));
         expected.push((k, "off"));
     }
     assert_eq!(names, expected);
     let none = &rows[0];
     assert_eq!((none[3].as_str(), none[6].as_str()), ("–", "no"), "{none:?}");
-    for (k, row) in ["ats", "arx"].iter().zip([&rows[6], &rows[8]]) {
+    for (k, row) in ["ats", "amb", "arx"].iter().zip([&rows[6], &rows[8], &rows[10]]) {
         let single = substep(&dir, &["benchmark", "rths", "--controller", k, "--case", "1", "--json"]);
         let v: serde_json::Value = serde_json::from_slice(&single.stdout).unwrap();
         assert_eq!(row[3], format!("{:.2}", v["J2"].as_f64().unwrap()), "{k} J2");

@@ -36,7 +36,7 @@
 use super::converged::converged_parameters;
 use super::frequency::{Peak, continuous_response, find_peaks};
 use super::{FrequencyResponse, StepMap};
-use crate::compensate::{ArxPhaseLagSpec, AtsSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
+use crate::compensate::{AmbSpec, ArxPhaseLagSpec, AtsSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use crate::error::{Error, Result};
 use crate::io::SubstructureDefinition;
 use crate::model::StructuralModel;
@@ -258,8 +258,16 @@ fn newmark_response(m: &StructuralModel, beta: f64, gamma: f64, dt: f64, output:
 /// fully ramped in: the lead of polynomial and inverse-FIR compensation is the delay in
 /// sub-steps; an ARX compensator gets the config's defaults for the setting (`k_lag` and its
 /// lead from the actuator's low-frequency lag `lag` (delay plus dynamics), velocities over a
-/// step; the form of project version 1 keeps its own).
-fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64, lag: f64) -> PhaseLagDefinition {
+/// step; the form of project version 1 keeps its own); AMB's model is the actuator's inverse
+/// `series` (\[sⁱ\], [`crate::transfer::ActuatorSpec::inverse_series`]) at the setting.
+fn phase_lag_for(
+    def: &PhaseLagDefinition,
+    dt: f64,
+    k_sub: usize,
+    delay: f64,
+    lag: f64,
+    series: [f64; 4],
+) -> PhaseLagDefinition {
     let dtau = dt / k_sub as f64;
     let lead = delay / dtau;
     let spec = match def.spec {
@@ -311,6 +319,19 @@ fn phase_lag_for(def: &PhaseLagDefinition, dt: f64, k_sub: usize, delay: f64, la
             guard_factor: s.guard_factor,
             ..AtsSpec::new(lag / dtau)
         }),
+        // The model, its span, low-pass and memory re-derived for the setting (as the config
+        // derives them); the band, adapted terms and threshold as configured.
+        PhaseLagSpec::Amb(s) => {
+            let series: [f64; 4] = std::array::from_fn(|i| series[i] / dtau.powi(i as i32));
+            let d = AmbSpec::pure_delay(series[1]);
+            PhaseLagSpec::Amb(AmbSpec {
+                series,
+                span: d.span,
+                smoothing: d.span as f64,
+                lambda: 1.0 - dtau / 2.0,
+                ..s
+            })
+        }
     };
     PhaseLagDefinition {
         spec,
@@ -477,7 +498,11 @@ pub fn plan(sub: &SubstructureDefinition, model: &StructuralModel, settings: &Pl
             s.substeps = k;
             s.actuator.delay = delay;
             let lag = s.actuator.low_frequency_lag();
-            s.phase_lag = sub.phase_lag.as_ref().map(|pl| phase_lag_for(pl, dt, k, delay, lag));
+            let series = s.actuator.inverse_series();
+            s.phase_lag = sub
+                .phase_lag
+                .as_ref()
+                .map(|pl| phase_lag_for(pl, dt, k, delay, lag, series));
             let theta = match &s.phase_lag {
                 Some(pl) => converged_parameters(pl, &s.actuator, dt / k as f64, s.inner_steps, &mode_hz)?,
                 None => None,
@@ -524,7 +549,7 @@ pub fn plan(sub: &SubstructureDefinition, model: &StructuralModel, settings: &Pl
         s.phase_lag = sub
             .phase_lag
             .as_ref()
-            .map(|pl| phase_lag_for(pl, pt.dt, pt.k_sub, pt.delay, lag));
+            .map(|pl| phase_lag_for(pl, pt.dt, pt.k_sub, pt.delay, lag, s.actuator.inverse_series()));
         pt.cost = cost(&s, model, pt.dt, settings.cost_steps, w1)?;
     }
     let mut result = recommend(sub, model, settings, points);
@@ -533,7 +558,8 @@ pub fn plan(sub: &SubstructureDefinition, model: &StructuralModel, settings: &Pl
     // The configured compensator is the default one if both re-derive to the same at a setting.
     let same = |a: &PhaseLagDefinition, b: PhaseLagSpec| {
         let b = PhaseLagDefinition { spec: b, ramp: a.ramp };
-        phase_lag_for(a, 0.01, 2, 0.01, 0.01).spec == phase_lag_for(&b, 0.01, 2, 0.01, 0.01).spec
+        let series = [1.0, 0.01, 5e-5, 1.7e-7];
+        phase_lag_for(a, 0.01, 2, 0.01, 0.01, series).spec == phase_lag_for(&b, 0.01, 2, 0.01, 0.01, series).spec
     };
     if result.recommended.is_none()
         && let Some(pl) = &sub.phase_lag
@@ -699,14 +725,18 @@ fn recommend(
         );
     }
     let phase_lag_note = sub.phase_lag.as_ref().map(|pl| match pl.spec {
-        PhaseLagSpec::Arx(_) | PhaseLagSpec::InverseFir(_)
+        PhaseLagSpec::Arx(_) | PhaseLagSpec::InverseFir(_) | PhaseLagSpec::Ats(_) | PhaseLagSpec::Amb(_)
             if !matches!(sub.actuator.dynamics, crate::transfer::Dynamics::ServoHydraulic(_)) =>
         {
             format!(
                 "phase-lag compensation ({}) analysed frozen at the parameters it converges to in front of this actuator \
-                 (identified on line under a multi-sine at the first modes; lead / k_lag = the scanned delay in \
-                 sub-steps), fully ramped in",
-                pl.spec.kind()
+                 (identified on line under a multi-sine at the first modes; {}), fully ramped in",
+                pl.spec.kind(),
+                if matches!(pl.spec, PhaseLagSpec::Amb(_)) {
+                    "starting from the actuator's model at the scanned delay"
+                } else {
+                    "lead / k_lag = the scanned delay in sub-steps"
+                }
             )
         }
         _ => format!(
@@ -738,7 +768,14 @@ fn what_if_polynomial(sub: &SubstructureDefinition, model: &StructuralModel, p: 
         },
         ramp: Ramp::full(),
     };
-    s.phase_lag = Some(phase_lag_for(&base, p.dt, p.k_sub, p.delay, p.delay));
+    s.phase_lag = Some(phase_lag_for(
+        &base,
+        p.dt,
+        p.k_sub,
+        p.delay,
+        p.delay,
+        s.actuator.inverse_series(),
+    ));
     let single = PlanSettings {
         dts: vec![p.dt],
         k_subs: vec![p.k_sub],

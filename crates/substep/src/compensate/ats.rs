@@ -92,19 +92,19 @@ impl AtsSpec {
 
 /// Two cascaded first-order low-pass stages `x ← x + α (input − x)`, `α = 1/(1 + T)`.
 #[derive(Debug, Clone, Copy)]
-struct Smoother {
+pub(super) struct Smoother {
     alpha: f64,
     stage: [f64; 2],
 }
 
 impl Smoother {
-    fn new(time_constant: f64) -> Self {
+    pub(super) fn new(time_constant: f64) -> Self {
         Self {
             alpha: 1.0 / (1.0 + time_constant),
             stage: [0.0; 2],
         }
     }
-    fn step(&mut self, x: f64) -> f64 {
+    pub(super) fn step(&mut self, x: f64) -> f64 {
         self.stage[0] += self.alpha * (x - self.stage[0]);
         self.stage[1] += self.alpha * (self.stage[0] - self.stage[1]);
         self.stage[1]
@@ -112,7 +112,7 @@ impl Smoother {
 }
 
 /// `(D x, D² x)` over span `s` of the newest samples of `h` (per sub-step).
-fn differences(h: &History, s: usize) -> (f64, f64) {
+pub(super) fn differences(h: &History, s: usize) -> (f64, f64) {
     let (x0, x1, x2) = (h.get(0), h.get(s), h.get(2 * s));
     let s = s as f64;
     ((x0 - x1) / s, (x0 - 2.0 * x1 + x2) / (s * s))

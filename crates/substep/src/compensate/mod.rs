@@ -24,7 +24,10 @@
 //! * [`InverseFir`] — an RLS-identified FIR inverse of the actuator applied to the extrapolated
 //!   target (baseline);
 //! * [`Ats`] — the adaptive time-series compensator of Chae et al. (2013), the field's common
-//!   reference: a feed-forward `a₀ d + a₁ ḋ + a₂ d̈` fitted by moving-window least squares.
+//!   reference: a feed-forward `a₀ d + a₁ ḋ + a₂ d̈` fitted by moving-window least squares;
+//! * [`Amb`] — adaptive model-based compensation: the inverse of the lab's plant model as a
+//!   feed-forward `Σ cᵢ Dⁱ d` (to the third derivative), its coefficients re-identified on line
+//!   by RLS within a band around the model.
 //!
 //! Every compensator has a [`Guard`]: a non-finite input or correction, or a sent correction
 //! `h Δu` larger than `factor ×` the range of targets seen so far, disables it (the correction is
@@ -41,6 +44,7 @@
 //! [`ArxPhaseLag`] ≈ 690× noise-free, ≈ 170× with 1 % displacement noise, ≈ 110× with the
 //! command noise as well; [`InverseFir`] ≈ 1150× / 13×.
 
+mod amb;
 mod arx_lag;
 mod ats;
 mod inverse;
@@ -48,6 +52,7 @@ mod polynomial;
 mod site;
 mod spec;
 
+pub use amb::{Amb, AmbSpec, difference_coefficients, inverse_series};
 pub use arx_lag::{ArxPhaseLag, ArxPhaseLagSpec, ErrorPairing, MAX_HISTORY, Regressor};
 pub use ats::{Ats, AtsSpec};
 pub use inverse::{InverseFir, InverseFirSpec};

@@ -1,7 +1,9 @@
 //! Descriptions of phase-lag compensation (for test definitions): which compensator, with which
 //! parameters, and the ramp; built into a [`CompensatedSite`] around an experimental side.
 
-use super::{ArxPhaseLagSpec, AtsSpec, CompensatedSite, Guard, InverseFirSpec, PhaseLagCompensator, Polynomial, Ramp};
+use super::{
+    AmbSpec, ArxPhaseLagSpec, AtsSpec, CompensatedSite, Guard, InverseFirSpec, PhaseLagCompensator, Polynomial, Ramp,
+};
 use crate::error::Result;
 use crate::substructure::ExperimentalSubstructure;
 
@@ -22,16 +24,19 @@ pub enum PhaseLagSpec {
     InverseFir(InverseFirSpec),
     /// [`super::Ats`].
     Ats(AtsSpec),
+    /// [`super::Amb`].
+    Amb(AmbSpec),
 }
 
 impl PhaseLagSpec {
-    /// `polynomial`, `arx`, `inverse_fir` or `ats` (the config's `kind`).
+    /// `polynomial`, `arx`, `inverse_fir`, `ats` or `amb` (the config's `kind`).
     pub fn kind(&self) -> &'static str {
         match self {
             PhaseLagSpec::Polynomial { .. } => "polynomial",
             PhaseLagSpec::Arx(_) => "arx",
             PhaseLagSpec::InverseFir(_) => "inverse_fir",
             PhaseLagSpec::Ats(_) => "ats",
+            PhaseLagSpec::Amb(_) => "amb",
         }
     }
 
@@ -51,6 +56,7 @@ impl PhaseLagSpec {
             PhaseLagSpec::Arx(spec) => Box::new(spec.build()?),
             PhaseLagSpec::InverseFir(spec) => Box::new(spec.build()?),
             PhaseLagSpec::Ats(spec) => Box::new(spec.build()?),
+            PhaseLagSpec::Amb(spec) => Box::new(spec.build()?),
         })
     }
 

@@ -273,6 +273,12 @@ pub(super) fn phase_lag_json(p: &PhaseLagDefinition) -> Value {
             "subsample": a.subsample, "smoothing_substeps": a.smoothing, "threshold": a.threshold,
             "guard_factor": a.guard_factor, "ramp": ramp,
         }),
+        PhaseLagSpec::Amb(a) => json!({
+            "kind": "amb", "inverse_series": a.series, "model_coefficients": a.model(), "span_substeps": a.span,
+            "smoothing_substeps": a.smoothing, "threshold": a.threshold, "forgetting_factor": a.lambda,
+            "subsample": a.subsample, "deviation": a.deviation, "adapted_terms": a.adapted_terms, "p0": a.p0, "instruments": a.instruments,
+            "guard_factor": a.guard_factor, "ramp": ramp,
+        }),
     }
 }
 

@@ -135,6 +135,33 @@ impl ActuatorSpec {
             }
     }
 
+    /// The first four coefficients of the power series of the actuator's inverse at `s = 0`,
+    /// `1/G(s) = g₀ + g₁ s + g₂ s² + g₃ s³ + …` \[sⁱ\]: the delay's `e^{sτ}` times the inverse of
+    /// the dynamics (the model of adaptive model-based compensation). A servo-hydraulic plant
+    /// (whose specimen is part of it) and an LTI model whose series does not exist count the
+    /// delay only.
+    pub fn inverse_series(&self) -> [f64; 4] {
+        let t = self.delay;
+        let delay = [1.0, t, t * t / 2.0, t * t * t / 6.0];
+        let dynamics = match &self.dynamics {
+            Dynamics::Ideal | Dynamics::ServoHydraulic(_) => None,
+            Dynamics::FirstOrder { time_constant } => Some([1.0, *time_constant, 0.0, 0.0]),
+            Dynamics::SecondOrder { frequency_hz, zeta } => {
+                let w = 2.0 * std::f64::consts::PI * frequency_hz;
+                Some([1.0, 2.0 * zeta / w, 1.0 / (w * w), 0.0])
+            }
+            Dynamics::Lti(ss) => lti_inverse_series(ss),
+        };
+        let Some(dyn_inv) = dynamics.filter(|g| g.iter().all(|v| v.is_finite())) else {
+            return delay;
+        };
+        let mut out = [0.0; 4];
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = (0..=k).map(|i| delay[i] * dyn_inv[k - i]).sum();
+        }
+        out
+    }
+
     pub fn validate(&self) -> Result<()> {
         require_non_negative("actuator.delay", self.delay)?;
         match self.dynamics {
@@ -504,6 +531,27 @@ impl Actuator {
             d.read_state(&s[1 + nz..]);
         }
     }
+}
+
+/// `1/G(s)` to third order for `G(s) = D + C (sI − A)⁻¹ B = Σ Gₖ sᵏ`, `G₀ = D − C A⁻¹ B`,
+/// `Gₖ = −C A⁻⁽ᵏ⁺¹⁾ B`; `None` if `A` is singular or `G(0) = 0`.
+fn lti_inverse_series(ss: &StateSpace) -> Option<[f64; 4]> {
+    let lu = ss.a.clone().lu();
+    let mut x = ss.b.clone();
+    let mut g = [0.0; 4];
+    for (k, gk) in g.iter_mut().enumerate() {
+        x = lu.solve(&x)?;
+        *gk = -ss.c.dot(&x) + if k == 0 { ss.d } else { 0.0 };
+    }
+    if g[0] == 0.0 {
+        return None;
+    }
+    let mut q = [0.0; 4];
+    for k in 0..4 {
+        let r = if k == 0 { 1.0 } else { 0.0 } - (1..=k).map(|i| g[i] * q[k - i]).sum::<f64>();
+        q[k] = r / g[0];
+    }
+    Some(q)
 }
 
 #[cfg(test)]

@@ -22,6 +22,7 @@ pub const COMPARED: &[ControllerKind] = &[
     ControllerKind::Sample,
     ControllerKind::Polynomial,
     ControllerKind::Ats,
+    ControllerKind::Amb,
     ControllerKind::Arx,
 ];
 

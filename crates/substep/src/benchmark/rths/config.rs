@@ -3,7 +3,7 @@
 //!
 //! ```toml
 //! [controller]
-//! kind = "arx"                  # none | sample | arx | polynomial | inverse_fir | ats (--controller wins)
+//! kind = "arx"                  # none | sample | arx | polynomial | inverse_fir | ats | amb (--controller wins)
 //! converters = true             # the benchmark's A/D and D/A (±3.8, q = 2^-18)
 //! # feedforward = { num = [...], den = [...] }  # the shaping filter of kind none | sample only
 //! feedback = { num = [2.0, 95.0], den = [1.0, 0.0] }   # continuous TFs in s, Tustin at 1/4096 s
@@ -47,6 +47,19 @@
 //! span = 32                     # samples per difference of the derivatives
 //! smoothing = 48.5              # low-pass time constant of each of two stages [samples]
 //! threshold = 1e-4              # adaptation starts above this |x_m| [m]
+//! guard_factor = 10.0
+//!
+//! [controller.amb]              # compensate::AmbSpec, in samples
+//! inverse_series = [0.99, 101.9, 1789.0, 26497.0]   # g₀…g₃ of 1/G(σ) (default: the nominal plant's)
+//! span = 34                     # samples per difference
+//! smoothing = 34.0              # low-pass time constant of each of two stages [samples]
+//! threshold = 1e-4              # adaptation starts above this |x_m| [m]
+//! forgetting_factor = 0.9995    # RLS, per row
+//! subsample = 1                 # one RLS row every sample
+//! deviation = 0.5               # each coefficient within ±50 % of the model's
+//! adapted_terms = 2             # adapt c₀ and c₁ (gain and lead); c₂, c₃ stay the model's
+//! p0 = 0.01                     # initial covariance of each ratio to the model
+//! instruments = true            # instrumental variables (the delayed target), not plain RLS
 //! guard_factor = 10.0
 //!
 //! [plant]
@@ -110,6 +123,23 @@ struct RawController {
     polynomial: Option<RawPolynomial>,
     inverse_fir: Option<RawInverseFir>,
     ats: Option<RawAts>,
+    amb: Option<RawAmb>,
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAmb {
+    inverse_series: Option<[f64; 4]>,
+    span: Option<usize>,
+    smoothing: Option<f64>,
+    threshold: Option<f64>,
+    forgetting_factor: Option<f64>,
+    subsample: Option<usize>,
+    deviation: Option<f64>,
+    adapted_terms: Option<usize>,
+    p0: Option<f64>,
+    instruments: Option<bool>,
+    guard_factor: Option<f64>,
 }
 
 #[derive(Debug, Clone, Default, Deserialize)]
@@ -357,6 +387,21 @@ impl BenchmarkConfig {
                     s.span = r.span.unwrap_or(s.span);
                     s.smoothing = r.smoothing.unwrap_or(s.smoothing);
                     s.threshold = r.threshold.unwrap_or(s.threshold);
+                    s.guard_factor = r.guard_factor.unwrap_or(s.guard_factor);
+                }
+            }
+            (Some(PhaseLagSpec::Amb(s)), ControllerKind::Amb) => {
+                if let Some(r) = &c.amb {
+                    s.series = r.inverse_series.unwrap_or(s.series);
+                    s.span = r.span.unwrap_or(s.span);
+                    s.smoothing = r.smoothing.unwrap_or(s.smoothing);
+                    s.threshold = r.threshold.unwrap_or(s.threshold);
+                    s.lambda = r.forgetting_factor.unwrap_or(s.lambda);
+                    s.subsample = r.subsample.unwrap_or(s.subsample);
+                    s.deviation = r.deviation.unwrap_or(s.deviation);
+                    s.adapted_terms = r.adapted_terms.unwrap_or(s.adapted_terms);
+                    s.p0 = r.p0.unwrap_or(s.p0);
+                    s.instruments = r.instruments.unwrap_or(s.instruments);
                     s.guard_factor = r.guard_factor.unwrap_or(s.guard_factor);
                 }
             }

@@ -2,7 +2,7 @@
 //! same names): the compensation methods.
 
 use super::{forbid, one, prefixed};
-use crate::compensate::{ArxPhaseLagSpec, AtsSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
+use crate::compensate::{AmbSpec, ArxPhaseLagSpec, AtsSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use crate::error::{Error, Result, require_non_negative};
 use crate::substructure::ErrorForceSpec;
 use serde::Deserialize;
@@ -63,6 +63,9 @@ pub(crate) struct RawPhaseLag {
     pub(crate) window: Option<f64>,
     pub(crate) threshold: Option<f64>,
     pub(crate) spacing: Option<usize>,
+    pub(crate) inverse_series: Option<[f64; 4]>,
+    pub(crate) deviation: Option<f64>,
+    pub(crate) adapted_terms: Option<usize>,
     pub(crate) ramp_start: Option<usize>,
     pub(crate) ramp_steps: Option<usize>,
     pub(crate) fade_out: Option<[usize; 2]>,
@@ -91,15 +94,23 @@ impl RawErrorForce {
 const ARX_ONLY: &[&str] = &["span", "smoothing", "max_lead", "supervisor"];
 /// The keys of `kind = "ats"` alone.
 const ATS_ONLY: &[&str] = &["window", "threshold"];
+/// The keys of `kind = "amb"` alone.
+const AMB_ONLY: &[&str] = &["inverse_series", "deviation", "adapted_terms"];
 
 /// Default ramp-in of the phase-lag compensation [steps].
 pub(crate) const DEFAULT_RAMP_STEPS: usize = 100;
 
 impl RawPhaseLag {
-    /// `None` for `kind = "none"`. `dt` time step, `k_sub` sub-steps, `delay` the actuator's pure
-    /// delay [s] (the default lead), `lag` its low-frequency lag [s] (delay plus dynamics: the
-    /// default `k_lag`).
-    pub(crate) fn build(&self, dt: f64, k_sub: usize, delay: f64, lag: f64) -> Result<Option<PhaseLagDefinition>> {
+    /// `None` for `kind = "none"`. `dt` time step, `k_sub` sub-steps; of the `actuator`: the pure
+    /// delay \[s\] (the default lead), the low-frequency lag \[s\] (delay plus dynamics: the
+    /// default `k_lag`) and the series of its inverse (the default model of `amb`).
+    pub(crate) fn build(
+        &self,
+        dt: f64,
+        k_sub: usize,
+        actuator: &crate::transfer::ActuatorSpec,
+    ) -> Result<Option<PhaseLagDefinition>> {
+        let (delay, lag) = (actuator.delay, actuator.low_frequency_lag());
         let p = "substructure.phase_lag.";
         let dtau = dt / k_sub as f64;
         let keys = |names: &[&'static str]| -> Vec<(&'static str, bool)> {
@@ -122,6 +133,9 @@ impl RawPhaseLag {
                         "window" => self.window.is_some(),
                         "threshold" => self.threshold.is_some(),
                         "spacing" => self.spacing.is_some(),
+                        "inverse_series" => self.inverse_series.is_some(),
+                        "deviation" => self.deviation.is_some(),
+                        "adapted_terms" => self.adapted_terms.is_some(),
                         "ramp_start" => self.ramp_start.is_some(),
                         "ramp_steps" => self.ramp_steps.is_some(),
                         "fade_out" => self.fade_out.is_some(),
@@ -172,6 +186,9 @@ impl RawPhaseLag {
                         "window",
                         "threshold",
                         "spacing",
+                        "inverse_series",
+                        "deviation",
+                        "adapted_terms",
                         "ramp_start",
                         "ramp_steps",
                         "fade_out",
@@ -184,6 +201,7 @@ impl RawPhaseLag {
                 forbid(p, &keys(&["k_lag", "n_u", "forgetting_factor", "taps"]), &unused)?;
                 forbid(p, &keys(ARX_ONLY), &unused)?;
                 forbid(p, &keys(ATS_ONLY), &unused)?;
+                forbid(p, &keys(AMB_ONLY), &unused)?;
                 PhaseLagSpec::Polynomial {
                     order: self.order.unwrap_or(3),
                     lead: lead()?,
@@ -198,6 +216,7 @@ impl RawPhaseLag {
                     &unused,
                 )?;
                 forbid(p, &keys(ATS_ONLY), &unused)?;
+                forbid(p, &keys(AMB_ONLY), &unused)?;
                 // The actuator's lag in sub-steps, or the k_lag given.
                 let lag = self.k_lag.map_or(lag / dtau, |k| k as f64);
                 let mut spec = ArxPhaseLagSpec::for_substeps(lag, k_sub);
@@ -236,6 +255,7 @@ impl RawPhaseLag {
                 forbid(p, &keys(&["k_lag", "n_u", "guard_factor", "spacing"]), &unused)?;
                 forbid(p, &keys(ARX_ONLY), &unused)?;
                 forbid(p, &keys(ATS_ONLY), &unused)?;
+                forbid(p, &keys(AMB_ONLY), &unused)?;
                 let mut spec = InverseFirSpec::new(lead()?);
                 if let Some(o) = self.order {
                     spec.order = o;
@@ -255,6 +275,7 @@ impl RawPhaseLag {
                     &unused,
                 )?;
                 forbid(p, &keys(&["span", "max_lead", "supervisor"]), &unused)?;
+                forbid(p, &keys(AMB_ONLY), &unused)?;
                 // The initial a₁: `lead`/`lead_substeps` if given, else the actuator's
                 // low-frequency lag (delay plus dynamics), what the actuator's inverse starts from.
                 let initial = if self.lead.is_some() || self.lead_substeps.is_some() {
@@ -282,10 +303,66 @@ impl RawPhaseLag {
                 spec.guard_factor = guard_factor;
                 PhaseLagSpec::Ats(spec)
             }
+            "amb" => {
+                forbid(
+                    p,
+                    &keys(&[
+                        "order",
+                        "k_lag",
+                        "n_u",
+                        "taps",
+                        "spacing",
+                        "max_lead",
+                        "supervisor",
+                        "window",
+                    ]),
+                    &unused,
+                )?;
+                // The model: `inverse_series` [sⁱ] if given, else a pure delay of `lead` if
+                // given, else the actuator's (delay and dynamics).
+                let given_lead = self.lead.is_some() || self.lead_substeps.is_some();
+                if given_lead && self.inverse_series.is_some() {
+                    return Err(Error::invalid(
+                        format!("{p}inverse_series"),
+                        "give either the model's inverse_series or a lead (a pure-delay model), not both",
+                    ));
+                }
+                let seconds = match self.inverse_series {
+                    Some(g) => g,
+                    None if given_lead => {
+                        let t = lead()? * dtau;
+                        [1.0, t, t * t / 2.0, t * t * t / 6.0]
+                    }
+                    None => actuator.inverse_series(),
+                };
+                let series: [f64; 4] = std::array::from_fn(|i| seconds[i] / dtau.powi(i as i32));
+                let mut spec = AmbSpec::pure_delay(series[1]);
+                spec.series = series;
+                // A memory of about 2 s.
+                spec.lambda = 1.0 - dtau / 2.0;
+                if let Some(s) = self.span {
+                    spec.span = s;
+                }
+                spec.smoothing = self.smoothing.unwrap_or(spec.span as f64);
+                if let Some(t) = self.threshold {
+                    spec.threshold = t;
+                }
+                if let Some(l) = self.forgetting_factor {
+                    spec.lambda = l;
+                }
+                if let Some(d) = self.deviation {
+                    spec.deviation = d;
+                }
+                if let Some(n) = self.adapted_terms {
+                    spec.adapted_terms = n;
+                }
+                spec.guard_factor = guard_factor;
+                PhaseLagSpec::Amb(spec)
+            }
             other => {
                 return Err(Error::invalid(
                     format!("{p}kind"),
-                    format!("unknown kind '{other}' (expected none, polynomial, arx, inverse_fir or ats)"),
+                    format!("unknown kind '{other}' (expected none, polynomial, arx, inverse_fir, ats or amb)"),
                 ));
             }
         };

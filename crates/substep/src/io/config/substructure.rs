@@ -457,7 +457,7 @@ impl RawSubstructure {
             .map_or(ErrorForceSpec::None, RawErrorForce::spec);
         error_force.validate()?;
         let phase_lag = match &self.phase_lag {
-            Some(raw) => raw.build(dt, self.substeps, actuator.delay, actuator.low_frequency_lag())?,
+            Some(raw) => raw.build(dt, self.substeps, &actuator)?,
             None => None,
         };
         Ok(SubstructureDefinition {
