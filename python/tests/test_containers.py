@@ -15,6 +15,7 @@ import subprocess
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import read_csv_exact, run_cli
 
 h5py = pytest.importorskip("h5py")
 mat73 = pytest.importorskip("mat73")
@@ -155,3 +156,45 @@ def test_python_save_writes_the_cli_containers(tmp_path):
     result.save(mat)
     m = scipy_io.loadmat(str(mat), simplify_cells=True)
     np.testing.assert_array_equal(np.ravel(m["history"]["u1"]), result.history["u1"])
+
+
+def test_benchmark_traces_in_hdf5_and_mat_score_the_run_again(cli, tmp_path):
+    # Issue 28: `benchmark rths --out DIR --format hdf5|mat` gathers the trace CSV files into
+    # traces.h5 / traces.mat: every column equal to the CSV's, with its unit, and J2 / J4
+    # recomputed from the container equal to the run's unrounded J_raw to 1e-9.
+    args = ("benchmark", "rths", "--case", "1", "--controller", "amb")
+    p = run_cli(cli, *args, "--json")
+    assert p.returncode == 0, p.stderr
+    raw = json.loads(p.stdout)["J_raw"]
+
+    def scores(target, measured, reference1):
+        j2 = 100 * np.std(measured - target) / np.std(target)
+        j4 = 100 * np.std(measured - reference1) / np.std(reference1)
+        return j2, j4
+
+    out = tmp_path / "h"
+    p = run_cli(cli, *args, "--no-plots", "--out", str(out), "--format", "hdf5")
+    assert p.returncode == 0, p.stderr
+    assert "traces.h5" in p.stdout
+    csv = read_csv_exact(out / "trace_case1.csv")
+    with h5py.File(out / "traces.h5", "r") as f:
+        group = f["trace_case1"]
+        names = [str(c) for c in group.attrs["columns"]]
+        assert names == [c.rsplit(" [", 1)[0] for c in csv.columns]
+        for name, header in zip(names, csv.columns):
+            np.testing.assert_array_equal(group[name][:], csv[header].to_numpy())
+            assert group[name].attrs["units"] == header.rsplit("[", 1)[1].rstrip("]")
+        j2, j4 = scores(group["target y_n"][:], group["measured x_m"][:], group["reference floor 1"][:])
+        assert abs(j2 - raw[1]) < 1e-9 and abs(j4 - raw[3]) < 1e-9, (j2, j4, raw)
+        assert json.loads(f.attrs["summary"])["J_raw"] == raw
+        assert "floors_case1" in f
+    out = tmp_path / "m"
+    p = run_cli(cli, *args, "--no-plots", "--out", str(out), "--format", "mat")
+    assert p.returncode == 0, p.stderr
+    m = scipy_io.loadmat(out / "traces.mat", squeeze_me=True)
+    trace = m["trace_case1"]
+    j2, j4 = scores(trace["target_y_n"].item(), trace["measured_x_m"].item(), trace["reference_floor_1"].item())
+    assert abs(j2 - raw[1]) < 1e-9 and abs(j4 - raw[3]) < 1e-9, (j2, j4, raw)
+    assert m["units"]["trace_case1"].item()["actuator_force_F"].item() == "N"
+    bad = run_cli(cli, *args, "--json", "--format", "hdf5")
+    assert bad.returncode == 2 and "--format: writes the traces" in bad.stderr

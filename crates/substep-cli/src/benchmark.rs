@@ -10,6 +10,7 @@ use substep::benchmark::rths::{
     Algorithm, COMPARED, Case, FORCE_CAPACITY, PUBLISHED_SAMPLE, RthsInput, RthsRow, RunHistory, StudyOptions,
     StudySetup, perturbed_stats, run,
 };
+use substep::io::results::{Format, Metadata, write_tables};
 
 #[derive(Debug, clap::Args)]
 pub struct BenchmarkArgs {
@@ -72,6 +73,10 @@ pub struct RthsArgs {
     /// Figure format: png, svg or pdf (vector, for papers)
     #[arg(long, value_enum, value_name = "FORMAT", default_value = "png")]
     pub plot_format: crate::plots::PlotFormat,
+    /// The traces also in one file: hdf5 (traces.h5), mat or mat73 (traces.mat; MATLAB); the CSV
+    /// files are always written. hdf5 and mat73 need a build with `--features hdf5`
+    #[arg(long, value_name = "FORMAT", default_value = "csv")]
+    pub format: String,
 }
 
 pub fn benchmark(args: &BenchmarkArgs) -> Result<()> {
@@ -350,6 +355,38 @@ fn traces(histories: &[(Case, RunHistory)], dir: &Path) -> Result<Vec<PathBuf>> 
     Ok(files)
 }
 
+/// The trace CSV files gathered into `traces.h5` / `traces.mat` (one group or struct per file:
+/// `trace_case1`, `floors_case1`, …; a dataset or field per column with its unit), with the
+/// results as JSON (`summary`) and the `--config` text (`config`).
+fn trace_container(args: &RthsArgs, format: Format, files: &[PathBuf], results: &serde_json::Value) -> Result<PathBuf> {
+    let tables: Vec<(String, PathBuf)> = files
+        .iter()
+        .map(|p| {
+            let stem = p
+                .file_stem()
+                .map_or(String::new(), |s| s.to_string_lossy().into_owned());
+            (stem, p.clone())
+        })
+        .collect();
+    let tables: Vec<(&str, PathBuf)> = tables.iter().map(|(n, p)| (n.as_str(), p.clone())).collect();
+    let config = match &args.config {
+        Some(path) => substep::io::limits::read_text(path, substep::io::limits::CONFIG_MAX_BYTES)?,
+        None => String::new(),
+    };
+    let meta = Metadata {
+        summary_json: serde_json::to_string_pretty(results)?,
+        config,
+    };
+    let name = if format == Format::Hdf5 {
+        "traces.h5"
+    } else {
+        "traces.mat"
+    };
+    let path = args.out.join(name);
+    write_tables(&path, format, &tables, &meta)?;
+    Ok(path)
+}
+
 fn plots(histories: &[(Case, RunHistory)], dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     for (case, hist) in histories {
@@ -518,6 +555,14 @@ fn out(text: &str) {
 }
 
 pub fn rths(args: &RthsArgs) -> Result<()> {
+    let format = Format::parse("--format", &args.format)?;
+    if format != Format::Csv && (args.compare || args.json) {
+        return Err(substep::Error::invalid(
+            "--format",
+            "writes the traces of a run to --out: not with --compare or --json",
+        )
+        .into());
+    }
     if args.compare {
         return comparison(args);
     }
@@ -559,6 +604,10 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     let base = setup.base.with_k_sub(setup.k_subs.first().copied().flatten());
     let histories = histories(&base, &setup.cases)?;
     let trace_files = traces(&histories, &args.out)?;
+    let container = match format {
+        Format::Csv => None,
+        _ => Some(trace_container(args, format, &trace_files, &setup.json(&rows))?),
+    };
     let files = if args.no_plots {
         Vec::new()
     } else {
@@ -573,10 +622,11 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     let path = args.out.join("benchmark.md");
     std::fs::write(&path, md).with_context(|| format!("cannot write {}", path.display()))?;
     out(&format!(
-        "{} run(s) in {elapsed:.2} s; wrote {}, {} trace files (CSV){}\n",
+        "{} run(s) in {elapsed:.2} s; wrote {}, {} trace files (CSV{}){}\n",
         rows.len() * (1 + args.perturbed.unwrap_or(0)),
         path.display(),
         trace_files.len(),
+        container.map_or(String::new(), |p| format!(", and {}", p.display())),
         if files.is_empty() {
             String::new()
         } else {

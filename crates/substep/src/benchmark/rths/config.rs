@@ -50,11 +50,11 @@
 //! guard_factor = 10.0
 //!
 //! [controller.amb]              # compensate::AmbSpec, in samples
-//! inverse_series = [0.99, 101.9, 1789.0, 26497.0]   # g₀…g₃ of 1/G(σ) (default: the nominal plant's)
+//! inverse_series = [0.9925, 101.9, 1789.0, 26497.0]   # g₀…g₃ of 1/G(σ) (default: the nominal plant's)
 //! span = 34                     # samples per difference
 //! smoothing = 34.0              # low-pass time constant of each of two stages [samples]
 //! threshold = 1e-4              # adaptation starts above this |x_m| [m]
-//! forgetting_factor = 0.9995    # RLS, per row
+//! forgetting_factor = 0.99988   # RLS, per row
 //! subsample = 1                 # one RLS row every sample
 //! deviation = 0.5               # each coefficient within ±50 % of the model's
 //! adapted_terms = 2             # adapt c₀ and c₁ (gain and lead); c₂, c₃ stay the model's

@@ -7,7 +7,7 @@
 //! `MATLAB_fields` (the field names as variable-length arrays of single characters), the
 //! convention MATLAB itself writes and `hdf5storage` / `mat73` read.
 
-use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name};
+use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name, split_header};
 use crate::error::{Error, Result};
 use hdf5::types::{FixedAscii, VarLenArray, VarLenUnicode};
 use hdf5::{Extent, File, Location};
@@ -98,15 +98,16 @@ fn h5_table<R: std::io::BufRead>(file: &File, name: &str, table: &mut CsvTable<R
         .create_group_builder()
         .with_gcpl(|p| p.link_creation_order(hdf5::plist::group_create::LinkCreationOrder::Indexed))
         .create(name)?;
-    str_list_attr(&group, "columns", table.columns())?;
+    let names: Vec<String> = table.columns().iter().map(|c| split_header(c).0.to_owned()).collect();
+    str_list_attr(&group, "columns", &names)?;
     let mut datasets = Vec::with_capacity(table.columns().len());
-    for c in table.columns() {
+    for (c, n) in table.columns().iter().zip(&names) {
         let ds = group
             .new_dataset::<f64>()
             .chunk(CHUNK)
             .deflate(DEFLATE)
             .shape(Extent::resizable(0))
-            .create(c.as_str())?;
+            .create(n.as_str())?;
         str_attr(&ds, "units", column_unit(name, c))?;
         datasets.push(ds);
     }
@@ -120,7 +121,7 @@ fn h5_table<R: std::io::BufRead>(file: &File, name: &str, table: &mut CsvTable<R
 /// A MATLAB struct of column vectors (dims `(1, N)` in HDF5).
 fn mat_table<R: std::io::BufRead>(file: &File, name: &str, table: &mut CsvTable<R>) -> H5 {
     let group = file.create_group(&matlab_name(name))?;
-    let fields: Vec<String> = table.columns().iter().map(|c| matlab_name(c)).collect();
+    let fields: Vec<String> = table.columns().iter().map(|c| matlab_name(split_header(c).0)).collect();
     fixed_attr::<6>(&group, "MATLAB_class", "struct")?;
     let names: Vec<VarLenArray<FixedAscii<1>>> = fields
         .iter()

@@ -21,7 +21,7 @@
 //! 2³¹ − 1 bytes per variable in this format: a larger table is refused with a message that
 //! points to `mat73` (MATLAB v7.3, the `hdf5` feature).
 
-use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name};
+use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name, split_header};
 use crate::error::{Error, Result};
 use std::io::{BufReader, BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -54,7 +54,12 @@ pub(super) fn write_file(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata
         let columns = write_table(&mut out, name, csv, shown)?;
         let fields = columns
             .iter()
-            .map(|c| (matlab_name(c), Value::Char(column_unit(name, c).to_string())))
+            .map(|c| {
+                (
+                    matlab_name(split_header(c).0),
+                    Value::Char(column_unit(name, c).to_string()),
+                )
+            })
             .collect();
         units.push((matlab_name(name), Value::Struct(fields)));
     }
@@ -254,7 +259,7 @@ fn unique_names(columns: &[String]) -> Vec<String> {
     columns
         .iter()
         .map(|c| {
-            let base = matlab_name(c);
+            let base = matlab_name(split_header(c).0);
             let mut name = base.clone();
             let mut i = 2;
             while !seen.insert(name.clone()) {

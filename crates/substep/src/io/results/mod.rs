@@ -113,9 +113,22 @@ impl Format {
     }
 }
 
-/// SI unit of a result column, from its name (the CSV headers of `substep run`): `m`, `m/s`,
-/// `m/s^2`, `N`, `N/m`, `N*s/m`, `J`, `s`, `Hz`, or `1` for counts, indices and ratios.
-pub fn column_unit(table: &str, column: &str) -> &'static str {
+/// A CSV header `name [unit]` (the benchmark's traces) split into its name and unit; a header
+/// without the bracketed unit is all name.
+pub fn split_header(column: &str) -> (&str, Option<&str>) {
+    match column.strip_suffix(']').and_then(|c| c.rsplit_once(" [")) {
+        Some((name, unit)) => (name, Some(unit)),
+        None => (column, None),
+    }
+}
+
+/// SI unit of a result column: the bracketed unit of a `name [unit]` header, else from its name
+/// (the CSV headers of `substep run`): `m`, `m/s`, `m/s^2`, `N`, `N/m`, `N*s/m`, `J`, `s`, `Hz`,
+/// or `1` for counts, indices and ratios.
+pub fn column_unit<'a>(table: &str, column: &'a str) -> &'a str {
+    if let (_, Some(unit)) = split_header(column) {
+        return unit;
+    }
     let stem = column.trim_end_matches(|c: char| c.is_ascii_digit());
     match (table, stem) {
         ("fourier", "f_hz") => "Hz",
@@ -252,6 +265,16 @@ pub fn write_container(dir: &Path, format: Format, meta: &Metadata) -> Result<Op
         .collect();
     write_impl(&path, format, &tables, meta)?;
     Ok(Some(path))
+}
+
+/// Write the CSV `tables` (`(name, csv path)`, in order) into the container of `format` at
+/// `path` (under a temporary name, renamed: a failure leaves no partial file). Used for the
+/// benchmark's traces; [`write_container`] for a run's results.
+pub fn write_tables(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
+    if format == Format::Csv {
+        return Err(Error::invalid("format", "csv is no container"));
+    }
+    write_impl(path, format, tables, meta)
 }
 
 fn write_impl(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
