@@ -313,6 +313,8 @@ impl Amb {
 
     /// One RLS row: `F u / scale ≈ Σ θᵢ (mᵢ Dⁱ F y / scale)`, with the instruments `z` (the
     /// regressors themselves for plain RLS): `k = P z / (λ + φᵀ P z)`, `P ← (P − k φᵀ P)/λ`.
+    // Indices read as the matrix algebra they implement.
+    #[allow(clippy::needless_range_loop)]
     fn update(&mut self, regressors: [f64; TERMS], instruments: [f64; TERMS], regressand: f64) {
         let scale = 1.0 / self.spec.threshold;
         let mut phi = [0.0; TERMS];
