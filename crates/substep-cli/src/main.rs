@@ -12,6 +12,7 @@ mod bench_models;
 mod benchmark;
 mod container;
 mod engineering;
+mod lab;
 mod model_export;
 mod monitor;
 mod output;
@@ -63,6 +64,8 @@ enum Command {
     Benchmark(benchmark::BenchmarkArgs),
     /// The numerical model of a test definition: `model export CONFIG --mtx DIR` (MatrixMarket)
     Model(model_export::ModelArgs),
+    /// Lab targets: `lab emulate TARGET.toml` serves a test's [substructure.lab] protocol with its virtual lab behind it (docs/lab.md)
+    Lab(lab::LabArgs),
 }
 
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -191,6 +194,7 @@ fn main() -> ExitCode {
         Some(Command::Benchmark(args)) => benchmark::benchmark(&args),
         Some(Command::Study(args)) => study::study(&args),
         Some(Command::Model(args)) => model_export::model(&args),
+        Some(Command::Lab(args)) => lab::lab(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

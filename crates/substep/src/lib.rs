@@ -28,6 +28,7 @@ pub mod bench;
 pub mod benchmark;
 pub mod compensate;
 pub mod ident;
+pub mod lab;
 pub mod linalg;
 pub mod site;
 pub mod sparse;

@@ -633,6 +633,7 @@ impl<'d> Run<'d> {
             None => (None, None),
         };
         let (estimation, phase_lag, mut warnings) = summary::compensation_summary(sim);
+        let lab = summary::lab_summary(sim, &mut warnings);
         warnings.extend(indicator_warnings);
         let sub = def.substructure.as_ref();
         RunSummary {
@@ -692,6 +693,7 @@ impl<'d> Run<'d> {
             reference: reference_summary,
             estimation,
             phase_lag,
+            lab,
             stability: stability.as_ref().map(StabilityMonitor::summary),
             warnings,
             input_motion: motion_summary,

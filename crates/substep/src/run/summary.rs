@@ -120,6 +120,11 @@ pub struct RunSummary {
     /// Phase-lag compensation: kind and guard trips.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phase_lag: Option<Value>,
+    /// A lab target's link (`[substructure.lab]`, docs/lab.md): exchanges, sub-steps held,
+    /// late / duplicated / unexpected / malformed replies, and the round trip p50 / p99 / max
+    /// \[µs\] (timings: they differ between reruns).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lab: Option<Value>,
     /// The on-line stability indicator: thresholds, worst values, alarms (docs/monitor.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stability: Option<crate::monitor::StabilitySummary>,
@@ -284,6 +289,25 @@ pub(super) fn phase_lag_json(p: &PhaseLagDefinition) -> Value {
 
 /// Estimation counts and phase-lag trips of a finished (or stopped) run, and the warnings.
 /// `(estimation, phase_lag, warnings)` of the summary.
+/// The `lab` block of a run against a lab target; a warning when sub-steps were held.
+pub(super) fn lab_summary(sim: &Simulation, warnings: &mut Vec<String>) -> Option<Value> {
+    let s = sim.substructure_test()?.site.lab_stats()?;
+    if s.held > 0 {
+        warnings.push(format!(
+            "lab target: {} sub-step(s) held the last measurement (no reply in time; at most {} in a row)",
+            s.held, s.max_held_in_a_row
+        ));
+    }
+    let us = |d: std::time::Duration| d.as_secs_f64() * 1e6;
+    Some(json!({
+        "protocol": s.protocol, "transport": s.transport, "exchanges": s.exchanges,
+        "held": s.held, "max_held_in_a_row": s.max_held_in_a_row, "late": s.late,
+        "duplicated": s.duplicated, "unexpected": s.unexpected, "malformed": s.malformed,
+        "stale": s.stale, "resent": s.resent,
+        "rtt_us": { "p50": us(s.rtt.percentile(0.5)), "p99": us(s.rtt.percentile(0.99)), "max": us(s.rtt.max()) },
+    }))
+}
+
 pub(super) fn compensation_summary(sim: &Simulation) -> (Option<Value>, Option<Value>, Vec<String>) {
     let mut warnings = Vec::new();
     let Some(test) = sim.substructure_test() else {

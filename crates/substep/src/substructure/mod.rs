@@ -87,4 +87,9 @@ pub trait ExperimentalSubstructure: Send {
     fn pace_ramp(&mut self, _clock: Option<Box<dyn RampClock>>) -> bool {
         false
     }
+    /// The link statistics of a lab target ([`crate::lab::LabTarget`]), if this side is one or
+    /// wraps one (wrappers forward it). Default: `None`.
+    fn lab_stats(&self) -> Option<&crate::lab::LabStats> {
+        None
+    }
 }

@@ -312,6 +312,9 @@ impl ExperimentalSubstructure for LimitedSite {
         }
         true
     }
+    fn lab_stats(&self) -> Option<&crate::lab::LabStats> {
+        self.inner.lab_stats()
+    }
     fn pace_ramp(&mut self, clock: Option<Box<dyn RampClock>>) -> bool {
         self.clock = clock;
         true

@@ -157,6 +157,9 @@ impl ExperimentalSubstructure for DelayRampSite {
     fn request_stop(&mut self, reason: &str) -> bool {
         self.inner.request_stop(reason)
     }
+    fn lab_stats(&self) -> Option<&crate::lab::LabStats> {
+        self.inner.lab_stats()
+    }
     fn pace_ramp(&mut self, clock: Option<Box<dyn crate::substructure::RampClock>>) -> bool {
         self.inner.pace_ramp(clock)
     }

@@ -54,6 +54,10 @@ pub struct SubstructureDefinition {
     /// A remote site instead of the virtual lab (the specimens, if any, then only feed the
     /// reference solution).
     pub remote: Option<RemoteDefinition>,
+    /// A lab's real-time target instead of the virtual lab (`[substructure.lab]`); the
+    /// specimens, actuator and sensors then describe what `substep lab emulate` runs and feed
+    /// the reference.
+    pub lab_target: Option<crate::lab::LabTargetSpec>,
     /// Safety limits with a controlled stop.
     pub limits: Option<SafetyLimits>,
     /// `[substructure.limits] stability = "off"`: no on-line stability indicator (see
@@ -94,19 +98,11 @@ impl SubstructureDefinition {
     pub fn build_site(&self, controller: &SubstepController, dt: f64) -> Result<Box<dyn ExperimentalSubstructure>> {
         let n_c = self.coupling_dofs.len();
         let site: Box<dyn ExperimentalSubstructure> = match &self.remote {
-            None => Box::new(
-                VirtualLab::from_specs_with(
-                    &self.coupling_dofs,
-                    &self.specimens,
-                    &vec![self.actuator.clone(); n_c],
-                    &self.force_sensors,
-                    &self.displacement_sensors,
-                    dt / self.substeps as f64,
-                    self.inner_steps,
-                    &self.lab,
-                )
-                .map_err(|e| prefixed(e, "substructure."))?,
-            ),
+            None if self.lab_target.is_some() => {
+                let target = self.lab_target.as_ref().expect("checked");
+                Box::new(crate::lab::LabTarget::connect(target, n_c)?)
+            }
+            None => Box::new(self.virtual_lab(dt)?),
             Some(r) => match (r.protocol, r.mode) {
                 (RemoteProtocol::Substep, Mode::PerSubstep) => Box::new(RemoteSite::for_controller(
                     r.address.as_str(),
@@ -152,6 +148,22 @@ impl SubstructureDefinition {
             Some(p) => Box::new(p.wrap(site).map_err(|e| prefixed(e, "substructure."))?),
         };
         Ok(site)
+    }
+
+    /// The virtual lab of this test (actuators, specimens, sensors) at time step `dt`.
+    pub fn virtual_lab(&self, dt: f64) -> Result<VirtualLab> {
+        let n_c = self.coupling_dofs.len();
+        VirtualLab::from_specs_with(
+            &self.coupling_dofs,
+            &self.specimens,
+            &vec![self.actuator.clone(); n_c],
+            &self.force_sensors,
+            &self.displacement_sensors,
+            dt / self.substeps as f64,
+            self.inner_steps,
+            &self.lab,
+        )
+        .map_err(|e| prefixed(e, "substructure."))
     }
 
     /// A per-step remote test (`mode = "per_step"`): the site runs the sub-steps of each step.
@@ -211,6 +223,7 @@ pub(crate) struct RawSubstructure {
     pub(crate) error_force: Option<RawErrorForce>,
     pub(crate) phase_lag: Option<RawPhaseLag>,
     pub(crate) remote: Option<RawRemote>,
+    pub(crate) lab: Option<super::lab_target::RawLabTarget>,
     pub(crate) limits: Option<RawLimits>,
     pub(crate) delay_ramp: Option<RawDelayRamp>,
     /// `"model"` (default) or `"from_motion"`.
@@ -279,7 +292,14 @@ impl RawSubstructure {
             return Err(Error::invalid(format!("{p}substeps"), "must be at least 1"));
         }
         let remote = self.remote.as_ref().map(|r| r.build(base)).transpose()?;
-        if self.specimen.is_empty() && remote.is_none() {
+        let lab_target = self.lab.as_ref().map(|l| l.build(&self.coupling_dofs)).transpose()?;
+        if remote.is_some() && lab_target.is_some() {
+            return Err(Error::invalid(
+                format!("{p}lab"),
+                "give either [substructure.remote] (a site) or [substructure.lab] (a lab target), not both",
+            ));
+        }
+        if self.specimen.is_empty() && remote.is_none() && lab_target.is_none() {
             return Err(Error::invalid(
                 format!("{p}specimen"),
                 "no specimen given (add a [[substructure.specimen]] table)",
@@ -478,6 +498,7 @@ impl RawSubstructure {
             stability_off: self.limits.as_ref().is_some_and(RawLimits::stability_off),
             coupling_dofs: coupling,
             remote,
+            lab_target,
             phase_lag,
             lab: LabOptions {
                 command_converter,

@@ -254,6 +254,7 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
             ramp: Ramp::new(0, s.ramp_steps * s.k_sub),
         }),
         remote: None,
+        lab_target: None,
         limits: None,
         stability_off: false,
         lab: Default::default(),
