@@ -172,7 +172,8 @@ impl HistoryWriter {
 
 /// `substeps.csv`: `step, substep, t, cmd.., fm.., dm..` for every sub-step, with phase-lag
 /// compensation also `te.., du..` (tracking error and correction, from
-/// [`SubstepObserver::phase_lag`]), with safety limits a last column `ramp`: 0 for the
+/// [`SubstepObserver::phase_lag`]), against a lab target `held, strays` (from
+/// [`SubstepObserver::lab`]), with safety limits a last column `ramp`: 0 for the
 /// algorithm's sub-steps, `s = 1, 2, ...` for the ramp to the safe position after a stop
 /// ([`SubstepObserver::ramp`]; `te`, `du` are NaN there). Write errors are kept and reported
 /// by [`SubstepWriter::finish`] (the observer interface cannot return them).
@@ -184,6 +185,8 @@ pub struct SubstepWriter {
     error: Option<io::Error>,
     /// Tracking error and correction of the current sub-step (phase-lag runs).
     phase_lag: Option<(Vec<f64>, Vec<f64>)>,
+    /// `held`, `strays` of the current sub-step (lab-target runs).
+    lab: Option<(bool, u64)>,
     /// The `ramp` column is written (runs with safety limits).
     ramp_column: bool,
     ramp_rows: usize,
@@ -207,6 +210,7 @@ impl SubstepWriter {
             dtau: layout.dt / substeps as f64,
             error: None,
             phase_lag: layout.phase_lag.then(|| (vec![0.0; n_c], vec![0.0; n_c])),
+            lab: layout.lab.then_some((false, 0)),
             ramp_column: layout.ramp_column,
             ramp_rows: 0,
         })
@@ -242,6 +246,13 @@ impl SubstepWriter {
                 }
             }
         }
+        if let Some((held, strays)) = self.lab {
+            if ramp == 0 {
+                let _ = write!(line, ",{},{strays}", u8::from(held));
+            } else {
+                line.push_str(",NaN,NaN");
+            }
+        }
         if self.ramp_column {
             let _ = write!(line, ",{ramp}");
         }
@@ -267,6 +278,11 @@ impl SubstepWriter {
 }
 
 impl SubstepObserver for SubstepWriter {
+    fn lab(&mut self, held: bool, strays: u64) {
+        if let Some(l) = &mut self.lab {
+            *l = (held, strays);
+        }
+    }
     fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
         if let Some((te, du)) = &mut self.phase_lag {
             te.copy_from_slice(tracking_error);

@@ -103,8 +103,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     // reference's and the indicator's when they run; no phase-lag columns (the real-time
     // records do not carry them).
     let indicator_columns = live.indicator().is_some();
-    // As offline: a remote site reports no noise-free force, so no `fei`.
-    let ideal_column = sub.remote.is_none();
+    // As offline: a remote site or a lab target reports no noise-free force, so no `fei`.
+    let ideal_column = sub.remote.is_none() && sub.lab_target.is_none();
     let layout = substep::run::Layout {
         n_dofs: def.model.n_dofs(),
         coupling_dofs: sub.coupling_dofs.clone(),
@@ -115,6 +115,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         substeps: Some(sub.substeps),
         // What the stop's substeps.csv below holds: the ramp, no phase-lag columns.
         phase_lag: false,
+        lab: false,
         ramp_column: true,
         response_columns: None,
     };

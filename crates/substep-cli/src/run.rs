@@ -546,6 +546,11 @@ impl SubstepObserver for CliObserver {
             w.phase_lag(tracking_error, correction);
         }
     }
+    fn lab(&mut self, held: bool, strays: u64) {
+        if let Some(w) = &mut self.substeps {
+            w.lab(held, strays);
+        }
+    }
     fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
         if let Some(w) = &mut self.substeps {
             w.ramp(step, j, s, command, force, displacement);

@@ -47,6 +47,9 @@ impl<O: SubstepObserver> SubstepObserver for LiveObserver<'_, O> {
     fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
         self.inner.phase_lag(tracking_error, correction);
     }
+    fn lab(&mut self, held: bool, strays: u64) {
+        self.inner.lab(held, strays);
+    }
     #[allow(clippy::too_many_arguments)]
     fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
         self.inner.ramp(step, j, s, command, force, displacement);

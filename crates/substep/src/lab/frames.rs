@@ -134,16 +134,12 @@ impl GenericSizes {
     }
 }
 
-/// ECGenericTCP, host → target: `[3, ctrl…]` (set trial response).
-pub fn generic_trial(control: &[f64], out: &mut [u8; OF_BYTES]) -> Result<()> {
+/// ECGenericTCP, host → target: `[code, ctrl…]`. ECGenericTCP keeps one send buffer whose
+/// words from 1 on are the control vector, and only sets word 0 to the action code: 3 (set
+/// trial response), 6 (get DAQ response) and 99 (die) all carry the last control vector.
+pub fn generic_frame(code: f64, control: &[f64], out: &mut [u8; OF_BYTES]) -> Result<()> {
     check_fits("generic_tcp control signals", control.len(), OF_WORDS - 1)?;
-    speedgoat_command(action::SET_TRIAL_RESPONSE, control, out)
-}
-
-/// ECGenericTCP, host → target: a frame with only its action code (6: get DAQ response, 99: die).
-pub fn generic_action(code: f64, out: &mut [u8; OF_BYTES]) {
-    out.fill(0);
-    out[..8].copy_from_slice(&code.to_le_bytes());
+    speedgoat_command(code, control, out)
 }
 
 /// substep lab I/O (`substep_udp`), host → target: `[sequence, time, Δτ, cmd_1 … cmd_n]`,

@@ -77,6 +77,15 @@ pub struct LabStats {
     pub resent: u64,
     /// Round trip of the answered exchanges.
     pub rtt: LatencyHistogram,
+    /// The last exchange: held, and the stray replies it discarded (for `substeps.csv`).
+    pub last_held: bool,
+    pub last_strays: u64,
+}
+
+impl LabStats {
+    fn strays(&self) -> u64 {
+        self.late + self.duplicated + self.unexpected + self.malformed + self.stale
+    }
 }
 
 impl LabStats {
@@ -95,6 +104,8 @@ impl LabStats {
             resent: 0,
             // 1 µs bins up to 100 ms.
             rtt: LatencyHistogram::new(Duration::from_micros(1), 100_000),
+            last_held: false,
+            last_strays: 0,
         }
     }
 }
@@ -278,13 +289,15 @@ impl LabTarget {
                 }
             }
         }
+        // acquire(): atTarget = 0, then read until a frame says 1 — at least one new frame, as
+        // the C++ does (ECSpeedgoat.cpp 800–803).
         loop {
+            if !self.receive(OF_BYTES, deadline)? {
+                return Ok(Exchange::Missed);
+            }
             if frames::word(&self.rx, 1) == 1.0 {
                 frames::words(&self.rx, 2, &mut self.measured_signals);
                 return Ok(Exchange::Answered);
-            }
-            if !self.receive(OF_BYTES, deadline)? {
-                return Ok(Exchange::Missed);
             }
         }
     }
@@ -301,12 +314,14 @@ impl LabTarget {
     /// One ECGenericTCP exchange: 3 (trial: the commands, then the time) and 6 (DAQ).
     fn exchange_generic(&mut self, deadline: Instant) -> Result<Exchange> {
         let mut tx = [0u8; OF_BYTES];
-        frames::generic_trial(&self.control, &mut tx).map_err(|e| self.fail(e.to_string()))?;
-        self.tx.copy_from_slice(&tx);
-        self.send("action 3")?;
-        frames::generic_action(action::GET_DAQ_RESPONSE, &mut tx);
-        self.tx.copy_from_slice(&tx);
-        self.send("action 6")?;
+        for (code, what) in [
+            (action::SET_TRIAL_RESPONSE, "action 3"),
+            (action::GET_DAQ_RESPONSE, "action 6"),
+        ] {
+            frames::generic_frame(code, &self.control, &mut tx).map_err(|e| self.fail(e.to_string()))?;
+            self.tx.copy_from_slice(&tx);
+            self.send(what)?;
+        }
         if !self.receive(OF_BYTES, deadline)? {
             // A stream that missed a reply is out of step: the next frame would be this one's.
             return Err(self.fail(format!(
@@ -325,11 +340,9 @@ impl LabTarget {
                 let _ = self.link.send(&tx);
                 let _ = self.link.send(&tx);
             }),
-            LabProtocol::GenericTcp => {
-                frames::generic_action(action::DIE, &mut tx);
+            LabProtocol::GenericTcp => frames::generic_frame(action::DIE, &self.control, &mut tx).map(|()| {
                 let _ = self.link.send(&tx);
-                Ok(())
-            }
+            }),
             LabProtocol::SubstepUdp => {
                 let mut f = vec![0u8; self.tx.len()];
                 frames::lab_command(-1.0, 0.0, 0.0, &self.command_signals, &mut f);
@@ -384,11 +397,14 @@ impl ExperimentalSubstructure for LabTarget {
         let start = Instant::now();
         let deadline = start + self.spec.timeout;
         self.stats.exchanges += 1;
+        let strays_before = self.stats.strays();
         let outcome = match self.spec.protocol {
             LabProtocol::SubstepUdp => self.exchange_substep_udp(time, dtau, deadline, start)?,
             LabProtocol::Speedgoat => self.exchange_speedgoat(deadline)?,
             LabProtocol::GenericTcp => self.exchange_generic(deadline)?,
         };
+        self.stats.last_held = matches!(outcome, Exchange::Missed);
+        self.stats.last_strays = self.stats.strays() - strays_before;
         match outcome {
             Exchange::Answered => {
                 self.stats.rtt.record(start.elapsed());

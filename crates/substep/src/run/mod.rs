@@ -67,6 +67,8 @@ pub struct Layout {
     pub substeps: Option<usize>,
     /// Sub-step rows carry `te`, `du` (phase-lag compensation).
     pub phase_lag: bool,
+    /// Sub-step rows carry `held`, `strays` (a lab target's exchange, docs/lab.md).
+    pub lab: bool,
     /// Sub-step rows end with a `ramp` column (runs with safety limits).
     pub ramp_column: bool,
     /// Columns of the engineering rows (`response.csv`), when they are recorded.
@@ -103,7 +105,8 @@ impl Layout {
     }
 
     /// The columns of `substeps.csv` (`None` for a monolithic run): `step, substep, t, cmd..,
-    /// fm.., dm..`, with phase-lag compensation `te.., du..`, with safety limits `ramp`.
+    /// fm.., dm..`, with phase-lag compensation `te.., du..`, against a lab target `held,
+    /// strays`, with safety limits `ramp`.
     pub fn substep_columns(&self) -> Option<Vec<String>> {
         self.substeps?;
         let n_c = self.coupling_dofs.len();
@@ -115,6 +118,10 @@ impl Layout {
             for p in ["te", "du"] {
                 group(&mut c, p, n_c);
             }
+        }
+        if self.lab {
+            c.push("held".into());
+            c.push("strays".into());
         }
         if self.ramp_column {
             c.push("ramp".into());
@@ -195,6 +202,10 @@ impl<A: SubstepObserver + ?Sized, B: SubstepObserver> SubstepObserver for Both<'
         self.0.phase_lag(tracking_error, correction);
         self.1.phase_lag(tracking_error, correction);
     }
+    fn lab(&mut self, held: bool, strays: u64) {
+        self.0.lab(held, strays);
+        self.1.lab(held, strays);
+    }
     #[allow(clippy::too_many_arguments)]
     fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
         self.0.ramp(step, j, s, command, force, displacement);
@@ -223,13 +234,13 @@ impl SubstepObserver for SubstepMetrics {
 }
 
 /// Extra history groups: `fei` (ideal error force) for every virtual (local) substructured run
-/// — a remote site reports no noise-free force —, `te`, `du` (tracking error and correction of
-/// the last sub-step) with phase-lag compensation.
+/// — a remote site or a lab target reports no noise-free force —, `te`, `du` (tracking error
+/// and correction of the last sub-step) with phase-lag compensation.
 fn extra_groups(def: &TestDefinition) -> Vec<&'static str> {
     match &def.substructure {
         None => Vec::new(),
-        Some(s) if s.remote.is_some() && s.phase_lag.is_some() => vec!["te", "du"],
-        Some(s) if s.remote.is_some() => Vec::new(),
+        Some(s) if (s.remote.is_some() || s.lab_target.is_some()) && s.phase_lag.is_some() => vec!["te", "du"],
+        Some(s) if s.remote.is_some() || s.lab_target.is_some() => Vec::new(),
         Some(s) if s.phase_lag.is_some() => vec!["fei", "te", "du"],
         Some(_) => vec!["fei"],
     }
@@ -407,6 +418,7 @@ impl<'d> Run<'d> {
             dt: def.integrator.dt,
             substeps: sub.map(|s| s.substeps),
             phase_lag: sub.is_some_and(|s| s.phase_lag.is_some()),
+            lab: sub.is_some_and(|s| s.lab_target.is_some()),
             ramp_column: sub.is_some_and(|s| s.limits.is_some()),
             response_columns: engineering.as_ref().map(EngineeringRecorder::columns),
         };

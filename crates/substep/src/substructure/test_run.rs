@@ -13,6 +13,11 @@ pub trait SubstepObserver {
     /// With phase-lag compensation: the tracking error `d − y` and the correction `Δu` of the
     /// sub-step, called just before [`substep`](Self::substep) for the same sub-step.
     fn phase_lag(&mut self, _tracking_error: &[f64], _correction: &[f64]) {}
+    /// Against a lab target ([`crate::lab::LabTarget`]): whether this sub-step held the last
+    /// measurement (no reply in time) and how many stray replies (late, duplicated,
+    /// unexpected, malformed, stale) its exchange discarded; called just before
+    /// [`substep`](Self::substep) for the same sub-step.
+    fn lab(&mut self, _held: bool, _strays: u64) {}
     /// After a safety stop in step `step`: ramp sub-step `s` (1-based) to the safe position,
     /// numbered `j` after the step's executed sub-steps (see [`StopLog::replay`]).
     #[allow(clippy::too_many_arguments)]
@@ -119,6 +124,9 @@ impl SubstructureTest {
             }
             if let Some(p) = self.site.phase_lag() {
                 observer.phase_lag(p.tracking_error(), p.correction());
+            }
+            if let Some(s) = self.site.lab_stats() {
+                observer.lab(s.last_held, s.last_strays);
             }
             observer.substep(
                 self.step + 1,
