@@ -221,11 +221,12 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let Some(e) = write_error {
         return Err(anyhow::Error::from(e).context(format!("cannot write {}", history_path.display())));
     }
-    let (report, failure, stop) = match result {
-        Ok((report, _)) => (report, None, None),
+    // The lab target's link statistics come back with the test (a failed run does not return it).
+    let (report, failure, stop, lab) = match result {
+        Ok((report, test)) => (report, None, None, test.site.lab_stats().cloned()),
         Err(f) => {
             let f = *f;
-            (f.report, Some(f.error), f.stopped_at.zip(f.stop_log))
+            (f.report, Some(f.error), f.stopped_at.zip(f.stop_log), None)
         }
     };
     let realtime_path = out_dir.join("realtime.json");
@@ -334,6 +335,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let (Some(s), Some(obj)) = (stopped_by, summary.as_object_mut()) {
         obj.insert("stopped_by".into(), s.into());
     }
+    if let (Some(l), Some(obj)) = (&lab, summary.as_object_mut()) {
+        obj.insert("lab".into(), l.json());
+    }
     if let (Some((scheme, n_dofs, u, f)), Some(obj)) = (reference_errors, summary.as_object_mut()) {
         obj.insert(
             "reference".into(),
@@ -372,6 +376,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         );
         if let Some((scheme, _, u, f)) = reference_errors {
             crate::run::print_reference_error(scheme, u, f);
+        }
+        if let Some(l) = &lab {
+            println!("  {}", l.line());
         }
         if let Some(n) = ramp_substeps.filter(|&n| n > 0) {
             println!("  the {n} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)");

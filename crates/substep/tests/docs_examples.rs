@@ -66,6 +66,14 @@ const SEARCH_DIRS: [&str; 4] = ["", "examples", "examples/studies", "examples/si
 /// Files the docs' examples name as the user's own (a record, a matrix, a secret): `(path,
 /// contents)`, written to a scratch directory so the rest of those blocks is still checked.
 const STAND_INS: &[(&str, &str)] = &[
+    // docs/config.md `substep lab emulate`: the test a target file names.
+    (
+        "my_test.toml",
+        concat!(
+            include_str!("../../../examples/default.toml"),
+            "\n[substructure.lab]\nprotocol = \"substep_udp\"\naddress = \"127.0.0.1:5000\"\n"
+        ),
+    ),
     // docs/config.md `[structure]`: `stiffness = "K.mtx"` next to a 2×2 inline mass.
     (
         "K.mtx",
@@ -245,6 +253,7 @@ enum Kind {
     SiteFragment,
     Study,
     Benchmark,
+    LabEmulator,
     Skipped,
     Listed,
 }
@@ -358,6 +367,8 @@ impl Checker {
             }
         } else if !keys.is_empty() && keys.iter().all(|k| BENCHMARK_KEYS.contains(k)) {
             Kind::Benchmark
+        } else if keys.contains(&"test") && keys.iter().all(|k| ["test", "bind", "idle", "faults"].contains(k)) {
+            Kind::LabEmulator
         } else if listed {
             return Ok(Kind::Listed);
         } else {
@@ -398,6 +409,13 @@ impl Checker {
             Kind::Benchmark => BenchmarkConfig::parse(&text, name)
                 .map(drop)
                 .map_err(|e| format!("benchmark settings: {e}"))?,
+            Kind::LabEmulator => self
+                .in_some_dir(None, |dir| {
+                    substep::io::config::emulator_from_toml(&text, name, dir)
+                        .map(drop)
+                        .map_err(|e| e.to_string())
+                })
+                .map_err(|e| format!("lab emulator target file: {e}"))?,
             Kind::Skipped | Kind::Listed => unreachable!(),
         }
         Ok(kind)

@@ -86,6 +86,35 @@ impl LabStats {
     fn strays(&self) -> u64 {
         self.late + self.duplicated + self.unexpected + self.malformed + self.stale
     }
+
+    /// The `lab` block of `summary.json` (round trips in µs).
+    pub fn json(&self) -> serde_json::Value {
+        let us = |d: Duration| d.as_secs_f64() * 1e6;
+        serde_json::json!({
+            "protocol": self.protocol, "transport": self.transport, "exchanges": self.exchanges,
+            "held": self.held, "max_held_in_a_row": self.max_held_in_a_row, "late": self.late,
+            "duplicated": self.duplicated, "unexpected": self.unexpected, "malformed": self.malformed,
+            "stale": self.stale, "resent": self.resent,
+            "rtt_us": { "p50": us(self.rtt.percentile(0.5)), "p99": us(self.rtt.percentile(0.99)), "max": us(self.rtt.max()) },
+        })
+    }
+
+    /// One line for a printed summary.
+    pub fn line(&self) -> String {
+        let us = |d: Duration| d.as_secs_f64() * 1e6;
+        format!(
+            "lab target ({} over {}): {} exchanges, {} held, {} late, {} duplicated; round trip p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs",
+            self.protocol,
+            self.transport,
+            self.exchanges,
+            self.held,
+            self.late,
+            self.duplicated,
+            us(self.rtt.percentile(0.5)),
+            us(self.rtt.percentile(0.99)),
+            us(self.rtt.max())
+        )
+    }
 }
 
 impl LabStats {
@@ -127,6 +156,9 @@ pub struct LabTarget {
     /// Bit `k` set: the reply to `sequence − k` was taken (substep_udp).
     answered: u64,
     in_a_row: u64,
+    /// generic_tcp: replies still owed by the target for held sub-steps (a TCP stream delivers
+    /// them late but in order).
+    owed: u64,
     tx: Vec<u8>,
     rx: Vec<u8>,
     command_signals: Vec<f64>,
@@ -175,6 +207,7 @@ impl LabTarget {
             sequence: 0,
             answered: 0,
             in_a_row: 0,
+            owed: 0,
             tx: vec![0; tx],
             // One word more than a reply, so that an oversized datagram shows as one.
             rx: vec![0; rx + 8],
@@ -322,13 +355,20 @@ impl LabTarget {
             self.tx.copy_from_slice(&tx);
             self.send(what)?;
         }
-        if !self.receive(OF_BYTES, deadline)? {
-            // A stream that missed a reply is out of step: the next frame would be this one's.
-            return Err(self.fail(format!(
-                "no reply to action 6 within {:.3} s: the stream is out of step",
-                self.spec.timeout.as_secs_f64()
-            )));
+        // Replies owed for held sub-steps come first (the stream keeps their order): read and
+        // discard them, then this sub-step's.
+        let mut owed = self.owed + 1;
+        while owed > 0 {
+            if !self.receive(OF_BYTES, deadline)? {
+                self.owed = owed;
+                return Ok(Exchange::Missed);
+            }
+            owed -= 1;
+            if owed > 0 {
+                self.stats.late += 1;
+            }
         }
+        self.owed = 0;
         frames::words(&self.rx, 0, &mut self.measured_signals);
         Ok(Exchange::Answered)
     }

@@ -298,14 +298,7 @@ pub(super) fn lab_summary(sim: &Simulation, warnings: &mut Vec<String>) -> Optio
             s.held, s.max_held_in_a_row
         ));
     }
-    let us = |d: std::time::Duration| d.as_secs_f64() * 1e6;
-    Some(json!({
-        "protocol": s.protocol, "transport": s.transport, "exchanges": s.exchanges,
-        "held": s.held, "max_held_in_a_row": s.max_held_in_a_row, "late": s.late,
-        "duplicated": s.duplicated, "unexpected": s.unexpected, "malformed": s.malformed,
-        "stale": s.stale, "resent": s.resent,
-        "rtt_us": { "p50": us(s.rtt.percentile(0.5)), "p99": us(s.rtt.percentile(0.99)), "max": us(s.rtt.max()) },
-    }))
+    Some(s.json())
 }
 
 pub(super) fn compensation_summary(sim: &Simulation) -> (Option<Value>, Option<Value>, Vec<String>) {

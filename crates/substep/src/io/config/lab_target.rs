@@ -257,13 +257,20 @@ struct RawFaults {
 /// Read a `substep lab emulate` target file: the emulator's spec and the virtual lab of its
 /// test definition (which must have a `[substructure.lab]`: protocol, transport, channels and,
 /// unless `bind` is given, the address to serve).
-pub fn emulator_from_file(
-    path: &Path,
-) -> Result<(EmulatorSpec, Box<dyn crate::substructure::ExperimentalSubstructure>)> {
+pub fn emulator_from_file(path: &Path) -> Result<Emulated> {
     let name = path.display().to_string();
     let text = crate::io::limits::read_text(path, crate::io::limits::CONFIG_MAX_BYTES)?;
-    let raw: RawEmulator = toml::from_str(&text).map_err(|e| super::toml_error(&e, &text, &name))?;
-    let base = path.parent().unwrap_or(Path::new(""));
+    emulator_from_toml(&text, &name, path.parent().unwrap_or(Path::new("")))
+}
+
+/// The emulator and its virtual lab.
+pub type Emulated = (EmulatorSpec, Box<dyn crate::substructure::ExperimentalSubstructure>);
+
+/// As [`emulator_from_file`] from the file's text; `name` names it in errors, `base` is the
+/// directory `test` is relative to.
+pub fn emulator_from_toml(text: &str, name: &str, base: &Path) -> Result<Emulated> {
+    let name = name.to_string();
+    let raw: RawEmulator = toml::from_str(text).map_err(|e| super::toml_error(&e, text, &name))?;
     let def = super::TestDefinition::from_file(base.join(&raw.test))?;
     let sub = def
         .substructure

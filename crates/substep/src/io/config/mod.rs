@@ -55,7 +55,7 @@ pub use ground_motion::GroundMotion;
 use ground_motion::RawGroundMotion;
 pub use integrator::IntegratorDefinition;
 use integrator::RawIntegrator;
-pub use lab_target::emulator_from_file;
+pub use lab_target::{Emulated, emulator_from_file, emulator_from_toml};
 use monitor::RawMonitor;
 pub use monitor::{MAX_TOKEN_CHARS, MIN_TOKEN_CHARS, MonitorSettings, check_token};
 use nalgebra::DMatrix;
