@@ -118,6 +118,9 @@ fn lab_run(
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+    // The emulator's report ("session ended: …; N sub-steps, …") for the tests that read it.
+    let rest = emulator.wait_with_output().unwrap();
+    std::fs::write(dir.join(format!("{name}.emu.out")), &rest.stdout).unwrap();
     let summary = std::fs::read_to_string(dir.join(name).join("summary.json")).unwrap();
     (out, serde_json::from_str(&summary).unwrap())
 }
@@ -321,5 +324,49 @@ fn bad_lab_input_is_one_line_with_exit_code_2() {
         text(&out.stderr).contains("the test has no [substructure.lab]"),
         "{}",
         text(&out.stderr)
+    );
+}
+
+/// Safety stays on the host: the same displacement limit stops the lab test at the same step as
+/// the virtual one, and the ramp to the safe position goes to the target sub-step by sub-step,
+/// the same commands in `substeps.csv`.
+#[test]
+fn safety_limits_stop_a_lab_test_as_they_stop_the_virtual_one() {
+    let dir = temp_dir("limits");
+    let limits = "[substructure.limits]\ndisplacement = 0.05\nramp_time = 0.2\n";
+    std::fs::write(dir.join("local.toml"), config(limits)).unwrap();
+    let local = run(&dir, "local.toml", "local");
+    assert_eq!(local.status.code(), Some(1), "{}", text(&local.stderr));
+    assert!(text(&local.stderr).contains("safety stop: measured displacement"));
+    let (out, s) = lab_run(
+        &dir,
+        "lab",
+        "substep_udp",
+        "udp",
+        &format!("timeout = 2.0\n{limits}"),
+        "",
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let local_summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("local/summary.json")).unwrap()).unwrap();
+    assert_eq!(s["stopped_at_step"], local_summary["stopped_at_step"]);
+    assert_eq!(s["ramp_substeps"], 80);
+    assert_eq!(s["lab"]["held"], 0);
+    let (h1, a) = table(&dir.join("local/substeps.csv"));
+    let (h2, b) = table(&dir.join("lab/substeps.csv"));
+    let ramp = |h: &[String]| h.iter().position(|c| c == "ramp").unwrap();
+    let (r1, r2) = (ramp(&h1), ramp(&h2));
+    let ramp_rows =
+        |rows: &[Vec<f64>], r: usize| rows.iter().filter(|x| x[r] > 0.0).map(|x| x[3]).collect::<Vec<f64>>();
+    let (ca, cb) = (ramp_rows(&a, r1), ramp_rows(&b, r2));
+    assert_eq!(ca.len(), 80);
+    assert_eq!(ca, cb, "the ramp commands");
+    assert_eq!(*cb.last().unwrap(), 0.0);
+    // The target executed every sub-step the host recorded, the ramp's included.
+    let emulated = std::fs::read_to_string(dir.join("lab.emu.out")).unwrap();
+    assert!(
+        emulated.contains(&format!("; {} sub-steps,", b.len())),
+        "{emulated} vs {} rows",
+        b.len()
     );
 }
