@@ -400,6 +400,16 @@ fn print_header(args: &RunArgs, def: &TestDefinition) {
         def.model.n_dofs(),
         def.model.storage_name()
     );
+    if let Some(t) = def.substructure.as_ref().and_then(|s| s.lab_target.as_ref()) {
+        println!(
+            "  experimental side: lab target at {} ({} over {}, exchange timeout {} ms, up to {} held sub-steps in a row)",
+            t.address,
+            t.protocol.name(),
+            t.transport.name(),
+            t.timeout.as_secs_f64() * 1e3,
+            t.hold_limit
+        );
+    }
     let steps = def.integrator.steps;
     println!(
         "  ground motion: {}; dt = {} s, {steps} steps ({} s)",
