@@ -42,12 +42,15 @@ pub enum Link {
 const MIN_WAIT: Duration = Duration::from_micros(20);
 
 impl Link {
-    /// Connect to `peer` (UDP: a socket of our own connected to it; TCP: within `timeout`).
+    /// Connect to `peer` (UDP: a socket of our own connected to it; TCP: within
+    /// `connect_timeout`, and every send bounded by `send_timeout`, the exchange's budget, so
+    /// that a target that stops reading cannot block the sub-step longer).
     pub fn connect(
         transport: LinkTransport,
         peer: SocketAddr,
         local: Option<SocketAddr>,
-        timeout: Duration,
+        connect_timeout: Duration,
+        send_timeout: Duration,
     ) -> io::Result<Self> {
         Ok(match transport {
             LinkTransport::Udp => {
@@ -63,9 +66,9 @@ impl Link {
                 Self::Udp(s)
             }
             LinkTransport::Tcp => {
-                let s = TcpStream::connect_timeout(&peer, timeout.max(MIN_WAIT))?;
+                let s = TcpStream::connect_timeout(&peer, connect_timeout.max(MIN_WAIT))?;
                 s.set_nodelay(true)?;
-                s.set_write_timeout(Some(timeout.max(MIN_WAIT)))?;
+                s.set_write_timeout(Some(send_timeout.max(MIN_WAIT)))?;
                 Self::Tcp(s)
             }
         })

@@ -184,7 +184,8 @@ impl LabTarget {
             spec.transport,
             spec.address,
             spec.local,
-            spec.timeout.max(Duration::from_millis(100)),
+            spec.timeout.max(Duration::from_secs(1)),
+            spec.timeout,
         )
         .map_err(|e| Error::invalid(&name, format!("cannot connect: {e}")))?;
         let n_cmd = spec.map.commands.len();
