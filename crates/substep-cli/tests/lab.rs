@@ -299,6 +299,10 @@ fn bad_lab_input_is_one_line_with_exit_code_2() {
             "substructure.lab.transport: generic_tcp runs over tcp",
         ),
         (
+            "[substructure.lab]\nprotocol = \"speedgoat\"\naddress = \"127.0.0.1:5000\"\nsignals = 300",
+            "substructure.lab.signals: 300 measured signals do not fit a speedgoat frame (at most 254)",
+        ),
+        (
             "[substructure.lab]\nprotocol = \"speedgoat\"\naddress = \"127.0.0.1:5000\"\n\
              [[substructure.lab.command]]\ndof = 7",
             "substructure.lab.command[1].dof: DOF 7 is not a coupling DOF",

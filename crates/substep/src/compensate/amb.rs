@@ -77,12 +77,12 @@ pub struct AmbSpec {
 }
 
 impl AmbSpec {
-    /// The defaults around the model coefficients `model`: differences of span `s`, two
-    /// low-pass stages of `s` sub-steps, threshold 0.1 mm, a row every sub-step with
-    /// `λ = 1 − 1/(4000 · subsample)`... see docs/theory.md §6.9 for the source of each.
-    ///
-    /// `g` is the series of the model's inverse in sub-step units; the coefficients of the
-    /// differences follow from it (module docs).
+    /// The model with inverse series `g` (sub-step units; the coefficients of the differences
+    /// follow from it, module docs) and the defaults: differences of span `s`, two low-pass
+    /// stages of `s` sub-steps, threshold 0.1 mm, one RLS row every sub-step with `λ = 0.9995`
+    /// (test definitions and the benchmark set `λ = 1 − Δτ / 2 s`, a memory of 2 s), `c₀` and
+    /// `c₁` adapted within ±50 %, `p0 = 0.01`, instrumental variables. docs/theory.md §6.9
+    /// gives the source of each.
     pub fn from_inverse_series(g: [f64; TERMS], span: usize) -> Self {
         Self {
             series: g,

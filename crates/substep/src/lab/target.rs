@@ -53,6 +53,40 @@ pub struct LabTargetSpec {
     pub hold_limit: usize,
 }
 
+impl LabTargetSpec {
+    /// The channels fit the protocol's frames: speedgoat `[newTarget, commands, time]` and
+    /// `[switchPC, atTarget, signals]` in 256 words; generic_tcp `[code, commands, time]` and the
+    /// signals in 256 words; substep_udp one UDP datagram (65 507 bytes) each way.
+    pub fn check_frames(&self) -> Result<()> {
+        let udp_words = 65_507 / 8;
+        let (cmd_room, signal_room) = match self.protocol {
+            LabProtocol::Speedgoat => (frames::OF_WORDS - 2, frames::OF_WORDS - 2),
+            LabProtocol::GenericTcp => (frames::OF_WORDS - 2, frames::OF_WORDS),
+            LabProtocol::SubstepUdp => (udp_words - 3, udp_words - 2),
+        };
+        let (n_cmd, m) = (self.map.commands.len(), self.map.n_signals);
+        if n_cmd > cmd_room {
+            return Err(Error::invalid(
+                "substructure.lab.command",
+                format!(
+                    "{n_cmd} command channels do not fit a {} frame (at most {cmd_room})",
+                    self.protocol.name()
+                ),
+            ));
+        }
+        if m > signal_room {
+            return Err(Error::invalid(
+                "substructure.lab.signals",
+                format!(
+                    "{m} measured signals do not fit a {} frame (at most {signal_room})",
+                    self.protocol.name()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// What happened on the link (for `summary.json`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LabStats {
@@ -174,6 +208,7 @@ impl LabTarget {
     /// Connect to the target (TCP: and send generic_tcp's sizes) for `n_c` coupling DOFs.
     pub fn connect(spec: &LabTargetSpec, n_c: usize) -> Result<Self> {
         spec.map.validate(n_c, "substructure.lab")?;
+        spec.check_frames()?;
         let name = format!(
             "lab target {} ({} over {})",
             spec.address,

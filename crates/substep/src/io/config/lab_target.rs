@@ -221,7 +221,7 @@ impl RawLabTarget {
                 ));
             }
         }
-        Ok(LabTargetSpec {
+        let spec = LabTargetSpec {
             protocol,
             transport,
             address,
@@ -229,7 +229,9 @@ impl RawLabTarget {
             map,
             timeout: Duration::from_secs_f64(timeout),
             hold_limit,
-        })
+        };
+        spec.check_frames()?;
+        Ok(spec)
     }
 }
 
