@@ -221,12 +221,12 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let Some(e) = write_error {
         return Err(anyhow::Error::from(e).context(format!("cannot write {}", history_path.display())));
     }
-    // The lab target's link statistics come back with the test (a failed run does not return it).
+    // A lab target's link statistics: with the test, or with the failure.
     let (report, failure, stop, lab) = match result {
         Ok((report, test)) => (report, None, None, test.site.lab_stats().cloned()),
         Err(f) => {
             let f = *f;
-            (f.report, Some(f.error), f.stopped_at.zip(f.stop_log), None)
+            (f.report, Some(f.error), f.stopped_at.zip(f.stop_log), f.lab)
         }
     };
     let realtime_path = out_dir.join("realtime.json");

@@ -374,3 +374,52 @@ fn safety_limits_stop_a_lab_test_as_they_stop_the_virtual_one() {
         b.len()
     );
 }
+
+/// `--realtime` against a lab target that dies: exit 1 with the target named, and the link's
+/// counts are in `summary.json` although the run failed.
+#[test]
+fn a_realtime_run_whose_target_dies_reports_the_link() {
+    let dir = temp_dir("realtime");
+    let name = "rt";
+    let extra = "timeout = 0.005\n";
+    std::fs::write(dir.join("rt.toml"), config(&lab_table("substep_udp", "udp", 9, extra))).unwrap();
+    let (mut emulator, port) = emulate(&dir, name, "[faults]\ndie_at = 0.5\n");
+    std::fs::write(
+        dir.join("rt.toml"),
+        config(&lab_table("substep_udp", "udp", port, extra)),
+    )
+    .unwrap();
+    let mut child = bin()
+        .args(["run", "rt.toml", "--out", "rt", "--quiet", "--no-plots", "--realtime"])
+        .current_dir(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("the real-time run hung");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    let _ = emulator.kill();
+    let _ = emulator.wait();
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("the target is gone"),
+        "{}",
+        text(&out.stderr)
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("rt/summary.json")).unwrap()).unwrap();
+    assert_eq!(s["completed"], false);
+    let lab = &s["lab"];
+    assert_eq!(lab["protocol"], "substep_udp", "{s}");
+    assert_eq!(lab["max_held_in_a_row"], 4, "{lab}");
+    // 0.5 s of 2.5 ms sub-steps answered, then 4 held: about 204 exchanges.
+    let n = lab["exchanges"].as_u64().unwrap();
+    assert!((200..=210).contains(&n), "{lab}");
+}

@@ -29,6 +29,8 @@ pub struct RealtimeFailure {
     /// What a safety stop did (tripping sub-step and ramp), for `substeps.csv`: replay it with
     /// [`StopLog::replay`] at `stopped_at`.
     pub stop_log: Option<StopLog>,
+    /// A lab target's link statistics up to the failure (the test itself is not returned).
+    pub lab: Option<crate::lab::LabStats>,
 }
 
 impl fmt::Display for RealtimeFailure {
@@ -366,6 +368,7 @@ impl RealtimeRunner {
                 report,
                 stopped_at: stats.stopped_at,
                 stop_log: self.test.site.take_stop_log(),
+                lab: self.test.site.lab_stats().cloned(),
             })),
             None => Ok((report, self.test)),
         }
