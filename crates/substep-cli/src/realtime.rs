@@ -378,7 +378,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             crate::run::print_reference_error(scheme, u, f);
         }
         if let Some(l) = &lab {
-            println!("  {}", l.line());
+            println!("  {}", substep::lab::LabStats::summary_line(&l.json()));
         }
         if let Some(n) = ramp_substeps.filter(|&n| n > 0) {
             println!("  the {n} sub-steps of the ramp to the safe position are in substeps.csv (column ramp)");

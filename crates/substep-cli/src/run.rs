@@ -741,18 +741,7 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
             );
         }
         if let Some(l) = &summary.lab {
-            println!(
-                "  lab target ({} over {}): {} exchanges, {} held, {} late, {} duplicated; round trip p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs",
-                l["protocol"].as_str().unwrap_or("?"),
-                l["transport"].as_str().unwrap_or("?"),
-                l["exchanges"],
-                l["held"],
-                l["late"],
-                l["duplicated"],
-                l["rtt_us"]["p50"].as_f64().unwrap_or(f64::NAN),
-                l["rtt_us"]["p99"].as_f64().unwrap_or(f64::NAN),
-                l["rtt_us"]["max"].as_f64().unwrap_or(f64::NAN)
-            );
+            println!("  {}", substep::lab::LabStats::summary_line(l));
         }
         for w in &summary.warnings {
             println!("  warning: {w}");

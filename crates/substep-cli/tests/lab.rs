@@ -69,8 +69,14 @@ fn emulate(dir: &Path, name: &str, faults: &str) -> (Child, u16) {
 
 /// Run `cfg` to its end or kill it after 60 s (a hang fails the test instead of blocking it).
 fn run(dir: &Path, cfg: &str, out: &str) -> Output {
+    run_with(dir, cfg, out, &[])
+}
+
+/// As [`run`] with more options (e.g. `--realtime`).
+fn run_with(dir: &Path, cfg: &str, out: &str, more: &[&str]) -> Output {
     let mut child = bin()
         .args(["run", cfg, "--out", out, "--quiet", "--no-plots"])
+        .args(more)
         .current_dir(dir)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -389,22 +395,7 @@ fn a_realtime_run_whose_target_dies_reports_the_link() {
         config(&lab_table("substep_udp", "udp", port, extra)),
     )
     .unwrap();
-    let mut child = bin()
-        .args(["run", "rt.toml", "--out", "rt", "--quiet", "--no-plots", "--realtime"])
-        .current_dir(&dir)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let start = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if start.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            panic!("the real-time run hung");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let out = child.wait_with_output().unwrap();
+    let out = run_with(&dir, "rt.toml", "rt", &["--realtime"]);
     let _ = emulator.kill();
     let _ = emulator.wait();
     assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));

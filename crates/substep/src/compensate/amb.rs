@@ -451,14 +451,10 @@ impl PhaseLagCompensator for Amb {
         3 * self.spec.span
     }
     fn write_state(&self, out: &mut [f64]) {
-        for (k, o) in out.iter_mut().enumerate() {
-            *o = self.targets.get(k);
-        }
+        self.targets.write(out);
     }
     fn read_state(&mut self, s: &[f64]) {
-        for (k, &v) in s.iter().enumerate() {
-            self.targets.set(k, v);
-        }
+        self.targets.read(s);
     }
 }
 
@@ -466,19 +462,7 @@ impl PhaseLagCompensator for Amb {
 mod tests {
     use super::*;
 
-    /// Broadband smooth target, 0.3–3 Hz at Δτ = 1 ms, with a 1 s cosine ramp-in.
-    fn target(j: usize) -> f64 {
-        let t = j as f64 * 1e-3;
-        let ramp = if t < 1.0 {
-            0.5 - 0.5 * (std::f64::consts::PI * t).cos()
-        } else {
-            1.0
-        };
-        ramp * [(0.3, 0.010), (0.7, 0.006), (1.3, 0.004), (2.1, 0.003), (3.0, 0.002)]
-            .iter()
-            .map(|(f, a)| a * (2.0 * std::f64::consts::PI * f * t).sin())
-            .sum::<f64>()
-    }
+    use crate::compensate::test_signals::broadband as target;
 
     #[test]
     fn the_inverse_series_of_known_plants() {

@@ -62,6 +62,25 @@ pub use spec::{PhaseLagDefinition, PhaseLagSpec};
 
 use crate::error::{Error, Result};
 
+/// Test signals shared by the compensators' unit tests.
+#[cfg(test)]
+pub(crate) mod test_signals {
+    /// A broadband smooth target: sines from 0.3 to 3 Hz at Δτ = 1 ms, from rest (a 1 s cosine
+    /// ramp-in, as a test would start).
+    pub(crate) fn broadband(j: usize) -> f64 {
+        let t = j as f64 * 1e-3;
+        let ramp = if t < 1.0 {
+            0.5 - 0.5 * (std::f64::consts::PI * t).cos()
+        } else {
+            1.0
+        };
+        ramp * [(0.3, 0.010), (0.7, 0.006), (1.3, 0.004), (2.1, 0.003), (3.0, 0.002)]
+            .iter()
+            .map(|(f, a)| a * (2.0 * std::f64::consts::PI * f * t).sin())
+            .sum::<f64>()
+    }
+}
+
 /// One coupling DOF's phase-lag compensator.
 pub trait PhaseLagCompensator: Send {
     /// Sub-step `j`: given the target command `d_j`, the displacement `y_{j−1}` measured at the

@@ -133,20 +133,21 @@ impl LabStats {
         })
     }
 
-    /// One line for a printed summary.
-    pub fn line(&self) -> String {
-        let us = |d: Duration| d.as_secs_f64() * 1e6;
+    /// One line for a printed summary, from the `lab` block of [`LabStats::json`] (what a
+    /// front end has of a finished run).
+    pub fn summary_line(lab: &serde_json::Value) -> String {
+        let us = |k: &str| lab["rtt_us"][k].as_f64().unwrap_or(f64::NAN);
         format!(
             "lab target ({} over {}): {} exchanges, {} held, {} late, {} duplicated; round trip p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs",
-            self.protocol,
-            self.transport,
-            self.exchanges,
-            self.held,
-            self.late,
-            self.duplicated,
-            us(self.rtt.percentile(0.5)),
-            us(self.rtt.percentile(0.99)),
-            us(self.rtt.max())
+            lab["protocol"].as_str().unwrap_or("?"),
+            lab["transport"].as_str().unwrap_or("?"),
+            lab["exchanges"],
+            lab["held"],
+            lab["late"],
+            lab["duplicated"],
+            us("p50"),
+            us("p99"),
+            us("max")
         )
     }
 }
@@ -371,10 +372,15 @@ impl LabTarget {
         }
     }
 
+    /// The send buffer as one OpenFresco frame (speedgoat and generic_tcp size it so).
+    fn of_frame(tx: &mut [u8]) -> &mut [u8; OF_BYTES] {
+        tx.try_into()
+            .expect("the send buffer of speedgoat and generic_tcp is one frame")
+    }
+
     fn speedgoat_send(&mut self, new_target: f64) -> Result<()> {
-        let mut tx = [0u8; OF_BYTES];
-        frames::speedgoat_command(new_target, &self.control, &mut tx).map_err(|e| self.fail(e.to_string()))?;
-        self.tx.copy_from_slice(&tx);
+        frames::speedgoat_command(new_target, &self.control, Self::of_frame(&mut self.tx))
+            .map_err(|e| self.fail(e.to_string()))?;
         // Every host frame twice, as ECSpeedgoat sends them.
         self.send("the command")?;
         self.send("the command")
@@ -382,13 +388,12 @@ impl LabTarget {
 
     /// One ECGenericTCP exchange: 3 (trial: the commands, then the time) and 6 (DAQ).
     fn exchange_generic(&mut self, deadline: Instant) -> Result<Exchange> {
-        let mut tx = [0u8; OF_BYTES];
         for (code, what) in [
             (action::SET_TRIAL_RESPONSE, "action 3"),
             (action::GET_DAQ_RESPONSE, "action 6"),
         ] {
-            frames::generic_frame(code, &self.control, &mut tx).map_err(|e| self.fail(e.to_string()))?;
-            self.tx.copy_from_slice(&tx);
+            frames::generic_frame(code, &self.control, Self::of_frame(&mut self.tx))
+                .map_err(|e| self.fail(e.to_string()))?;
             self.send(what)?;
         }
         // Replies owed for held sub-steps come first (the stream keeps their order): read and
