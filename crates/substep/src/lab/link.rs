@@ -76,7 +76,13 @@ impl Link {
 
     pub fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
         match self {
-            Self::Udp(s) => s.send(bytes).map(|_| ()),
+            // A connected UDP socket reports an earlier ICMP "port unreachable" on the next
+            // send: nobody listens at the target. That datagram is lost like any other; the
+            // exchange's deadline then decides (hold, and after `hold_limit` the target is gone).
+            Self::Udp(s) => match s.send(bytes) {
+                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => Ok(()),
+                r => r.map(|_| ()),
+            },
             Self::Tcp(s) => s.write_all(bytes),
         }
     }
