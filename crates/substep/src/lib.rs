@@ -30,6 +30,7 @@ pub mod compensate;
 pub mod ident;
 pub mod lab;
 pub mod linalg;
+pub mod material;
 pub mod site;
 pub mod sparse;
 pub mod specimen;
