@@ -89,10 +89,10 @@ fn plotted_dofs(n: usize, coupling: &[usize]) -> Vec<usize> {
 
 /// The summary's line on the error against the reference (offline and real-time runs).
 pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, max_force_error: f64) {
-    let what = if scheme == "exact" {
-        "exact solution"
-    } else {
-        "monolithic Newmark solution"
+    let what = match scheme {
+        "exact" => "exact solution",
+        "newmark_newton" => "monolithic Newmark + Newton solution (nonlinear)",
+        _ => "monolithic Newmark solution",
     };
     println!(
         "  max error vs {what}: {} (displacement), {} (coupling force)",

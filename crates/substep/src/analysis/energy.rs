@@ -4,7 +4,9 @@
 //! the experimental substructure on the structure, spread onto all DOFs (zero where there is no
 //! coupling DOF). Its energy terms at step `i` are
 //!
-//! * kinetic `E_K = ½ vᵀ M v`, strain `E_S = ½ uᵀ K u` (state functions),
+//! * kinetic `E_K = ½ vᵀ M v`, strain `E_S = ½ uᵀ K u` (state functions; for a nonlinear model
+//!   `K = K₀` and the work of the hysteretic deviation force `Σ Δuᵀ d̄` is added, so `E_S` is the
+//!   work of the restoring force `r = K₀ u + d`: stored plus dissipated by yielding),
 //! * damping `E_D = Σ Δuᵀ C v̄`, input `E_I = −Σ Δuᵀ M ι ā_g`, coupling `E_C = Σ Δuᵀ f̄_c`
 //!   (work integrals),
 //!
@@ -64,6 +66,9 @@ pub struct EnergyBalance {
     max_in: f64,
     max_rel_error: f64,
     started: bool,
+    /// Work of the springs' deviation force so far, and the last deviation force.
+    hysteretic: f64,
+    deviation: DVector<f64>,
 }
 
 impl EnergyBalance {
@@ -83,6 +88,8 @@ impl EnergyBalance {
             max_in: 0.0,
             max_rel_error: 0.0,
             started: false,
+            hysteretic: 0.0,
+            deviation: DVector::zeros(n),
         }
     }
 
@@ -93,7 +100,17 @@ impl EnergyBalance {
     // Several arrays of one length walked together: the index form reads like the formula.
     #[allow(clippy::needless_range_loop)]
     pub fn push(&mut self, u: &[f64], v: &[f64], ag: f64, fc: &[f64]) -> Result<()> {
+        self.push_nonlinear(u, v, ag, fc, None)
+    }
+
+    /// [`push`](Self::push) for a nonlinear model: `deviation` is the springs' deviation force
+    /// `d` of this state (docs/theory.md §9.2), whose work joins the strain term.
+    #[allow(clippy::needless_range_loop)]
+    pub fn push_nonlinear(&mut self, u: &[f64], v: &[f64], ag: f64, fc: &[f64], deviation: Option<&[f64]>) -> Result<()> {
         let n = self.u.len();
+        if deviation.is_some_and(|d| d.len() != n) {
+            return Err(Error::invalid("energy balance", format!("expected {n} deviation forces")));
+        }
         if u.len() != n || v.len() != n || fc.len() != n {
             return Err(Error::invalid(
                 "energy balance",
@@ -117,6 +134,16 @@ impl EnergyBalance {
                 w += self.work[k] * 0.5 * (self.fc[k] + fc[k]);
             }
             self.terms.coupling += w;
+            if let Some(d) = deviation {
+                let mut h = 0.0;
+                for k in 0..n {
+                    h += self.work[k] * 0.5 * (self.deviation[k] + d[k]);
+                }
+                self.hysteretic += h;
+            }
+        }
+        if let Some(d) = deviation {
+            self.deviation.copy_from_slice(d);
         }
         self.u.copy_from_slice(u);
         self.v.copy_from_slice(v);
@@ -125,7 +152,7 @@ impl EnergyBalance {
         self.product.gemv(1.0, &self.model.mass, &self.v, 0.0);
         self.terms.kinetic = 0.5 * self.v.dot(&self.product);
         self.product.gemv(1.0, &self.model.stiffness, &self.u, 0.0);
-        self.terms.strain = 0.5 * self.u.dot(&self.product);
+        self.terms.strain = 0.5 * self.u.dot(&self.product) + self.hysteretic;
         if !self.started {
             self.initial = self.terms.kinetic + self.terms.strain;
             self.started = true;

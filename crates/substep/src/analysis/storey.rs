@@ -68,6 +68,13 @@ impl StoreyResponse {
     // Several arrays of one length walked together: the index form reads like the formula.
     #[allow(clippy::needless_range_loop)]
     pub fn update(&mut self, u: &[f64], v: &[f64], a: &[f64], ag: f64) -> Result<()> {
+        self.update_nonlinear(u, v, a, ag, None)
+    }
+
+    /// [`update`](Self::update) for a nonlinear model: `deviation` is the springs' deviation
+    /// force `d` (docs/theory.md §9.2), part of the restoring force `K₀ u + d`.
+    #[allow(clippy::needless_range_loop)]
+    pub fn update_nonlinear(&mut self, u: &[f64], v: &[f64], a: &[f64], ag: f64, deviation: Option<&[f64]>) -> Result<()> {
         let n = self.model.n_dofs();
         if u.len() != n || v.len() != n || a.len() != n {
             return Err(Error::invalid(
@@ -82,6 +89,11 @@ impl StoreyResponse {
         self.restoring.gemv(1.0, &self.model.stiffness, &self.product, 0.0);
         self.product.copy_from_slice(v);
         self.restoring.gemv(1.0, &self.model.damping, &self.product, 1.0);
+        if let Some(d) = deviation {
+            for (r, d) in self.restoring.iter_mut().zip(d) {
+                *r += d;
+            }
+        }
         self.base_shear = self.model.influence.dot(&self.restoring);
         if self.shear_chain {
             let mut below = 0.0;

@@ -4,7 +4,7 @@
 
 use super::{Integrator, Kinematics, check_hilber_alpha};
 use crate::error::{Error, Result};
-use crate::model::StructuralModel;
+use crate::model::{Springs, StructuralModel};
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 
 struct FourPoint {
@@ -116,6 +116,8 @@ impl Integrator for Hht {
 /// path is where a measured specimen force enters.
 pub struct AlphaOs {
     p: FourPoint,
+    /// Hysteretic springs of a nonlinear model (`r̃ = K₀ ũ + d(ũ)`), committed at each predictor.
+    springs: Option<Springs>,
     /// `r̃_i = K ũ_i` and `ṽ_i` of the previous step.
     restoring_prev: DVector<f64>,
     v_pred_prev: DVector<f64>,
@@ -124,14 +126,32 @@ pub struct AlphaOs {
 
 impl AlphaOs {
     pub fn new(model: &StructuralModel, dt: f64, alpha: f64, load0: &DVector<f64>) -> Result<Self> {
+        Self::with_springs(model, dt, alpha, None, load0)
+    }
+
+    /// α-OS for a nonlinear model: `model` holds the initial stiffness `K₀`, `springs` the
+    /// hysteretic part, evaluated once per step at the predictor `ũ_{i+1}` (docs/theory.md §9.3).
+    pub fn with_springs(
+        model: &StructuralModel,
+        dt: f64,
+        alpha: f64,
+        mut springs: Option<Springs>,
+        load0: &DVector<f64>,
+    ) -> Result<Self> {
         let p = FourPoint::new(model, dt, alpha, load0)?;
         // Consistent start: ũ_0 = u_0 − βΔt² a_0, ṽ_0 = v_0 − γΔt a_0.
         let u_pred0 = &p.state.u - &p.state.a * (p.beta * dt * dt);
         let v_pred_prev = &p.state.v - &p.state.a * (p.gamma * dt);
-        let restoring_prev = &p.stiffness * u_pred0;
+        let mut restoring_prev = &p.stiffness * &u_pred0;
+        if let Some(s) = &mut springs {
+            s.set_trial(u_pred0.as_slice());
+            s.add_deviation(1.0, restoring_prev.as_mut_slice());
+            s.commit();
+        }
         let n = model.n_dofs();
         Ok(Self {
             p,
+            springs,
             restoring_prev,
             v_pred_prev,
             restoring: DVector::zeros(n),
@@ -142,6 +162,9 @@ impl AlphaOs {
 impl Integrator for AlphaOs {
     fn name(&self) -> &'static str {
         "alpha_os"
+    }
+    fn springs(&self) -> Option<&Springs> {
+        self.springs.as_ref()
     }
     fn dt(&self) -> f64 {
         self.p.dt
@@ -154,6 +177,11 @@ impl Integrator for AlphaOs {
         let (al, dt) = (p.alpha, p.dt);
         p.predict();
         self.restoring.gemv(1.0, &p.stiffness, &p.next.u, 0.0);
+        if let Some(springs) = &mut self.springs {
+            springs.set_trial(p.next.u.as_slice());
+            springs.add_deviation(1.0, self.restoring.as_mut_slice());
+            springs.commit();
+        }
         let (s, n) = (&p.state, &mut p.next);
         // rhs = (1+α) f_{i+1} − α f_i − (1+α) r̃_{i+1} + α r̃_i
         //       − (1+α) C ṽ_{i+1} + α C ṽ_i + αγΔt C a_i + αβΔt² K a_i

@@ -7,13 +7,15 @@
 mod exact;
 mod hht;
 mod newmark;
+mod newton;
 
 pub use exact::{ExactFoh, FohMap};
 pub use hht::{AlphaOs, Hht};
 pub use newmark::{ExplicitNewmark, Newmark, NewmarkConstants, NewmarkCore};
+pub use newton::{NewmarkNewton, NewtonSettings};
 
 use crate::error::{Error, Result, require_positive};
-use crate::model::ModelRef;
+use crate::model::{ModelRef, Springs};
 use crate::sparse::{FactorKind, SymmetricFactor};
 use nalgebra::DVector;
 
@@ -76,6 +78,15 @@ pub trait Integrator: Send {
     fn state(&self) -> &Kinematics;
     /// Advance one step with the total load `f*_{i+1}` at the end of the step.
     fn step(&mut self, load_next: &DVector<f64>);
+    /// Why the last step failed (a nonlinear solve that did not converge); the state is then
+    /// that of the step before and further steps do nothing.
+    fn failure(&self) -> Option<&str> {
+        None
+    }
+    /// The hysteretic springs of a nonlinear model (committed state).
+    fn springs(&self) -> Option<&crate::model::Springs> {
+        None
+    }
 }
 
 /// The integration schemes offered by name.
@@ -155,6 +166,41 @@ impl Scheme {
 }
 
 impl Scheme {
+    /// Build the integrator for a nonlinear model: `model` holds the initial stiffness `K₀`,
+    /// `springs` the hysteretic part (docs/theory.md §9). The implicit Newmark schemes iterate
+    /// with Newton–Raphson; α-OS evaluates the springs at its predictor (no iterations).
+    pub fn build_nonlinear<'a>(
+        &self,
+        model: impl Into<ModelRef<'a>>,
+        springs: Springs,
+        dt: f64,
+        newton: NewtonSettings,
+        load0: &DVector<f64>,
+    ) -> Result<Box<dyn Integrator>> {
+        require_positive("integrator.dt", dt)?;
+        let model = model.into();
+        match (*self, model) {
+            (Scheme::Newmark { beta, gamma }, _) if beta > 0.0 => Ok(Box::new(NewmarkNewton::new(
+                model, springs, dt, beta, gamma, newton, load0,
+            )?)),
+            (Scheme::AlphaOs { alpha }, ModelRef::Dense(m)) => {
+                Ok(Box::new(AlphaOs::with_springs(m, dt, alpha, Some(springs), load0)?))
+            }
+            (Scheme::AlphaOs { alpha }, ModelRef::Sparse(m)) => {
+                let dense = m.to_dense("alpha_os on a nonlinear model")?;
+                Ok(Box::new(AlphaOs::with_springs(&dense, dt, alpha, Some(springs), load0)?))
+            }
+            _ => Err(Error::invalid(
+                "integrator.scheme",
+                format!(
+                    "{} cannot integrate a nonlinear model: use an implicit Newmark scheme (e.g. \
+                     average_acceleration, solved by Newton–Raphson) or alpha_os",
+                    self.name()
+                ),
+            )),
+        }
+    }
+
     /// A short name for messages.
     pub fn name(&self) -> &'static str {
         match self {

@@ -53,16 +53,40 @@ impl Simulation {
         let dt = def.integrator.dt;
         let mass_influence = model.effective_mass_vector();
         let load0 = -&mass_influence * accel[0];
+        let springs = match &def.hysteresis {
+            Some(h) => Some(h.build(model.n_dofs())?),
+            None => None,
+        };
         let engine = match &def.substructure {
             None => Engine::Monolithic {
-                integrator: def.integrator.scheme.build(model, dt, &load0)?,
+                integrator: match springs {
+                    Some(springs) => {
+                        def.integrator
+                            .scheme
+                            .build_nonlinear(model, springs, dt, def.integrator.newton, &load0)?
+                    }
+                    None => def.integrator.scheme.build(model, dt, &load0)?,
+                },
                 load: load0,
                 mass_influence,
             },
             Some(s) if s.remote.as_ref().is_some_and(|r| r.mode == Mode::PerStep) => {
+                if springs.is_some() {
+                    return Err(Error::invalid(
+                        "substructure.remote.mode",
+                        "a per-step remote site runs the sub-steps with its own copy of the linear algorithm: \
+                         a nonlinear numerical substructure ([structure.storeys.hysteresis]) needs mode = \"substep\"",
+                    ));
+                }
                 Engine::RemoteStep(Box::new(s.build_remote_step_test(model, dt, &load0)?))
             }
-            Some(s) => Engine::Substructured(Box::new(s.build_test(model, dt, &load0)?)),
+            Some(s) => {
+                let mut test = s.build_test(model, dt, &load0)?;
+                if let Some(springs) = springs {
+                    test.controller.set_springs(springs);
+                }
+                Engine::Substructured(Box::new(test))
+            }
         };
         Ok(Self {
             engine,
@@ -98,6 +122,16 @@ impl Simulation {
             Engine::Monolithic { integrator, .. } => integrator.state(),
             Engine::Substructured(test) => test.controller.state(),
             Engine::RemoteStep(test) => test.controller.state(),
+        }
+    }
+
+    /// The hysteretic springs of a nonlinear numerical substructure, in their committed state
+    /// (`None` for a linear model).
+    pub fn springs(&self) -> Option<&crate::model::Springs> {
+        match &self.engine {
+            Engine::Monolithic { integrator, .. } => integrator.springs(),
+            Engine::Substructured(test) => test.controller.springs(),
+            Engine::RemoteStep(_) => None,
         }
     }
 
@@ -146,6 +180,13 @@ impl Simulation {
                 load.copy_from(mass_influence);
                 load.scale_mut(-ag_next);
                 integrator.step(load);
+                if let Some(reason) = integrator.failure() {
+                    return Err(Error::Diverged {
+                        step: i + 1,
+                        time: (i + 1) as f64 * self.dt,
+                        reason: reason.to_string(),
+                    });
+                }
                 if !integrator.state().is_finite() {
                     return Err(Error::Diverged {
                         step: i + 1,
@@ -223,10 +264,20 @@ impl Reference {
         let mut assembled = assemble_monolithic_model(&def.model, &s.specimens)?;
         let n = def.model.n_dofs();
         let n_assembled = assembled.n_dofs();
+        let nonlinear = def.hysteresis.is_some();
         if n_assembled <= EXACT_REFERENCE_MAX_DOFS && assembled.is_sparse() {
             assembled = Model::Dense(assembled.dense("the exact reference")?.into_owned());
         }
-        let (scheme, name) = if n_assembled <= EXACT_REFERENCE_MAX_DOFS {
+        let (scheme, name) = if nonlinear {
+            // Nonlinear: Newmark with the test's β, γ and Δt, Newton–Raphson to convergence.
+            (
+                Scheme::Newmark {
+                    beta: s.beta,
+                    gamma: s.gamma,
+                },
+                "newmark_newton",
+            )
+        } else if n_assembled <= EXACT_REFERENCE_MAX_DOFS {
             (Scheme::Exact, "exact")
         } else {
             (
@@ -239,7 +290,17 @@ impl Reference {
         };
         let mass_influence = assembled.effective_mass_vector();
         let load = -&mass_influence * def.ground_motion.accel.first().copied().unwrap_or(0.0);
-        let integrator = scheme.build(&assembled, def.integrator.dt, &load)?;
+        let integrator = match &def.hysteresis {
+            // The numerical DOFs come first in the assembled model: the springs keep their DOFs.
+            Some(h) => scheme.build_nonlinear(
+                &assembled,
+                h.build(n_assembled)?,
+                def.integrator.dt,
+                def.integrator.newton,
+                &load,
+            )?,
+            None => scheme.build(&assembled, def.integrator.dt, &load)?,
+        };
         // Same DOF numbering as assemble_monolithic: internal DOFs appended in specimen order.
         let mut next = n;
         let specimens = parts
@@ -281,7 +342,7 @@ impl Reference {
         }))
     }
 
-    /// `exact` or `newmark`.
+    /// `exact`, `newmark` or, for a nonlinear model, `newmark_newton`.
     pub fn scheme(&self) -> &'static str {
         self.scheme
     }
@@ -290,11 +351,15 @@ impl Reference {
         self.n_assembled
     }
 
-    /// Advance to the next step, ground acceleration `ag_next` at its end.
-    pub fn step(&mut self, ag_next: f64) {
+    /// Advance to the next step, ground acceleration `ag_next` at its end. A nonlinear
+    /// reference whose Newton iteration fails is an error naming the reference.
+    pub fn step(&mut self, ag_next: f64) -> Result<()> {
         self.load.copy_from(&self.mass_influence);
         self.load.scale_mut(-ag_next);
         self.integrator.step(&self.load);
+        if let Some(reason) = self.integrator.failure() {
+            return Err(Error::numerical("the monolithic reference", reason.to_string()));
+        }
         let s = self.integrator.state();
         self.force.iter_mut().for_each(|f| *f = 0.0);
         for p in &self.specimens {
@@ -306,6 +371,7 @@ impl Reference {
                 self.force[ci] -= acc;
             }
         }
+        Ok(())
     }
 
     /// Displacements of the numerical DOFs \[m\].

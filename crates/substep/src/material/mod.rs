@@ -17,11 +17,17 @@
 //!   `F_tr = F_n + k (δ − δ_n)` clamped into `[b k δ − (1 − b) F_y, b k δ + (1 − b) F_y]`;
 //!   tangent `k` inside, `b k` on a bound.
 //! * elastic–perfectly plastic: [`Bilinear`] with `b = 0` (OpenSees `ElasticPP`).
-//! * Bouc–Wen (with Baber–Wen degradation and Baber–Noori pinching): the law of the `bouc_wen`
-//!   specimen, see [`crate::specimen::BoucWen`].
+//! * [`BoucWenMaterial`]: Bouc–Wen, `F = α k δ + (1 − α) k z` with the hysteretic displacement
+//!   `z` (Baber–Wen degradation and Baber–Noori pinching optional), integrated accurately along
+//!   the straight path of each trial move; the spring of the `bouc_wen` specimen
+//!   ([`crate::specimen::BoucWen`]). Parameters [`BoucWenParams`], [`Pinching`].
 //!
 //! A new law is one implementation of [`Material`] plus one arm of [`MaterialSpec`]. The
 //! trial/commit calls never allocate.
+
+mod bouc_wen;
+
+pub use bouc_wen::{BoucWenMaterial, BoucWenParams, Pinching};
 
 use crate::error::{Error, Result, require_positive};
 
@@ -144,7 +150,11 @@ pub fn check_hardening(what: &str, hardening: f64) -> Result<()> {
 
 impl Material for Bilinear {
     fn kind(&self) -> &'static str {
-        if self.hardening == 0.0 { "elastic_plastic" } else { "bilinear" }
+        if self.hardening == 0.0 {
+            "elastic_plastic"
+        } else {
+            "bilinear"
+        }
     }
     fn set_trial(&mut self, deformation: f64) {
         let (k, b) = (self.stiffness, self.hardening);
@@ -204,7 +214,14 @@ impl Material for Bilinear {
 pub enum MaterialSpec {
     Elastic,
     /// Bilinear kinematic hardening; `hardening = 0` is elastic–perfectly plastic.
-    Bilinear { yield_force: f64, hardening: f64 },
+    Bilinear {
+        yield_force: f64,
+        hardening: f64,
+    },
+    /// Bouc–Wen; `build` replaces `stiffness` by the element's stiffness and keeps
+    /// `yield_displacement` (and the shape, degradation and pinching parameters). `damping` must
+    /// be 0: a material is the spring alone.
+    BoucWen(Box<BoucWenParams>),
 }
 
 impl MaterialSpec {
@@ -213,6 +230,7 @@ impl MaterialSpec {
             MaterialSpec::Elastic => "elastic",
             MaterialSpec::Bilinear { hardening, .. } if *hardening == 0.0 => "elastic_plastic",
             MaterialSpec::Bilinear { .. } => "bilinear",
+            MaterialSpec::BoucWen(_) => "bouc_wen",
         }
     }
 
@@ -220,7 +238,11 @@ impl MaterialSpec {
     pub fn build(&self, stiffness: f64, what: &str) -> Result<Box<dyn Material>> {
         let named = |e: Error| match e {
             Error::InvalidInput { what: w, reason } => {
-                Error::invalid(format!("{what}.{}", w.trim_start_matches("material.")), reason)
+                let key = w
+                    .strip_prefix("material.")
+                    .or_else(|| w.strip_prefix("specimen."))
+                    .unwrap_or(&w);
+                Error::invalid(format!("{what}.{key}"), reason)
             }
             other => other,
         };
@@ -228,6 +250,19 @@ impl MaterialSpec {
             MaterialSpec::Elastic => Box::new(Elastic::new(stiffness).map_err(named)?),
             MaterialSpec::Bilinear { yield_force, hardening } => {
                 Box::new(Bilinear::new(stiffness, *yield_force, *hardening).map_err(named)?)
+            }
+            MaterialSpec::BoucWen(params) => {
+                if params.damping != 0.0 {
+                    return Err(Error::invalid(
+                        format!("{what}.damping"),
+                        format!(
+                            "must be 0 for a material (the Bouc–Wen material is the spring alone), got {}",
+                            params.damping
+                        ),
+                    ));
+                }
+                let params = BoucWenParams { stiffness, ..**params };
+                Box::new(BoucWenMaterial::new(&params).map_err(named)?)
             }
         })
     }

@@ -2,7 +2,7 @@
 //! sparse storage). The moment frame is in `frame.rs`.
 
 use super::StructuralModel;
-use crate::error::{Result, require_non_negative, require_positive};
+use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::sparse::CscMatrix;
 use nalgebra::{DMatrix, DVector, dmatrix};
 use std::f64::consts::PI;
@@ -173,5 +173,61 @@ impl ShearBuilding {
         require_positive("structure.shear_building.story_mass", self.story_mass)?;
         require_positive("structure.shear_building.first_period", self.first_period)?;
         Ok(())
+    }
+}
+
+/// A shear building given storey by storey: floor masses `masses` \[kg\] and storey stiffnesses
+/// `stiffness` \[N/m\], first floor first; diagonal `M`, tridiagonal `K` (the initial stiffness of
+/// hysteretic storeys, see [`storey_springs`]), no damping (add it with
+/// [`SparseModel::with_damping`](super::SparseModel::with_damping)). DOF `i` is floor `i + 1`.
+pub fn storey_building(masses: &[f64], stiffness: &[f64], what: &str) -> Result<super::SparseModel> {
+    let n = masses.len();
+    if n == 0 {
+        return Err(Error::invalid(format!("{what}.masses"), "must list at least one floor"));
+    }
+    if stiffness.len() != n {
+        return Err(Error::invalid(
+            format!("{what}.stiffness"),
+            format!("has {} entries but masses has {n} (one per storey)", stiffness.len()),
+        ));
+    }
+    for (i, (&m, &k)) in masses.iter().zip(stiffness).enumerate() {
+        crate::error::require_positive(&format!("{what}.masses[{}]", i + 1), m)?;
+        crate::error::require_positive(&format!("{what}.stiffness[{}]", i + 1), k)?;
+    }
+    let mut t = Vec::with_capacity(3 * n);
+    for i in 0..n {
+        let above = stiffness.get(i + 1).copied().unwrap_or(0.0);
+        t.push((i, i, stiffness[i] + above));
+        if i + 1 < n {
+            t.push((i, i + 1, -above));
+            t.push((i + 1, i, -above));
+        }
+    }
+    super::SparseModel::new(
+        CscMatrix::from_diagonal(masses),
+        CscMatrix::zeros(n),
+        CscMatrix::from_triplets(n, &t),
+        None,
+    )
+}
+
+/// One hysteretic spring per storey of a [`storey_building`]: storey `i` (1-based) acts on
+/// the drift `u_i − u_{i−1}` (`u_0 = 0`, the ground) with initial stiffness `stiffness[i−1]`
+/// and the law `laws[i−1]`.
+pub fn storey_springs(stiffness: &[f64], laws: &[crate::material::MaterialSpec], what: &str) -> super::Hysteresis {
+    super::Hysteresis {
+        springs: stiffness
+            .iter()
+            .zip(laws)
+            .enumerate()
+            .map(|(i, (&k, law))| super::SpringSpec {
+                from: i.checked_sub(1),
+                to: i,
+                stiffness: k,
+                law: law.clone(),
+                what: format!("{what} (storey {})", i + 1),
+            })
+            .collect(),
     }
 }

@@ -8,13 +8,17 @@ mod builders;
 mod damping;
 mod frame;
 mod frame3d;
+mod hysteretic;
 mod modal;
 mod sparse;
 
-pub use builders::{ShearBuilding, TmdSystem, sdof, shear_building, shear_building_sparse, tmd_two_dof};
+pub use builders::{
+    ShearBuilding, TmdSystem, sdof, shear_building, shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
+};
 pub use damping::{DampingSpec, modal_damping, rayleigh_coefficients};
 pub use frame::{Frame2d, FrameDof, Section, frame_2d, frame_2d_dense};
 pub use frame3d::{Frame3d, Frame3dDof, Section3d, frame_3d};
+pub use hysteretic::{Hysteresis, SpringSpec, Springs};
 pub use modal::{Modes, modes};
 pub use sparse::{
     AUTO_SPARSE_MAX_DENSITY, AUTO_SPARSE_MIN_DOFS, DENSE_MAX_DOFS, Model, ModelRef, SparseModel, Storage,

@@ -25,6 +25,8 @@ pub struct EngineeringRecorder {
     storey: StoreyResponse,
     coupling: Vec<usize>,
     force: Vec<f64>,
+    /// The springs' deviation force of a nonlinear model (work vector).
+    deviation: Vec<f64>,
     ag: f64,
     peak_abs: Vec<(f64, f64)>,
     peak_drift: Vec<(f64, f64)>,
@@ -129,6 +131,7 @@ impl EngineeringRecorder {
             storey,
             coupling,
             force: vec![0.0; n],
+            deviation: vec![0.0; n],
             ag: 0.0,
             peak_abs: vec![(0.0, 0.0); n],
             peak_drift: vec![(0.0, 0.0); if chain { n } else { 0 }],
@@ -183,8 +186,18 @@ impl EngineeringRecorder {
                 self.force[c] += rec.coupling_force[k] + rec.compensation_force[k];
             }
         }
-        self.energy.push(s.u.as_slice(), s.v.as_slice(), ag, &self.force)?;
-        self.storey.update(s.u.as_slice(), s.v.as_slice(), s.a.as_slice(), ag)?;
+        let deviation = match sim.springs() {
+            Some(springs) => {
+                self.deviation.iter_mut().for_each(|d| *d = 0.0);
+                springs.add_deviation(1.0, &mut self.deviation);
+                Some(self.deviation.as_slice())
+            }
+            None => None,
+        };
+        self.energy
+            .push_nonlinear(s.u.as_slice(), s.v.as_slice(), ag, &self.force, deviation)?;
+        self.storey
+            .update_nonlinear(s.u.as_slice(), s.v.as_slice(), s.a.as_slice(), ag, deviation)?;
         let peak = |p: &mut (f64, f64), x: f64| {
             if x.abs() > p.0 {
                 *p = (x.abs(), t);

@@ -590,8 +590,11 @@ impl<'d> Run<'d> {
                 failure = Some(e);
                 break;
             }
-            if let Some(r) = reference {
-                r.step(sim.ground_acceleration(i + 1));
+            if let Some(r) = reference
+                && let Err(e) = r.step(sim.ground_acceleration(i + 1))
+            {
+                failure = Some(e);
+                break;
             }
         }
         let wall = started.elapsed().as_secs_f64();

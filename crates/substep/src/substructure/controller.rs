@@ -54,6 +54,20 @@ pub struct SubstepController {
     substep: usize,
     /// Error-force compensation by estimation and the ideal error force (see the block at the end).
     est: EstimationState,
+    /// Hysteretic springs of a nonlinear numerical substructure (operator splitting, see
+    /// [`SubstepController::set_springs`]), the displacement predictor `ũ` they are evaluated
+    /// at and their deviation force `d(ũ)` of the current step.
+    nonlinear: Option<Box<Splitting>>,
+}
+
+/// The explicit part of the operator splitting (docs/theory.md §9.4).
+struct Splitting {
+    springs: crate::model::Springs,
+    predictor: DVector<f64>,
+    deviation: DVector<f64>,
+    /// `d(u_i) − d(ũ_i)` of the last step: the force the splitting left out, carried into the
+    /// next predictor (the numerical counterpart of P = 1 error-force compensation).
+    unbalance: DVector<f64>,
 }
 
 impl SubstepController {
@@ -116,7 +130,49 @@ impl SubstepController {
             command: DVector::zeros(n_c),
             substep: 0,
             est,
+            nonlinear: None,
         })
+    }
+
+    /// Make the numerical substructure nonlinear: `r(u) = K₀ u + d(u)` with the model's
+    /// stiffness as `K₀` and `springs` the hysteretic part (docs/theory.md §9.4). Each step then
+    /// evaluates the springs at the Newmark displacement predictor
+    /// `ũ_{i+1} = u_i + Δt v_i + Δt² (½ − β) a_i`, commits them there and moves `d(ũ_{i+1})` to
+    /// the right-hand side of the predictor; `K̂` and the gains stay those of `K₀` (operator
+    /// splitting in the manner of Nakashima's OS method: no iterations). At the end of the step
+    /// the springs are evaluated once more at `u_{i+1}` (a trial, not committed) and the
+    /// unbalance `d(u_{i+1}) − d(ũ_{i+1})` joins the next predictor's load, so the splitting's
+    /// force error does not accumulate (measured: docs/theory.md §9.4). Two spring updates and
+    /// the usual solves per step, no allocation.
+    pub fn set_springs(&mut self, springs: crate::model::Springs) {
+        let n = self.state.u.len();
+        self.nonlinear = Some(Box::new(Splitting {
+            springs,
+            predictor: DVector::zeros(n),
+            deviation: DVector::zeros(n),
+            unbalance: DVector::zeros(n),
+        }));
+    }
+
+    /// The springs of a nonlinear numerical substructure (committed at the last predictor).
+    pub fn springs(&self) -> Option<&crate::model::Springs> {
+        self.nonlinear.as_ref().map(|s| &s.springs)
+    }
+
+    /// `d(ũ_{i+1})` into the splitting's work vector (springs committed at `ũ_{i+1}`).
+    fn split_nonlinear_part(&mut self) {
+        let Some(nl) = self.nonlinear.as_deref_mut() else {
+            return;
+        };
+        let (dt, beta) = (self.core.c.dt, self.core.c.beta);
+        let s = &self.state;
+        nl.predictor.copy_from(&s.u);
+        nl.predictor.axpy(dt, &s.v, 1.0);
+        nl.predictor.axpy(dt * dt * (0.5 - beta), &s.a, 1.0);
+        nl.springs.set_trial(nl.predictor.as_slice());
+        nl.springs.commit();
+        nl.deviation.fill(0.0);
+        nl.springs.add_deviation(1.0, nl.deviation.as_mut_slice());
     }
 
     pub fn dt(&self) -> f64 {
@@ -182,8 +238,13 @@ impl SubstepController {
 
     /// Step 1: predictor `x̂ = K̂⁻¹ (F̂_i + f_l,i+1 + Sᵀ f_u,i)`.
     pub fn begin_step(&mut self, load_next: &DVector<f64>) {
+        self.split_nonlinear_part();
         self.core.effective_load(&self.state, &mut self.predictor);
         self.predictor += load_next;
+        if let Some(nl) = &self.nonlinear {
+            self.predictor -= &nl.deviation;
+            self.predictor -= &nl.unbalance;
+        }
         for (k, &c) in self.coupling.iter().enumerate() {
             self.predictor[c] += self.compensation_force[k];
         }
@@ -234,6 +295,13 @@ impl SubstepController {
         }
         self.core.update_kinematics(&self.state, &mut self.next);
         std::mem::swap(&mut self.state, &mut self.next);
+        if let Some(nl) = self.nonlinear.as_deref_mut() {
+            nl.springs.set_trial(self.state.u.as_slice());
+            nl.unbalance.fill(0.0);
+            nl.springs.add_deviation(1.0, nl.unbalance.as_mut_slice());
+            nl.unbalance -= &nl.deviation;
+            nl.springs.revert();
+        }
         for k in 0..self.coupling.len() {
             self.error_force[k] = self.force_last[k] - self.est.closing_force[k];
         }
@@ -256,13 +324,19 @@ impl SubstepController {
         }
         let mut internal = DVector::zeros(r.len());
         self.core.internal_force(s, &mut internal);
+        if let Some(nl) = &self.nonlinear {
+            internal += &nl.deviation;
+        }
         r - internal
     }
 
     /// Length of the algorithm state (for the amplification-matrix analysis and checkpoints):
     /// `[u, v, a, x̂_c^{(i)}, f_c, f_u, compensator]`.
     pub fn state_len(&self) -> usize {
-        3 * self.state.u.len() + 3 * self.coupling.len() + self.compensation.state_len()
+        3 * self.state.u.len()
+            + 3 * self.coupling.len()
+            + self.compensation.state_len()
+            + self.nonlinear.as_ref().map_or(0, |nl| nl.springs.state_len())
     }
     pub fn write_state(&self, out: &mut [f64]) {
         let (n, n_c) = (self.state.u.len(), self.coupling.len());
@@ -273,7 +347,12 @@ impl SubstepController {
         out[at..at + n_c].copy_from_slice(self.predictor_c_prev.as_slice());
         out[at + n_c..at + 2 * n_c].copy_from_slice(self.force.as_slice());
         out[at + 2 * n_c..at + 3 * n_c].copy_from_slice(&self.compensation_force);
-        self.compensation.write_state(&mut out[at + 3 * n_c..]);
+        let at = at + 3 * n_c;
+        let m = self.compensation.state_len();
+        self.compensation.write_state(&mut out[at..at + m]);
+        if let Some(nl) = &self.nonlinear {
+            nl.springs.write_state(&mut out[at + m..]);
+        }
     }
     pub fn read_state(&mut self, s: &[f64]) {
         let (n, n_c) = (self.state.u.len(), self.coupling.len());
@@ -284,7 +363,12 @@ impl SubstepController {
         self.predictor_c_prev.copy_from_slice(&s[at..at + n_c]);
         self.force.copy_from_slice(&s[at + n_c..at + 2 * n_c]);
         self.compensation_force.copy_from_slice(&s[at + 2 * n_c..at + 3 * n_c]);
-        self.compensation.read_state(&s[at + 3 * n_c..]);
+        let at = at + 3 * n_c;
+        let m = self.compensation.state_len();
+        self.compensation.read_state(&s[at..at + m]);
+        if let Some(nl) = &mut self.nonlinear {
+            nl.springs.read_state(&s[at + m..]);
+        }
         self.substep = 0;
     }
 }
@@ -486,6 +570,13 @@ impl SubstepController {
     /// amplification-matrix analysis). The estimation adapts on line, switches between the
     /// estimate and the plain algorithm, and its histories are not part of the state: refused.
     pub fn is_linear(&self) -> Result<()> {
+        if self.nonlinear.is_some() {
+            return Err(Error::invalid(
+                "structure.storeys.hysteresis",
+                "the numerical substructure is nonlinear; the linear analysis uses its initial stiffness \
+                 (analyze stability --vary stiffness_ratio) instead",
+            ));
+        }
         if self.est.estimation.is_some() {
             return Err(Error::invalid(
                 "substructure.error_force",

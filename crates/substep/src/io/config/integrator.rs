@@ -2,7 +2,7 @@
 
 use super::forbid;
 use crate::error::{Error, Result, require_non_negative, require_positive};
-use crate::integrate::{Scheme, check_hilber_alpha};
+use crate::integrate::{NewtonSettings, Scheme, check_hilber_alpha};
 use serde::Deserialize;
 
 #[derive(Debug, Clone)]
@@ -14,6 +14,8 @@ pub struct IntegratorDefinition {
     pub dt: f64,
     /// Number of steps; the run covers `t = 0 ..= steps·dt`.
     pub steps: usize,
+    /// Newton–Raphson of the implicit Newmark schemes on a nonlinear model.
+    pub newton: NewtonSettings,
 }
 
 #[derive(Debug, Deserialize)]
@@ -26,6 +28,8 @@ pub(crate) struct RawIntegrator {
     pub(crate) alpha: Option<f64>,
     pub(crate) dt: f64,
     pub(crate) duration: Option<f64>,
+    pub(crate) tolerance: Option<f64>,
+    pub(crate) max_iterations: Option<usize>,
 }
 
 pub(crate) fn default_scheme() -> String {
@@ -33,6 +37,46 @@ pub(crate) fn default_scheme() -> String {
 }
 
 impl RawIntegrator {
+    /// `[integrator] tolerance` and `max_iterations`.
+    pub(crate) fn newton(&self) -> Result<NewtonSettings> {
+        let mut n = NewtonSettings::default();
+        if let Some(t) = self.tolerance {
+            if !(t.is_finite() && t > 0.0 && t < 1.0) {
+                return Err(Error::invalid(
+                    "integrator.tolerance",
+                    format!("must lie in (0, 1) (the Newton tolerance on the displacement increment, relative), got {t}"),
+                ));
+            }
+            n.tolerance = t;
+        }
+        if let Some(m) = self.max_iterations {
+            if !(1..=1000).contains(&m) {
+                return Err(Error::invalid(
+                    "integrator.max_iterations",
+                    format!("must lie in 1..=1000 (Newton iterations per step), got {m}"),
+                ));
+            }
+            n.max_iterations = m;
+        }
+        Ok(n)
+    }
+
+    /// Refuse a scheme that cannot integrate a nonlinear model.
+    pub(crate) fn check_nonlinear(&self, scheme: Scheme) -> Result<()> {
+        match scheme {
+            Scheme::Newmark { beta, .. } if beta > 0.0 => Ok(()),
+            Scheme::AlphaOs { .. } => Ok(()),
+            _ => Err(Error::invalid(
+                "integrator.scheme",
+                format!(
+                    "\"{}\" cannot integrate a nonlinear model ([structure.storeys.hysteresis]): use an implicit \
+                     Newmark scheme (e.g. average_acceleration, solved by Newton–Raphson) or alpha_os",
+                    self.scheme
+                ),
+            )),
+        }
+    }
+
     /// `(name, scheme, dt, duration)`.
     pub(crate) fn build(&self) -> Result<(String, Scheme, f64, Option<f64>)> {
         let dt = require_positive("integrator.dt", self.dt)?;

@@ -47,7 +47,7 @@ use crate::error::{Error, Result};
 use crate::integrate::Scheme;
 use crate::io::limits::{self, Limits, RunShape};
 use crate::io::matrix_market::{read_matrix_market_sparse_with, read_matrix_market_with};
-use crate::model::Model;
+use crate::model::{Hysteresis, Model};
 use crate::sparse::CscMatrix;
 use crate::transfer::{ActuatorSpec, Dynamics};
 pub(crate) use actuator::RawActuator;
@@ -81,6 +81,9 @@ pub struct TestDefinition {
     /// The numerical substructure (with a `[substructure]`, the specimens are not in it), in
     /// dense or sparse storage (`[structure] storage`).
     pub model: Model,
+    /// The hysteretic springs of a nonlinear numerical substructure (`[structure.storeys.hysteresis]`);
+    /// `None` for a linear one. `model` holds the initial stiffness.
+    pub hysteresis: Option<Hysteresis>,
     pub ground_motion: GroundMotion,
     pub integrator: IntegratorDefinition,
     pub substructure: Option<SubstructureDefinition>,
@@ -417,6 +420,7 @@ impl RawConfig {
             .as_ref()
             .map_or(Ok(Limits::default()), RawRunLimits::build)?;
         let (name_s, scheme, dt, duration) = self.integrator.build()?;
+        let newton = self.integrator.newton()?;
         // Only the implicit Newmark schemes (and the sub-step controller) run on sparse storage.
         let sparse_capable = matches!(scheme, Scheme::Newmark { beta, .. } if beta > 0.0);
         // Limits first, from the config alone: nothing big is built, read or run before this.
@@ -439,6 +443,10 @@ impl RawConfig {
             self.check_run(&limits, m, steps as f64, dt)?;
         }
         let model = self.structure.build(base, sparse_capable, &limits)?;
+        let hysteresis = self.structure.hysteresis()?;
+        if hysteresis.is_some() {
+            self.integrator.check_nonlinear(scheme)?;
+        }
         if shape.is_none() {
             self.check_run(&limits, ModelShape::of(&model), steps as f64, dt)?;
         }
@@ -464,12 +472,14 @@ impl RawConfig {
         Ok(TestDefinition {
             source: name.to_string(),
             model,
+            hysteresis,
             ground_motion,
             integrator: IntegratorDefinition {
                 name: name_s,
                 scheme,
                 dt,
                 steps,
+                newton,
             },
             substructure,
             output: {

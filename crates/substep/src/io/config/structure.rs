@@ -8,8 +8,10 @@ use crate::integrate::Scheme;
 use crate::io::limits::{self, Limits, RunShape};
 use crate::model::{
     DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, Model, Section, Section3d, ShearBuilding, SparseModel, Storage,
-    StructuralModel, TmdSystem, frame_2d, frame_3d, sdof, shear_building_sparse, tmd_two_dof,
+    Hysteresis, StructuralModel, TmdSystem, frame_2d, frame_3d, sdof, shear_building_sparse, storey_building,
+    storey_springs, tmd_two_dof,
 };
+use crate::material::{MaterialSpec, check_hardening};
 use crate::sparse::CscMatrix;
 use crate::transfer::Dynamics;
 use nalgebra::{DMatrix, DVector};
@@ -26,6 +28,7 @@ pub(crate) struct RawStructure {
     pub(crate) rayleigh: Option<RawRayleigh>,
     pub(crate) modal: Option<RawModal>,
     pub(crate) shear_building: Option<RawShearBuilding>,
+    pub(crate) storeys: Option<RawStoreys>,
     pub(crate) sdof: Option<RawSdof>,
     pub(crate) tmd: Option<RawTmd>,
     pub(crate) frame: Option<RawFrame>,
@@ -217,6 +220,105 @@ pub(crate) struct RawShearBuilding {
     pub(crate) first_period: f64,
 }
 
+/// `[structure.storeys]`: a shear building storey by storey, optionally with hysteretic storeys.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawStoreys {
+    pub(crate) masses: Vec<f64>,
+    pub(crate) stiffness: Vec<f64>,
+    pub(crate) hysteresis: Option<RawHysteresis>,
+}
+
+/// `[structure.storeys.hysteresis]`: the law of every storey spring.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawHysteresis {
+    pub(crate) kind: String,
+    pub(crate) yield_force: Option<OneOrMany>,
+    pub(crate) hardening: Option<f64>,
+}
+
+const STOREYS: &str = "structure.storeys";
+const HYSTERESIS: &str = "structure.storeys.hysteresis";
+
+impl RawStoreys {
+    /// The law of each storey (`elastic` without `[structure.storeys.hysteresis]`).
+    fn laws(&self) -> Result<Vec<MaterialSpec>> {
+        let n = self.masses.len();
+        let Some(h) = &self.hysteresis else {
+            return Ok(vec![MaterialSpec::Elastic; n]);
+        };
+        let yield_forces = |h: &RawHysteresis| -> Result<Vec<f64>> {
+            let f = h.yield_force.as_ref().ok_or_else(|| {
+                Error::invalid(
+                    format!("{HYSTERESIS}.yield_force"),
+                    format!("missing (kind = \"{}\" needs a yield force per storey, or one for all)", h.kind),
+                )
+            })?;
+            let f = match f.0.len() {
+                1 => vec![f.0[0]; n],
+                m if m == n => f.0.clone(),
+                m => {
+                    return Err(Error::invalid(
+                        format!("{HYSTERESIS}.yield_force"),
+                        format!("has {m} entries but the building has {n} storeys (give one per storey, or one number)"),
+                    ));
+                }
+            };
+            for (i, &y) in f.iter().enumerate() {
+                if !(y.is_finite() && y > 0.0) {
+                    return Err(Error::invalid(
+                        format!("{HYSTERESIS}.yield_force"),
+                        format!("storey {}: must be a finite force > 0 N, got {y}", i + 1),
+                    ));
+                }
+            }
+            Ok(f)
+        };
+        match h.kind.as_str() {
+            "elastic" => {
+                forbid(
+                    &format!("{HYSTERESIS}."),
+                    &[("yield_force", h.yield_force.is_some()), ("hardening", h.hardening.is_some())],
+                    "not used with kind = \"elastic\"",
+                )?;
+                Ok(vec![MaterialSpec::Elastic; n])
+            }
+            "bilinear" => {
+                let hardening = h.hardening.ok_or_else(|| {
+                    Error::invalid(
+                        format!("{HYSTERESIS}.hardening"),
+                        "missing (kind = \"bilinear\" needs the post-yield over initial stiffness ratio; use kind = \"elastic_plastic\" for 0)",
+                    )
+                })?;
+                check_hardening(&format!("{HYSTERESIS}.hardening"), hardening)?;
+                Ok(yield_forces(h)?
+                    .into_iter()
+                    .map(|yield_force| MaterialSpec::Bilinear { yield_force, hardening })
+                    .collect())
+            }
+            "elastic_plastic" => {
+                forbid(
+                    &format!("{HYSTERESIS}."),
+                    &[("hardening", h.hardening.is_some())],
+                    "not used with kind = \"elastic_plastic\" (its hardening is 0; use kind = \"bilinear\")",
+                )?;
+                Ok(yield_forces(h)?
+                    .into_iter()
+                    .map(|yield_force| MaterialSpec::Bilinear {
+                        yield_force,
+                        hardening: 0.0,
+                    })
+                    .collect())
+            }
+            other => Err(Error::invalid(
+                format!("{HYSTERESIS}.kind"),
+                format!("unknown hysteresis '{other}' (expected elastic, bilinear, bouc_wen or elastic_plastic)"),
+            )),
+        }
+    }
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawSdof {
@@ -252,6 +354,18 @@ impl Default for RawTmd {
 }
 
 impl RawStructure {
+    /// The hysteretic springs of a nonlinear model (`None`: the model is linear).
+    pub(crate) fn hysteresis(&self) -> Result<Option<Hysteresis>> {
+        let Some(b) = &self.storeys else {
+            return Ok(None);
+        };
+        let laws = b.laws()?;
+        if laws.iter().all(|l| *l == MaterialSpec::Elastic) {
+            return Ok(None);
+        }
+        Ok(Some(storey_springs(&b.stiffness, &laws, HYSTERESIS)))
+    }
+
     /// The model in the storage `[structure] storage` asks for; `sparse_capable` is false when
     /// the integrator needs dense matrices (then `auto` keeps models dense).
     pub(crate) fn build(&self, base: &Path, sparse_capable: bool, limits: &Limits) -> Result<Model> {
@@ -259,6 +373,7 @@ impl RawStructure {
         let forms = [
             ("mass + stiffness", matrices),
             ("[structure.shear_building]", self.shear_building.is_some()),
+            ("[structure.storeys]", self.storeys.is_some()),
             ("[structure.sdof]", self.sdof.is_some()),
             ("[structure.tmd]", self.tmd.is_some()),
             ("[structure.frame]", self.frame.is_some()),
@@ -269,7 +384,7 @@ impl RawStructure {
                 return Err(Error::invalid(
                     "structure",
                     "no model given: set mass and stiffness, or one of [structure.shear_building], \
-                     [structure.frame], [structure.sdof], [structure.tmd]",
+                     [structure.storeys], [structure.frame], [structure.sdof], [structure.tmd]",
                 ));
             }
             1 => {}
@@ -328,6 +443,13 @@ impl RawStructure {
                 story_mass: b.story_mass,
                 first_period: b.first_period,
             })?;
+            let damping = match &self.damping {
+                Some(c) => sparse_matrix(c, "structure.damping", base, limits)?,
+                None => m.damping,
+            };
+            SparseModel::new(m.mass, damping, m.stiffness, influence)?.into()
+        } else if let Some(b) = &self.storeys {
+            let m = storey_building(&b.masses, &b.stiffness, STOREYS)?;
             let damping = match &self.damping {
                 Some(c) => sparse_matrix(c, "structure.damping", base, limits)?,
                 None => m.damping,
@@ -485,6 +607,14 @@ impl RawStructure {
             };
             let asked = format!("a shear building of {} stories", b.stories);
             (n, sparse, "structure.shear_building.stories", asked)
+        } else if let Some(b) = &self.storeys {
+            let n = b.masses.len() as f64;
+            let sparse = ModelShape {
+                n,
+                bytes: n * limits::CHAIN_BYTES_PER_DOF,
+                step_seconds: RunShape::chain_step_seconds(n),
+            };
+            (n, sparse, "structure.storeys.masses", format!("a shear building of {n} storeys"))
         } else if let Some(f) = &self.frame {
             let (n, lines) = f.size();
             let sparse = ModelShape {
@@ -537,6 +667,8 @@ impl RawStructure {
             "structure.tmd".into()
         } else if self.shear_building.is_some() {
             "structure.shear_building".into()
+        } else if self.storeys.is_some() {
+            STOREYS.into()
         } else if self.frame.is_some() {
             "structure.frame".into()
         } else if what == "damping" && self.rayleigh.is_some() {

@@ -265,6 +265,7 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
     Ok(TestDefinition {
         source: format!("vst: {}", method.name),
         model: structure()?.into(),
+        hysteresis: None,
         ground_motion: GroundMotion {
             accel: record.accel,
             description: format!(
@@ -277,6 +278,7 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
             scheme: Scheme::Newmark { beta, gamma },
             dt: s.dt,
             steps,
+            newton: Default::default(),
         },
         substructure: Some(substructure),
         output: OutputSettings {

@@ -124,7 +124,7 @@ fn reference_run(s: &VstSettings) -> Result<Series> {
     out.f_true.push(0.0);
     out.d_meas.push(0.0);
     for i in 1..n {
-        r.step(def.ground_motion.accel[i]);
+        r.step(def.ground_motion.accel[i])?;
         out.t.push(i as f64 * s.dt);
         out.u.push(r.u()[TOP]);
         out.f_true.push(r.coupling_force()[0]);

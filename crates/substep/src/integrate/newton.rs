@@ -1,0 +1,259 @@
+//! Implicit Newmark(β, γ) for a nonlinear model, solved by Newton–Raphson (docs/theory.md §9.3).
+//!
+//! The model is `M ü + C u̇ + r(u) = f(t)` with `r(u) = K₀ u + d(u)` (hysteretic springs, see
+//! [`crate::model::Springs`]). With the Newmark relations `a_{i+1} = a0 (u − u_i) − a2 v_i − a3
+//! a_i`, `v_{i+1} = v_i + a6 a_i + a7 a_{i+1}` the step is the root of
+//!
+//! ```text
+//! R(u) = f_{i+1} − M a_{i+1}(u) − C v_{i+1}(u) − K₀ u − d(u) = 0,
+//! ```
+//!
+//! iterated from `u⁰ = u_i` by `K̂_t Δu = R(u)`, `K̂_t = K_t(u) + a0 M + a1 C`, until
+//! `‖Δu‖∞ ≤ tol · max(‖u‖∞, largest ‖u‖∞ of the run so far)` (`[integrator] tolerance`, default
+//! 1e-10). The springs' trial states always start from the committed state of step `i`; the
+//! converged state is committed. `K̂_t` is factorised again only when a spring's tangent
+//! changed (the piecewise-linear laws change it at yield and unloading only); while every
+//! spring is on its initial slope the factor of `K̂₀` is used. A step that does not converge
+//! in `max_iterations` leaves the state of the step before and reports the failure (the run
+//! stops with the step and the residual).
+
+use super::{Integrator, Kinematics, NewmarkCore};
+use crate::error::{Error, Result};
+use crate::model::{ModelRef, Springs};
+use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
+use nalgebra::{DMatrix, DVector};
+
+/// Newton–Raphson settings (`[integrator] tolerance`, `max_iterations`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonSettings {
+    /// Convergence when the displacement increment is at most this share of the displacement
+    /// scale (see the module docs).
+    pub tolerance: f64,
+    pub max_iterations: usize,
+}
+
+impl Default for NewtonSettings {
+    fn default() -> Self {
+        Self {
+            tolerance: 1e-10,
+            max_iterations: 50,
+        }
+    }
+}
+
+/// `K̂₀` in the form the tangent is assembled from.
+enum Base {
+    Dense(DMatrix<f64>),
+    Sparse(CscMatrix),
+}
+
+enum TangentFactor {
+    Dense(nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>),
+    Sparse(Box<SymmetricFactor>),
+}
+
+/// Newmark + Newton–Raphson on a model with hysteretic springs.
+pub struct NewmarkNewton {
+    core: NewmarkCore,
+    base: Base,
+    springs: Springs,
+    settings: NewtonSettings,
+    state: Kinematics,
+    next: Kinematics,
+    residual: DVector<f64>,
+    internal: DVector<f64>,
+    /// Tangents of the springs in the current factor, and the factor (`None`: `K̂₀`'s).
+    tangents: Vec<f64>,
+    factor: Option<TangentFactor>,
+    initial_tangents: Vec<f64>,
+    scale: f64,
+    failure: Option<String>,
+    iterations: usize,
+    most_iterations: usize,
+}
+
+impl NewmarkNewton {
+    pub fn new<'a>(
+        model: impl Into<ModelRef<'a>>,
+        springs: Springs,
+        dt: f64,
+        beta: f64,
+        gamma: f64,
+        settings: NewtonSettings,
+        load0: &DVector<f64>,
+    ) -> Result<Self> {
+        let model = model.into();
+        if !(settings.tolerance.is_finite() && settings.tolerance > 0.0) {
+            return Err(Error::invalid(
+                "integrator.tolerance",
+                format!("must be > 0, got {}", settings.tolerance),
+            ));
+        }
+        let core = NewmarkCore::new(model, dt, beta, gamma)?;
+        let a = core.c.a;
+        let base = match model {
+            ModelRef::Dense(m) => Base::Dense(&m.stiffness + &m.mass * a[0] + &m.damping * a[1]),
+            ModelRef::Sparse(m) => Base::Sparse(CscMatrix::linear_combination(&[
+                (1.0, &m.stiffness),
+                (a[0], &m.mass),
+                (a[1], &m.damping),
+            ])),
+        };
+        let state = Kinematics::at_rest(model, load0)?;
+        let n = model.n_dofs();
+        let mut springs = springs;
+        springs.set_trial(&vec![0.0; n]);
+        let mut tangents = vec![0.0; springs.len()];
+        springs.tangents_unchanged(&mut tangents);
+        springs.revert();
+        Ok(Self {
+            core,
+            base,
+            springs,
+            settings,
+            next: state.clone(),
+            state,
+            residual: DVector::zeros(n),
+            internal: DVector::zeros(n),
+            initial_tangents: tangents.clone(),
+            tangents,
+            factor: None,
+            scale: 0.0,
+            failure: None,
+            iterations: 0,
+            most_iterations: 0,
+        })
+    }
+
+    /// Newton iterations of all steps so far, and the most in one step.
+    pub fn iterations(&self) -> (usize, usize) {
+        (self.iterations, self.most_iterations)
+    }
+
+    /// The springs (their committed state after each step).
+    pub fn springs(&self) -> &Springs {
+        &self.springs
+    }
+
+    fn refactor(&mut self) -> Result<()> {
+        if self.tangents == self.initial_tangents {
+            self.factor = None;
+            return Ok(());
+        }
+        self.factor = Some(match &self.base {
+            Base::Dense(k0) => {
+                let mut k = k0.clone();
+                self.springs.add_tangent_deviation(&mut k);
+                TangentFactor::Dense(k.lu())
+            }
+            Base::Sparse(k0) => {
+                let n = k0.n();
+                let mut triplets = Vec::new();
+                self.springs.tangent_deviation_triplets(&mut triplets);
+                let dev = CscMatrix::from_triplets(n, &triplets);
+                let k = CscMatrix::linear_combination(&[(1.0, k0), (1.0, &dev)]);
+                TangentFactor::Sparse(Box::new(SymmetricFactor::new(
+                    &k,
+                    FactorKind::Auto,
+                    "tangent effective stiffness",
+                )?))
+            }
+        });
+        Ok(())
+    }
+
+    fn solve(&mut self) -> bool {
+        match &mut self.factor {
+            None => {
+                self.core.solve_in_place(&mut self.residual);
+                true
+            }
+            Some(TangentFactor::Dense(lu)) => lu.solve_mut(&mut self.residual),
+            Some(TangentFactor::Sparse(f)) => {
+                f.solve_in_place(self.residual.as_mut_slice());
+                true
+            }
+        }
+    }
+
+    /// `residual = f − M a − C v − K₀ u − d(u)` at `next` (springs at their trial state).
+    fn residual(&mut self, load: &DVector<f64>) {
+        self.core.internal_force(&self.next, &mut self.internal);
+        self.residual.copy_from(load);
+        self.residual -= &self.internal;
+        self.springs.add_deviation(-1.0, self.residual.as_mut_slice());
+    }
+
+    fn try_step(&mut self, load_next: &DVector<f64>) -> std::result::Result<(), String> {
+        self.next.u.copy_from(&self.state.u);
+        let n_max = self.settings.max_iterations;
+        for it in 1..=n_max {
+            self.springs.set_trial(self.next.u.as_slice());
+            self.core.update_kinematics(&self.state, &mut self.next);
+            self.residual(load_next);
+            if !self.springs.tangents_unchanged(&mut self.tangents) {
+                self.refactor().map_err(|e| e.to_string())?;
+            }
+            if !self.solve() {
+                return Err("the tangent effective stiffness is singular".into());
+            }
+            let du = self.residual.amax();
+            self.next.u += &self.residual;
+            let scale = self.next.u.amax().max(self.scale);
+            if !du.is_finite() {
+                return Err("the Newton iteration produced a non-finite displacement".into());
+            }
+            if du <= self.settings.tolerance * scale {
+                self.springs.set_trial(self.next.u.as_slice());
+                self.core.update_kinematics(&self.state, &mut self.next);
+                self.iterations += it;
+                self.most_iterations = self.most_iterations.max(it);
+                self.scale = scale;
+                return Ok(());
+            }
+        }
+        self.springs.set_trial(self.next.u.as_slice());
+        self.core.update_kinematics(&self.state, &mut self.next);
+        self.residual(load_next);
+        Err(format!(
+            "Newton–Raphson did not converge in {n_max} iterations (last displacement increment above {} of the \
+             displacement scale; residual force {:.6e} N, largest entry): raise [integrator] max_iterations or \
+             tolerance, or reduce dt",
+            self.settings.tolerance,
+            self.residual.amax()
+        ))
+    }
+}
+
+impl Integrator for NewmarkNewton {
+    fn name(&self) -> &'static str {
+        "newmark"
+    }
+    fn dt(&self) -> f64 {
+        self.core.c.dt
+    }
+    fn state(&self) -> &Kinematics {
+        &self.state
+    }
+    fn step(&mut self, load_next: &DVector<f64>) {
+        if self.failure.is_some() {
+            return;
+        }
+        match self.try_step(load_next) {
+            Ok(()) => {
+                self.springs.commit();
+                std::mem::swap(&mut self.state, &mut self.next);
+            }
+            Err(reason) => {
+                self.springs.revert();
+                self.failure = Some(reason);
+            }
+        }
+    }
+    fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+    fn springs(&self) -> Option<&Springs> {
+        Some(&self.springs)
+    }
+}
