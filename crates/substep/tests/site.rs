@@ -1295,8 +1295,14 @@ fn openfresco_client_reports_a_vanished_site() {
 // ---------------------------------------------------------------------------------------------
 // OpenSees interoperability (needs openseespy).
 
+/// `$SUBSTEP_PYTHON` (scripts/test points it at the virtual environment with openseespy), else
+/// `python3`.
+fn python() -> String {
+    std::env::var("SUBSTEP_PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
 fn openseespy_available() -> bool {
-    std::process::Command::new("python3")
+    std::process::Command::new(python())
         .args(["-c", "import openseespy.opensees"])
         .output()
         .map(|o| o.status.success())
@@ -1346,7 +1352,7 @@ fn opensees_generic_client_matches_native_element() {
     let tag = format!("substep-site-opensees-{}", std::process::id());
     let out_path = tmp.join(format!("{tag}.out"));
     let err_path = tmp.join(format!("{tag}.err"));
-    let mut child = std::process::Command::new("python3")
+    let mut child = std::process::Command::new(python())
         .arg(script)
         .args(["--k", &k.to_string(), "--c", &c.to_string(), "--m", &m.to_string()])
         .args(["--dt", "0.01", "--steps", "500"])

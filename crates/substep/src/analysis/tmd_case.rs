@@ -8,7 +8,8 @@ use crate::compensate::{
     ArxPhaseLagSpec, CompensatedSite, PhaseLagCompensator, PhaseLagDefinition, PhaseLagSpec, Polynomial, Ramp,
 };
 use crate::error::{Error, Result, require_non_negative, require_positive};
-use crate::model::{StructuralModel, TmdSystem, sdof, tmd_two_dof};
+use crate::material::MaterialSpec;
+use crate::model::{Hysteresis, SpringSpec, StructuralModel, TmdSystem, sdof, tmd_two_dof};
 use crate::specimen::SpecimenSpec;
 use crate::substructure::{
     ErrorForceSpec, ExperimentalSubstructure, SubstepController, SubstepSettings, SubstructureTest,
@@ -36,6 +37,11 @@ pub struct AnalysisCase {
     pub error_force: ErrorForceSpec,
     /// Phase-lag compensation with frozen parameters (a fixed linear filter), if any.
     pub phase_lag: Option<FrozenPhaseLag>,
+    /// Instantaneous over initial stiffness `k_t/k₀` of the numerical substructure: with
+    /// `≠ 1` its restoring force is `k₀ u + (k_t − k₀) ũ`, the operator splitting of a
+    /// nonlinear model linearised at a yielded (`< 1`) or hardened (`> 1`) state
+    /// (docs/theory.md §9.5); `K̂` and the gains keep `k₀`.
+    pub stiffness_ratio: f64,
 }
 
 /// A phase-lag compensator for the linear analysis: frozen, full from the first sub-step, on
@@ -63,6 +69,8 @@ pub enum Parameter {
     /// `η_T = Δt/T = Ω/2π`.
     EtaT,
     Omega,
+    /// `k_t/k₀` of the numerical substructure.
+    StiffnessRatio,
 }
 
 impl Parameter {
@@ -75,10 +83,14 @@ impl Parameter {
             "eta_p" => Parameter::EtaP,
             "eta_t" | "eta_T" => Parameter::EtaT,
             "omega" | "Omega" => Parameter::Omega,
+            "stiffness_ratio" => Parameter::StiffnessRatio,
             other => {
                 return Err(Error::invalid(
                     "parameter",
-                    format!("unknown parameter '{other}' (expected zeta_s, zeta, eta_f, eta_m, eta_p, eta_T or Omega)"),
+                    format!(
+                        "unknown parameter '{other}' (expected zeta_s, zeta, eta_f, eta_m, eta_p, eta_T, Omega or \
+                         stiffness_ratio)"
+                    ),
                 ));
             }
         })
@@ -92,6 +104,7 @@ impl Parameter {
             Parameter::EtaP => "eta_p",
             Parameter::EtaT => "eta_T",
             Parameter::Omega => "Omega",
+            Parameter::StiffnessRatio => "stiffness_ratio",
         }
     }
     /// The symbol for figures and tables (`η_m`, `ζ_s`, `Ω`, …).
@@ -104,6 +117,7 @@ impl Parameter {
             Parameter::EtaP => "η_p",
             Parameter::EtaT => "η_T",
             Parameter::Omega => "Ω",
+            Parameter::StiffnessRatio => "k_t/k₀",
         }
     }
 }
@@ -121,6 +135,7 @@ impl AnalysisCase {
             eta_p: 0.0,
             error_force: ErrorForceSpec::None,
             phase_lag: None,
+            stiffness_ratio: 1.0,
         }
     }
     /// "Coupled system with large mass ratio": `η_m = 50 %`, `ζ = ζ_s = 5 %`, `η_f = 1`.
@@ -141,6 +156,7 @@ impl AnalysisCase {
             Parameter::EtaP => self.eta_p = value,
             Parameter::EtaT => self.omega_dt = 2.0 * PI * value,
             Parameter::Omega => self.omega_dt = value,
+            Parameter::StiffnessRatio => self.stiffness_ratio = value,
         }
         self
     }
@@ -154,6 +170,7 @@ impl AnalysisCase {
             Parameter::EtaP => self.eta_p,
             Parameter::EtaT => self.omega_dt / (2.0 * PI),
             Parameter::Omega => self.omega_dt,
+            Parameter::StiffnessRatio => self.stiffness_ratio,
         }
     }
 
@@ -164,6 +181,7 @@ impl AnalysisCase {
         require_non_negative("zeta_s", self.zeta_s)?;
         require_positive("Omega", self.omega_dt)?;
         require_non_negative("eta_p", self.eta_p)?;
+        require_non_negative("stiffness_ratio", self.stiffness_ratio)?;
         if self.k_sub == 0 {
             return Err(Error::invalid("k_sub", "must be at least 1"));
         }
@@ -208,7 +226,21 @@ impl AnalysisCase {
             coupling_dofs: vec![0],
             error_force: self.error_force,
         };
-        let controller = SubstepController::new(&model, &settings, &DVector::zeros(1))?;
+        let mut controller = SubstepController::new(&model, &settings, &DVector::zeros(1))?;
+        if self.stiffness_ratio != 1.0 {
+            let springs = Hysteresis {
+                springs: vec![SpringSpec {
+                    from: None,
+                    to: 0,
+                    stiffness: k,
+                    law: MaterialSpec::Scaled {
+                        ratio: self.stiffness_ratio,
+                    },
+                    what: "stiffness_ratio".into(),
+                }],
+            };
+            controller.set_springs(springs.build(1)?);
+        }
         let actuator = ActuatorSpec {
             dynamics: Dynamics::Ideal,
             delay: self.eta_p * self.dt(),

@@ -122,25 +122,46 @@ pub struct AlphaOs {
     restoring_prev: DVector<f64>,
     v_pred_prev: DVector<f64>,
     restoring: DVector<f64>,
+    /// The form: OpenSees `AlphaOS` (one evaluation at `ũ_α`) or `AlphaOS_TP` (two points).
+    form: AlphaOsForm,
+    /// `ũ_i`, the predictor of the previous step (`AlphaOS` form), and `ũ_α`.
+    u_pred_prev: DVector<f64>,
+    u_alpha: DVector<f64>,
+}
+
+/// The two α-OS forms of OpenSees; identical for linear models (up to the start).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AlphaOsForm {
+    /// `AlphaOS`: the restoring force is evaluated once per step at
+    /// `ũ_α = (1+α) ũ_{i+1} − α ũ_i` (and the springs committed there); start `ũ_0 = u_0`.
+    OnePoint,
+    /// `AlphaOS_TP`: `(1+α) r(ũ_{i+1}) − α r(ũ_i)`, springs committed at `ũ_{i+1}`; start
+    /// `ũ_0 = u_0 − βΔt² a_0`.
+    TwoPoint,
 }
 
 impl AlphaOs {
     pub fn new(model: &StructuralModel, dt: f64, alpha: f64, load0: &DVector<f64>) -> Result<Self> {
-        Self::with_springs(model, dt, alpha, None, load0)
+        Self::with_springs(model, dt, alpha, AlphaOsForm::OnePoint, None, load0)
     }
 
     /// α-OS for a nonlinear model: `model` holds the initial stiffness `K₀`, `springs` the
-    /// hysteretic part, evaluated once per step at the predictor `ũ_{i+1}` (docs/theory.md §9.3).
+    /// hysteretic part, evaluated once per step at a predictor (docs/theory.md §9.3).
     pub fn with_springs(
         model: &StructuralModel,
         dt: f64,
         alpha: f64,
+        form: AlphaOsForm,
         mut springs: Option<Springs>,
         load0: &DVector<f64>,
     ) -> Result<Self> {
         let p = FourPoint::new(model, dt, alpha, load0)?;
-        // Consistent start: ũ_0 = u_0 − βΔt² a_0, ṽ_0 = v_0 − γΔt a_0.
-        let u_pred0 = &p.state.u - &p.state.a * (p.beta * dt * dt);
+        // Two-point form, consistent start: ũ_0 = u_0 − βΔt² a_0, ṽ_0 = v_0 − γΔt a_0.
+        // One-point form (OpenSees AlphaOS): ũ_0 = u_0.
+        let u_pred0 = match form {
+            AlphaOsForm::TwoPoint => &p.state.u - &p.state.a * (p.beta * dt * dt),
+            AlphaOsForm::OnePoint => p.state.u.clone(),
+        };
         let v_pred_prev = &p.state.v - &p.state.a * (p.gamma * dt);
         let mut restoring_prev = &p.stiffness * &u_pred0;
         if let Some(s) = &mut springs {
@@ -152,6 +173,9 @@ impl AlphaOs {
         Ok(Self {
             p,
             springs,
+            form,
+            u_pred_prev: u_pred0,
+            u_alpha: DVector::zeros(n),
             restoring_prev,
             v_pred_prev,
             restoring: DVector::zeros(n),
@@ -161,7 +185,10 @@ impl AlphaOs {
 
 impl Integrator for AlphaOs {
     fn name(&self) -> &'static str {
-        "alpha_os"
+        match self.form {
+            AlphaOsForm::OnePoint => "alpha_os",
+            AlphaOsForm::TwoPoint => "alpha_os_tp",
+        }
     }
     fn springs(&self) -> Option<&Springs> {
         self.springs.as_ref()
@@ -173,6 +200,10 @@ impl Integrator for AlphaOs {
         &self.p.state
     }
     fn step(&mut self, load_next: &DVector<f64>) {
+        if self.form == AlphaOsForm::OnePoint {
+            self.step_one_point(load_next);
+            return;
+        }
         let p = &mut self.p;
         let (al, dt) = (p.alpha, p.dt);
         p.predict();
@@ -198,6 +229,42 @@ impl Integrator for AlphaOs {
         n.a.gemv(al * p.beta * dt * dt, &p.stiffness, &s.a, 1.0);
         self.v_pred_prev.copy_from(&n.v);
         std::mem::swap(&mut self.restoring_prev, &mut self.restoring);
+        p.correct(load_next);
+    }
+}
+
+impl AlphaOs {
+    /// OpenSees `AlphaOS`: with `α_O = 1 + α`,
+    /// `M a_{i+1} + C[α_O v_{i+1} + (1−α_O) v_i] + r(ũ_α) + K₀[α_O (u_{i+1} − ũ_{i+1}) +
+    /// (1−α_O)(u_i − ũ_i)] = α_O f_{i+1} + (1−α_O) f_i`, `ũ_α = α_O ũ_{i+1} + (1−α_O) ũ_i`.
+    fn step_one_point(&mut self, load_next: &DVector<f64>) {
+        let p = &mut self.p;
+        let al = p.alpha;
+        p.predict();
+        // ũ_α and r(ũ_α) = K₀ ũ_α + d(ũ_α), springs committed there
+        self.u_alpha.copy_from(&p.next.u);
+        self.u_alpha.scale_mut(1.0 + al);
+        self.u_alpha.axpy(-al, &self.u_pred_prev, 1.0);
+        self.restoring.gemv(1.0, &p.stiffness, &self.u_alpha, 0.0);
+        if let Some(springs) = &mut self.springs {
+            springs.set_trial(self.u_alpha.as_slice());
+            springs.add_deviation(1.0, self.restoring.as_mut_slice());
+            springs.commit();
+        }
+        let (s, n) = (&p.state, &mut p.next);
+        // rhs = (1+α) f_{i+1} − α f_i − r(ũ_α) − (1+α) C ṽ_{i+1} + α C v_i + α K₀ (u_i − ũ_i)
+        n.a.copy_from(load_next);
+        n.a.scale_mut(1.0 + al);
+        n.a.axpy(-al, &p.load_prev, 1.0);
+        n.a -= &self.restoring;
+        p.work.copy_from(&n.v);
+        p.work.scale_mut(-(1.0 + al));
+        p.work.axpy(al, &s.v, 1.0);
+        n.a.gemv(1.0, &p.damping, &p.work, 1.0);
+        p.work.copy_from(&s.u);
+        p.work -= &self.u_pred_prev;
+        n.a.gemv(al, &p.stiffness, &p.work, 1.0);
+        self.u_pred_prev.copy_from(&n.u);
         p.correct(load_next);
     }
 }

@@ -10,7 +10,7 @@ mod newmark;
 mod newton;
 
 pub use exact::{ExactFoh, FohMap};
-pub use hht::{AlphaOs, Hht};
+pub use hht::{AlphaOs, AlphaOsForm, Hht};
 pub use newmark::{ExplicitNewmark, Newmark, NewmarkConstants, NewmarkCore};
 pub use newton::{NewmarkNewton, NewtonSettings};
 
@@ -96,8 +96,9 @@ pub enum Scheme {
     Newmark { beta: f64, gamma: f64 },
     /// Hilber–Hughes–Taylor with Hilber's `α ∈ [−⅓, 0]`.
     Hht { alpha: f64 },
-    /// Operator splitting α-OS (linear restoring force with the initial stiffness).
-    AlphaOs { alpha: f64 },
+    /// Operator splitting α-OS (linear restoring force with the initial stiffness): OpenSees'
+    /// `AlphaOS` form (`alpha_os`) or its `AlphaOS_TP` form (`alpha_os_tp`).
+    AlphaOs { alpha: f64, form: AlphaOsForm },
     /// Exact first-order-hold discretisation (reference).
     Exact,
 }
@@ -115,13 +116,20 @@ impl Scheme {
             "galerkin" => nm(0.8, 1.5),
             "backward_difference" => nm(1.0, 1.5),
             "hht" => Ok(Scheme::Hht { alpha }),
-            "alpha_os" => Ok(Scheme::AlphaOs { alpha }),
+            "alpha_os" => Ok(Scheme::AlphaOs {
+                alpha,
+                form: AlphaOsForm::OnePoint,
+            }),
+            "alpha_os_tp" => Ok(Scheme::AlphaOs {
+                alpha,
+                form: AlphaOsForm::TwoPoint,
+            }),
             "exact" => Ok(Scheme::Exact),
             other => Err(Error::invalid(
                 "integrator.scheme",
                 format!(
                     "unknown scheme '{other}' (expected one of newmark, central_difference, fox_goodwin, \
-                     linear_acceleration, average_acceleration, galerkin, backward_difference, hht, alpha_os, exact)"
+                     linear_acceleration, average_acceleration, galerkin, backward_difference, hht, alpha_os, alpha_os_tp, exact)"
                 ),
             )),
         }
@@ -159,7 +167,7 @@ impl Scheme {
             Scheme::Newmark { beta: 0.0, gamma } => Box::new(ExplicitNewmark::new(model, dt, gamma, load0)?),
             Scheme::Newmark { beta, gamma } => Box::new(Newmark::new(model, dt, beta, gamma, load0)?),
             Scheme::Hht { alpha } => Box::new(Hht::new(model, dt, alpha, load0)?),
-            Scheme::AlphaOs { alpha } => Box::new(AlphaOs::new(model, dt, alpha, load0)?),
+            Scheme::AlphaOs { alpha, form } => Box::new(AlphaOs::with_springs(model, dt, alpha, form, None, load0)?),
             Scheme::Exact => Box::new(ExactFoh::new(model, dt, load0)?),
         })
     }
@@ -183,12 +191,24 @@ impl Scheme {
             (Scheme::Newmark { beta, gamma }, _) if beta > 0.0 => Ok(Box::new(NewmarkNewton::new(
                 model, springs, dt, beta, gamma, newton, load0,
             )?)),
-            (Scheme::AlphaOs { alpha }, ModelRef::Dense(m)) => {
-                Ok(Box::new(AlphaOs::with_springs(m, dt, alpha, Some(springs), load0)?))
-            }
-            (Scheme::AlphaOs { alpha }, ModelRef::Sparse(m)) => {
+            (Scheme::AlphaOs { alpha, form }, ModelRef::Dense(m)) => Ok(Box::new(AlphaOs::with_springs(
+                m,
+                dt,
+                alpha,
+                form,
+                Some(springs),
+                load0,
+            )?)),
+            (Scheme::AlphaOs { alpha, form }, ModelRef::Sparse(m)) => {
                 let dense = m.to_dense("alpha_os on a nonlinear model")?;
-                Ok(Box::new(AlphaOs::with_springs(&dense, dt, alpha, Some(springs), load0)?))
+                Ok(Box::new(AlphaOs::with_springs(
+                    &dense,
+                    dt,
+                    alpha,
+                    form,
+                    Some(springs),
+                    load0,
+                )?))
             }
             _ => Err(Error::invalid(
                 "integrator.scheme",
@@ -207,7 +227,11 @@ impl Scheme {
             Scheme::Newmark { beta, .. } if *beta == 0.0 => "explicit Newmark (central difference)",
             Scheme::Newmark { .. } => "newmark",
             Scheme::Hht { .. } => "hht",
-            Scheme::AlphaOs { .. } => "alpha_os",
+            Scheme::AlphaOs {
+                form: AlphaOsForm::OnePoint,
+                ..
+            } => "alpha_os",
+            Scheme::AlphaOs { .. } => "alpha_os_tp",
             Scheme::Exact => "the exact scheme",
         }
     }

@@ -73,7 +73,9 @@ impl Hysteresis {
 
     /// Whether every spring is elastic (then the model is linear).
     pub fn is_linear(&self) -> bool {
-        self.springs.iter().all(|s| s.law == MaterialSpec::Elastic)
+        self.springs
+            .iter()
+            .all(|s| matches!(s.law, MaterialSpec::Elastic | MaterialSpec::Scaled { .. }))
     }
 
     /// The same springs on DOFs renumbered by `map` (old → new).
@@ -127,6 +129,10 @@ impl Springs {
     }
     pub fn is_empty(&self) -> bool {
         self.springs.is_empty()
+    }
+    /// Whether every spring is linear (then a step is a linear map of the state).
+    pub fn is_linear(&self) -> bool {
+        self.springs.iter().all(|s| s.material.kind() == "elastic")
     }
 
     /// Trial state at the displacements `u` (from the committed state).
@@ -193,7 +199,9 @@ impl Springs {
 
     /// Deformation and force of each spring's trial state.
     pub fn states(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
-        self.springs.iter().map(|s| (s.deformation_of_trial(), s.material.force()))
+        self.springs
+            .iter()
+            .map(|s| (s.deformation_of_trial(), s.material.force()))
     }
 
     pub fn commit(&mut self) {

@@ -570,7 +570,7 @@ impl SubstepController {
     /// amplification-matrix analysis). The estimation adapts on line, switches between the
     /// estimate and the plain algorithm, and its histories are not part of the state: refused.
     pub fn is_linear(&self) -> Result<()> {
-        if self.nonlinear.is_some() {
+        if self.nonlinear.as_ref().is_some_and(|nl| !nl.springs.is_linear()) {
             return Err(Error::invalid(
                 "structure.storeys.hysteresis",
                 "the numerical substructure is nonlinear; the linear analysis uses its initial stiffness \

@@ -44,7 +44,9 @@ impl RawIntegrator {
             if !(t.is_finite() && t > 0.0 && t < 1.0) {
                 return Err(Error::invalid(
                     "integrator.tolerance",
-                    format!("must lie in (0, 1) (the Newton tolerance on the displacement increment, relative), got {t}"),
+                    format!(
+                        "must lie in (0, 1) (the Newton tolerance on the displacement increment, relative), got {t}"
+                    ),
                 ));
             }
             n.tolerance = t;
@@ -85,7 +87,7 @@ impl RawIntegrator {
         }
         let name = self.scheme.as_str();
         let is_newmark = name == "newmark";
-        let is_alpha = matches!(name, "hht" | "alpha_os");
+        let is_alpha = matches!(name, "hht" | "alpha_os" | "alpha_os_tp");
         if !is_newmark {
             forbid(
                 "integrator.",
@@ -106,7 +108,7 @@ impl RawIntegrator {
             require_non_negative("integrator.gamma", gamma)?;
         }
         let scheme = Scheme::from_name(name, beta, gamma, self.alpha.unwrap_or(-0.1))?;
-        if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha } = scheme {
+        if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha, .. } = scheme {
             check_hilber_alpha(alpha)?;
         }
         Ok((name.to_string(), scheme, dt, self.duration))

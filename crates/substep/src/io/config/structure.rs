@@ -6,12 +6,12 @@ use super::{MatrixInput, OneOrMany, SubstructureDefinition, forbid, matrix_with,
 use crate::error::{Error, Result};
 use crate::integrate::Scheme;
 use crate::io::limits::{self, Limits, RunShape};
+use crate::material::{MaterialSpec, check_hardening};
 use crate::model::{
-    DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, Model, Section, Section3d, ShearBuilding, SparseModel, Storage,
-    Hysteresis, StructuralModel, TmdSystem, frame_2d, frame_3d, sdof, shear_building_sparse, storey_building,
+    DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, Hysteresis, Model, Section, Section3d, ShearBuilding, SparseModel,
+    Storage, StructuralModel, TmdSystem, frame_2d, frame_3d, sdof, shear_building_sparse, storey_building,
     storey_springs, tmd_two_dof,
 };
-use crate::material::{MaterialSpec, check_hardening};
 use crate::sparse::CscMatrix;
 use crate::transfer::Dynamics;
 use nalgebra::{DMatrix, DVector};
@@ -252,7 +252,10 @@ impl RawStoreys {
             let f = h.yield_force.as_ref().ok_or_else(|| {
                 Error::invalid(
                     format!("{HYSTERESIS}.yield_force"),
-                    format!("missing (kind = \"{}\" needs a yield force per storey, or one for all)", h.kind),
+                    format!(
+                        "missing (kind = \"{}\" needs a yield force per storey, or one for all)",
+                        h.kind
+                    ),
                 )
             })?;
             let f = match f.0.len() {
@@ -261,7 +264,9 @@ impl RawStoreys {
                 m => {
                     return Err(Error::invalid(
                         format!("{HYSTERESIS}.yield_force"),
-                        format!("has {m} entries but the building has {n} storeys (give one per storey, or one number)"),
+                        format!(
+                            "has {m} entries but the building has {n} storeys (give one per storey, or one number)"
+                        ),
                     ));
                 }
             };
@@ -279,7 +284,10 @@ impl RawStoreys {
             "elastic" => {
                 forbid(
                     &format!("{HYSTERESIS}."),
-                    &[("yield_force", h.yield_force.is_some()), ("hardening", h.hardening.is_some())],
+                    &[
+                        ("yield_force", h.yield_force.is_some()),
+                        ("hardening", h.hardening.is_some()),
+                    ],
                     "not used with kind = \"elastic\"",
                 )?;
                 Ok(vec![MaterialSpec::Elastic; n])
@@ -614,7 +622,12 @@ impl RawStructure {
                 bytes: n * limits::CHAIN_BYTES_PER_DOF,
                 step_seconds: RunShape::chain_step_seconds(n),
             };
-            (n, sparse, "structure.storeys.masses", format!("a shear building of {n} storeys"))
+            (
+                n,
+                sparse,
+                "structure.storeys.masses",
+                format!("a shear building of {n} storeys"),
+            )
         } else if let Some(f) = &self.frame {
             let (n, lines) = f.size();
             let sparse = ModelShape {
