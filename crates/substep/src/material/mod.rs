@@ -69,6 +69,14 @@ impl Elastic {
     }
 }
 
+impl Elastic {
+    /// As [`Elastic::new`], also for a zero stiffness (a fully yielded state).
+    pub fn new_or_zero(stiffness: f64) -> Result<Self> {
+        crate::error::require_non_negative("material.stiffness", stiffness)?;
+        Ok(Self { stiffness, trial: 0.0 })
+    }
+}
+
 impl Material for Elastic {
     fn kind(&self) -> &'static str {
         "elastic"
@@ -88,7 +96,7 @@ impl Material for Elastic {
     fn commit(&mut self) {}
     fn revert(&mut self) {}
     fn fresh(&self) -> Box<dyn Material> {
-        Box::new(Self::new(self.stiffness).expect("validated"))
+        Box::new(Self::new_or_zero(self.stiffness).expect("validated"))
     }
     fn state_len(&self) -> usize {
         0
@@ -222,6 +230,12 @@ pub enum MaterialSpec {
     /// `yield_displacement` (and the shape, degradation and pinching parameters). `damping` must
     /// be 0: a material is the spring alone.
     BoucWen(Box<BoucWenParams>),
+    /// Linear with `ratio` times the element's stiffness: a spring frozen in a yielded
+    /// (`ratio < 1`) or hardened (`> 1`) state, for the stability analysis of the splitting
+    /// (its deviation force is `(ratio − 1) k δ`).
+    Scaled {
+        ratio: f64,
+    },
 }
 
 impl MaterialSpec {
@@ -230,6 +244,7 @@ impl MaterialSpec {
             MaterialSpec::Elastic => "elastic",
             MaterialSpec::Bilinear { hardening, .. } if *hardening == 0.0 => "elastic_plastic",
             MaterialSpec::Bilinear { .. } => "bilinear",
+            MaterialSpec::Scaled { .. } => "elastic",
             MaterialSpec::BoucWen(_) => "bouc_wen",
         }
     }
@@ -248,6 +263,10 @@ impl MaterialSpec {
         };
         Ok(match self {
             MaterialSpec::Elastic => Box::new(Elastic::new(stiffness).map_err(named)?),
+            MaterialSpec::Scaled { ratio } => {
+                crate::error::require_non_negative(&format!("{what}.ratio"), *ratio)?;
+                Box::new(Elastic::new_or_zero(stiffness * ratio).map_err(named)?)
+            }
             MaterialSpec::Bilinear { yield_force, hardening } => {
                 Box::new(Bilinear::new(stiffness, *yield_force, *hardening).map_err(named)?)
             }
