@@ -106,10 +106,20 @@ impl EnergyBalance {
     /// [`push`](Self::push) for a nonlinear model: `deviation` is the springs' deviation force
     /// `d` of this state (docs/theory.md §9.2), whose work joins the strain term.
     #[allow(clippy::needless_range_loop)]
-    pub fn push_nonlinear(&mut self, u: &[f64], v: &[f64], ag: f64, fc: &[f64], deviation: Option<&[f64]>) -> Result<()> {
+    pub fn push_nonlinear(
+        &mut self,
+        u: &[f64],
+        v: &[f64],
+        ag: f64,
+        fc: &[f64],
+        deviation: Option<&[f64]>,
+    ) -> Result<()> {
         let n = self.u.len();
         if deviation.is_some_and(|d| d.len() != n) {
-            return Err(Error::invalid("energy balance", format!("expected {n} deviation forces")));
+            return Err(Error::invalid(
+                "energy balance",
+                format!("expected {n} deviation forces"),
+            ));
         }
         if u.len() != n || v.len() != n || fc.len() != n {
             return Err(Error::invalid(

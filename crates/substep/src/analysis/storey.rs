@@ -74,7 +74,14 @@ impl StoreyResponse {
     /// [`update`](Self::update) for a nonlinear model: `deviation` is the springs' deviation
     /// force `d` (docs/theory.md §9.2), part of the restoring force `K₀ u + d`.
     #[allow(clippy::needless_range_loop)]
-    pub fn update_nonlinear(&mut self, u: &[f64], v: &[f64], a: &[f64], ag: f64, deviation: Option<&[f64]>) -> Result<()> {
+    pub fn update_nonlinear(
+        &mut self,
+        u: &[f64],
+        v: &[f64],
+        a: &[f64],
+        ag: f64,
+        deviation: Option<&[f64]>,
+    ) -> Result<()> {
         let n = self.model.n_dofs();
         if u.len() != n || v.len() != n || a.len() != n {
             return Err(Error::invalid(
