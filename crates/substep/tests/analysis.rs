@@ -11,7 +11,8 @@ use substep::substructure::ErrorForceSpec;
 /// `[u, v, a, f_c, x_s, ẋ_s]` (m = 1, ω = 1, trapezoidal Newmark, ideal actuator):
 /// predictor `x̂ = F̂/K̂`, `u' = x̂ + G f_c`, Newmark kinematics; the TMD's relative motion
 /// `e = x_s − u_c` is a free damped oscillation during the step (the linear support motion is a
-/// particular solution), `f_c' = k_s e' + c_s ė'`.
+/// particular solution), `f_c' = k_s e' + c_s ė'`. With `k_t/k₀ ≠ 1` the operator splitting
+/// moves `(k_t − k₀) ũ`, `ũ = u + Δt v + Δt² (½ − β) a`, to the predictor's right-hand side.
 fn closed_form_matrix(c: &AnalysisCase) -> DMatrix<f64> {
     let dt = c.omega_dt;
     let (m, k, cc) = (1.0, 1.0, 2.0 * c.zeta);
@@ -33,7 +34,9 @@ fn closed_form_matrix(c: &AnalysisCase) -> DMatrix<f64> {
     let step = |s: [f64; 6]| -> [f64; 6] {
         let [u, v, a, f, x, y] = s;
         let fhat = m * (a0 * u + a2 * v + a3 * a) + cc * (a1 * u + a4 * v + a5 * a);
-        let u1 = fhat / khat + f / khat;
+        let u_pred = u + dt * v + dt * dt * (0.5 - beta) * a;
+        let split = (c.stiffness_ratio - 1.0) * k * u_pred;
+        let u1 = (fhat - split) / khat + f / khat;
         let acc1 = a0 * (u1 - u) - a2 * v - a3 * a;
         let v1 = v + a6 * a + a7 * acc1;
         let ud = (u1 - u) / dt;
@@ -85,6 +88,55 @@ fn probed_rho_equals_closed_form_for_one_substep() {
     println!("worst relative difference {worst:.2e}");
 }
 
+/// The stability of the splitting of a nonlinear numerical substructure (`k_t/k₀` from 0 to 2):
+/// the probed spectral radius equals the hand-derived step; softening never destabilises it,
+/// hardening does beyond a boundary in `Ω`.
+#[test]
+fn splitting_rho_equals_closed_form_over_stiffness_ratios() {
+    let mut worst: f64 = 0.0;
+    let (mut unstable_hardening, mut unstable_softening) = (0, 0);
+    for base in [AnalysisCase::typical_tmd(), AnalysisCase::large_mass_ratio()] {
+        for ratio in [0.0, 0.02, 0.25, 0.5, 1.0, 1.2, 1.5, 2.0] {
+            for i in 1..=30 {
+                let omega = 0.1 * i as f64;
+                let case = AnalysisCase {
+                    omega_dt: omega,
+                    stiffness_ratio: ratio,
+                    ..base
+                };
+                let probed = case.spectral_radius().unwrap();
+                let closed = spectral_radius(&closed_form_matrix(&case));
+                let err = (probed - closed).abs() / closed.max(1e-300);
+                worst = worst.max(err);
+                assert!(
+                    err < 1e-11,
+                    "k_t/k0 {ratio}, Omega {omega}: probed {probed} vs closed form {closed}"
+                );
+                let linear = spectral_radius(&closed_form_matrix(&AnalysisCase {
+                    stiffness_ratio: 1.0,
+                    ..case
+                }));
+                // Points where the linear algorithm is stable and the splitting is not.
+                if closed > 1.0 + 1e-9 && linear <= 1.0 + 1e-9 {
+                    if ratio > 1.0 {
+                        unstable_hardening += 1;
+                    } else {
+                        unstable_softening += 1;
+                    }
+                }
+            }
+        }
+    }
+    println!(
+        "worst relative difference {worst:.2e}, unstable: {unstable_hardening} hardening, {unstable_softening} softening"
+    );
+    assert_eq!(unstable_softening, 0, "softening must not destabilise a stable test");
+    assert!(
+        unstable_hardening > 10,
+        "hardening beyond k0 should be unstable at large Omega"
+    );
+}
+
 /// Peak free-vibration amplitude of the primary DOF in a window of steps.
 fn window_peak(history: &[f64], from: usize, to: usize) -> f64 {
     history[from..to].iter().fold(0.0f64, |m, v| m.max(v.abs()))
@@ -122,6 +174,19 @@ fn time_domain_growth_matches_rho() {
             k_sub: 2,
             eta_p: 0.5,
             zeta_s: 0.02,
+            ..AnalysisCase::typical_tmd()
+        },
+        // the splitting of a nonlinear numerical substructure, yielded and hardened
+        AnalysisCase {
+            omega_dt: 0.8,
+            k_sub: 4,
+            stiffness_ratio: 0.05,
+            ..AnalysisCase::typical_tmd()
+        },
+        AnalysisCase {
+            omega_dt: 2.5,
+            k_sub: 4,
+            stiffness_ratio: 1.8,
             ..AnalysisCase::typical_tmd()
         },
     ];

@@ -16,7 +16,7 @@ pub struct AccuracyArgs {
     /// Dimensionless time steps η_T = Δt/T, a list
     #[arg(long, default_value = "0.005,0.01,0.02,0.03,0.05,0.075,0.1,0.125,0.15,0.2")]
     pub eta_t: String,
-    /// Optional series parameter name=a:b:n (zeta_s, zeta, eta_f, eta_m, eta_p); adds a column
+    /// Optional series parameter name=a:b:n (zeta_s, zeta, eta_f, eta_m, eta_p, stiffness_ratio); adds a column
     #[arg(long)]
     pub vary: Option<String>,
     /// Output directory of the CSV files and figures

@@ -21,7 +21,8 @@ pub struct StabilityArgs {
     /// Ω = ωΔt grid a:b:n (inclusive)
     #[arg(long, default_value = "0.015708:3.141593:200")]
     pub omega: String,
-    /// The y axis: name=a:b:n with name one of zeta_s, zeta, eta_f, eta_m, eta_p
+    /// The y axis: name=a:b:n with name one of zeta_s, zeta, eta_f, eta_m, eta_p, stiffness_ratio
+    /// (k_t/k₀ of a yielded or hardened numerical substructure under the operator splitting)
     #[arg(long, default_value = "zeta_s=0:0.5:200")]
     pub vary: String,
     /// Band around ρ = 1 taken as limited stability

@@ -65,9 +65,6 @@ struct Splitting {
     springs: crate::model::Springs,
     predictor: DVector<f64>,
     deviation: DVector<f64>,
-    /// `d(u_i) − d(ũ_i)` of the last step: the force the splitting left out, carried into the
-    /// next predictor (the numerical counterpart of P = 1 error-force compensation).
-    unbalance: DVector<f64>,
 }
 
 impl SubstepController {
@@ -139,18 +136,16 @@ impl SubstepController {
     /// evaluates the springs at the Newmark displacement predictor
     /// `ũ_{i+1} = u_i + Δt v_i + Δt² (½ − β) a_i`, commits them there and moves `d(ũ_{i+1})` to
     /// the right-hand side of the predictor; `K̂` and the gains stay those of `K₀` (operator
-    /// splitting in the manner of Nakashima's OS method: no iterations). At the end of the step
-    /// the springs are evaluated once more at `u_{i+1}` (a trial, not committed) and the
-    /// unbalance `d(u_{i+1}) − d(ũ_{i+1})` joins the next predictor's load, so the splitting's
-    /// force error does not accumulate (measured: docs/theory.md §9.4). Two spring updates and
-    /// the usual solves per step, no allocation.
+    /// splitting in the manner of Nakashima's OS method: no iterations, one spring update and
+    /// the usual solves per step, no allocation). Carrying the unbalance `d(u_{i+1}) −
+    /// d(ũ_{i+1})` into the next step was tried and dropped: it makes the splitting unstable
+    /// for `k_t/k₀ < 0.25` at `Ω > 0.5` (docs/theory.md §9.5).
     pub fn set_springs(&mut self, springs: crate::model::Springs) {
         let n = self.state.u.len();
         self.nonlinear = Some(Box::new(Splitting {
             springs,
             predictor: DVector::zeros(n),
             deviation: DVector::zeros(n),
-            unbalance: DVector::zeros(n),
         }));
     }
 
@@ -243,7 +238,6 @@ impl SubstepController {
         self.predictor += load_next;
         if let Some(nl) = &self.nonlinear {
             self.predictor -= &nl.deviation;
-            self.predictor -= &nl.unbalance;
         }
         for (k, &c) in self.coupling.iter().enumerate() {
             self.predictor[c] += self.compensation_force[k];
@@ -295,13 +289,6 @@ impl SubstepController {
         }
         self.core.update_kinematics(&self.state, &mut self.next);
         std::mem::swap(&mut self.state, &mut self.next);
-        if let Some(nl) = self.nonlinear.as_deref_mut() {
-            nl.springs.set_trial(self.state.u.as_slice());
-            nl.unbalance.fill(0.0);
-            nl.springs.add_deviation(1.0, nl.unbalance.as_mut_slice());
-            nl.unbalance -= &nl.deviation;
-            nl.springs.revert();
-        }
         for k in 0..self.coupling.len() {
             self.error_force[k] = self.force_last[k] - self.est.closing_force[k];
         }
