@@ -187,6 +187,7 @@ impl NewmarkNewton {
     fn try_step(&mut self, load_next: &DVector<f64>) -> std::result::Result<(), String> {
         self.next.u.copy_from(&self.state.u);
         let n_max = self.settings.max_iterations;
+        let mut last_increment = f64::NAN;
         for it in 1..=n_max {
             self.springs.set_trial(self.next.u.as_slice());
             self.core.update_kinematics(&self.state, &mut self.next);
@@ -203,6 +204,7 @@ impl NewmarkNewton {
             if !du.is_finite() {
                 return Err("the Newton iteration produced a non-finite displacement".into());
             }
+            last_increment = du / scale;
             if du <= self.settings.tolerance * scale {
                 self.springs.set_trial(self.next.u.as_slice());
                 self.core.update_kinematics(&self.state, &mut self.next);
@@ -216,9 +218,10 @@ impl NewmarkNewton {
         self.core.update_kinematics(&self.state, &mut self.next);
         self.residual(load_next);
         Err(format!(
-            "Newton–Raphson did not converge in {n_max} iterations (last displacement increment above {} of the \
-             displacement scale; residual force {:.6e} N, largest entry): raise [integrator] max_iterations or \
-             tolerance, or reduce dt",
+            "Newton–Raphson did not converge in {n_max} iterations (the last displacement increment is {:.3e} of \
+             the displacement scale, tolerance {:e}; largest residual force {:.3e} N): raise [integrator] \
+             max_iterations or tolerance, or reduce dt",
+            last_increment,
             self.settings.tolerance,
             self.residual.amax()
         ))
