@@ -29,7 +29,7 @@
 //!      setting, e.g. an actuator `kind` and its keys) and keeps the base's sub-tables; a table
 //!      with sub-tables only (`substructure` in `[substructure.phase_lag]`) just leads to them;
 //!      an array of tables (`[[substructure.specimen]]`) replaces the base's array; a fragment
-//!      with a model form (`mass`/`stiffness`, `shear_building`, `frame`, `sdof`, `tmd`)
+//!      with a model form (`mass`/`stiffness`, `shear_building`, `storeys`, `frame`, `sdof`, `tmd`)
 //!      replaces the base's whole `[structure]` (the forms exclude each other);
 //!    * only the tables of a benchmark settings file (`[controller]`, `[plant]`, `[noise]`,
 //!      `[substep]`): read by `BenchmarkConfig::parse`;
@@ -502,7 +502,7 @@ fn not_in(block: &Table, file: &Table, prefix: &str, out: &mut Vec<String>) {
     }
 }
 
-const MODEL_FORMS: [&str; 6] = ["mass", "stiffness", "shear_building", "frame", "sdof", "tmd"];
+const MODEL_FORMS: [&str; 7] = ["mass", "stiffness", "shear_building", "storeys", "frame", "sdof", "tmd"];
 
 /// A value of a table's own (not a sub-table, not an array of tables).
 fn own(v: &Value) -> bool {

@@ -94,7 +94,7 @@ fn ductility(table: &HistoryTable) -> f64 {
 /// The substructure test of a yielding building against its own converged Newmark + Newton
 /// reference: within 3 % of each floor's peak at Δt = 5 ms over intensities from ductility ~2 to
 /// ~35, two dampers and with and without P = 1 error-force compensation. (At Δt = 10 ms the same
-/// grid gives 2.4–6.2 %: the splitting's force error is O(Δt²), docs/theory.md §9.4.)
+/// grid gives 2.4–6.2 %: the splitting's force error is O(Δt²), docs/theory.md §14.4.)
 #[test]
 fn a_yielding_building_test_is_within_3_percent_of_its_nonlinear_reference() {
     let mut worst: f64 = 0.0;
@@ -151,7 +151,7 @@ hardening = 0.02
 
 /// Newmark + Newton of the monolithic yielding building: the energy balance (input = kinetic +
 /// damping + the restoring force's work) closes to round-off, as it must for the trapezoidal
-/// rule with converged iterations (docs/theory.md §9.3), while the storeys dissipate most of the
+/// rule with converged iterations (docs/theory.md §14.3), while the storeys dissipate most of the
 /// input by yielding.
 #[test]
 fn the_newton_solution_balances_its_energy() {

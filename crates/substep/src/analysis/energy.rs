@@ -104,7 +104,7 @@ impl EnergyBalance {
     }
 
     /// [`push`](Self::push) for a nonlinear model: `deviation` is the springs' deviation force
-    /// `d` of this state (docs/theory.md §9.2), whose work joins the strain term.
+    /// `d` of this state (docs/theory.md §14.2), whose work joins the strain term.
     #[allow(clippy::needless_range_loop)]
     pub fn push_nonlinear(
         &mut self,

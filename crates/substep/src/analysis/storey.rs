@@ -72,7 +72,7 @@ impl StoreyResponse {
     }
 
     /// [`update`](Self::update) for a nonlinear model: `deviation` is the springs' deviation
-    /// force `d` (docs/theory.md §9.2), part of the restoring force `K₀ u + d`.
+    /// force `d` (docs/theory.md §14.2), part of the restoring force `K₀ u + d`.
     #[allow(clippy::needless_range_loop)]
     pub fn update_nonlinear(
         &mut self,

@@ -40,7 +40,7 @@ pub struct AnalysisCase {
     /// Instantaneous over initial stiffness `k_t/k₀` of the numerical substructure: with
     /// `≠ 1` its restoring force is `k₀ u + (k_t − k₀) ũ`, the operator splitting of a
     /// nonlinear model linearised at a yielded (`< 1`) or hardened (`> 1`) state
-    /// (docs/theory.md §9.5); `K̂` and the gains keep `k₀`.
+    /// (docs/theory.md §14.5); `K̂` and the gains keep `k₀`.
     pub stiffness_ratio: f64,
 }
 

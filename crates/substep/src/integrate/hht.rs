@@ -146,7 +146,7 @@ impl AlphaOs {
     }
 
     /// α-OS for a nonlinear model: `model` holds the initial stiffness `K₀`, `springs` the
-    /// hysteretic part, evaluated once per step at a predictor (docs/theory.md §9.3).
+    /// hysteretic part, evaluated once per step at a predictor (docs/theory.md §14.3).
     pub fn with_springs(
         model: &StructuralModel,
         dt: f64,

@@ -96,9 +96,11 @@ pub enum Scheme {
     Newmark { beta: f64, gamma: f64 },
     /// Hilber–Hughes–Taylor with Hilber's `α ∈ [−⅓, 0]`.
     Hht { alpha: f64 },
-    /// Operator splitting α-OS (linear restoring force with the initial stiffness): OpenSees'
-    /// `AlphaOS` form (`alpha_os`) or its `AlphaOS_TP` form (`alpha_os_tp`).
-    AlphaOs { alpha: f64, form: AlphaOsForm },
+    /// Operator splitting α-OS, OpenSees' `AlphaOS` form (restoring force at the predictor,
+    /// the linear part implicit with the initial stiffness).
+    AlphaOs { alpha: f64 },
+    /// α-OS in OpenSees' `AlphaOS_TP` form (differs from `AlphaOs` for nonlinear models only).
+    AlphaOsTp { alpha: f64 },
     /// Exact first-order-hold discretisation (reference).
     Exact,
 }
@@ -116,14 +118,8 @@ impl Scheme {
             "galerkin" => nm(0.8, 1.5),
             "backward_difference" => nm(1.0, 1.5),
             "hht" => Ok(Scheme::Hht { alpha }),
-            "alpha_os" => Ok(Scheme::AlphaOs {
-                alpha,
-                form: AlphaOsForm::OnePoint,
-            }),
-            "alpha_os_tp" => Ok(Scheme::AlphaOs {
-                alpha,
-                form: AlphaOsForm::TwoPoint,
-            }),
+            "alpha_os" => Ok(Scheme::AlphaOs { alpha }),
+            "alpha_os_tp" => Ok(Scheme::AlphaOsTp { alpha }),
             "exact" => Ok(Scheme::Exact),
             other => Err(Error::invalid(
                 "integrator.scheme",
@@ -167,13 +163,25 @@ impl Scheme {
             Scheme::Newmark { beta: 0.0, gamma } => Box::new(ExplicitNewmark::new(model, dt, gamma, load0)?),
             Scheme::Newmark { beta, gamma } => Box::new(Newmark::new(model, dt, beta, gamma, load0)?),
             Scheme::Hht { alpha } => Box::new(Hht::new(model, dt, alpha, load0)?),
-            Scheme::AlphaOs { alpha, form } => Box::new(AlphaOs::with_springs(model, dt, alpha, form, None, load0)?),
+            Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. } => {
+                let (alpha, form) = self.alpha_os_form().expect("an alpha-OS scheme");
+                Box::new(AlphaOs::with_springs(model, dt, alpha, form, None, load0)?)
+            }
             Scheme::Exact => Box::new(ExactFoh::new(model, dt, load0)?),
         })
     }
 }
 
 impl Scheme {
+    /// Hilber's α and the form of an α-OS scheme.
+    pub fn alpha_os_form(&self) -> Option<(f64, AlphaOsForm)> {
+        match *self {
+            Scheme::AlphaOs { alpha } => Some((alpha, AlphaOsForm::OnePoint)),
+            Scheme::AlphaOsTp { alpha } => Some((alpha, AlphaOsForm::TwoPoint)),
+            _ => None,
+        }
+    }
+
     /// Build the integrator for a nonlinear model: `model` holds the initial stiffness `K₀`,
     /// `springs` the hysteretic part (docs/theory.md §9). The implicit Newmark schemes iterate
     /// with Newton–Raphson; α-OS evaluates the springs at its predictor (no iterations).
@@ -191,15 +199,19 @@ impl Scheme {
             (Scheme::Newmark { beta, gamma }, _) if beta > 0.0 => Ok(Box::new(NewmarkNewton::new(
                 model, springs, dt, beta, gamma, newton, load0,
             )?)),
-            (Scheme::AlphaOs { alpha, form }, ModelRef::Dense(m)) => Ok(Box::new(AlphaOs::with_springs(
-                m,
-                dt,
-                alpha,
-                form,
-                Some(springs),
-                load0,
-            )?)),
-            (Scheme::AlphaOs { alpha, form }, ModelRef::Sparse(m)) => {
+            (Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. }, ModelRef::Dense(m)) => {
+                let (alpha, form) = self.alpha_os_form().expect("an alpha-OS scheme");
+                Ok(Box::new(AlphaOs::with_springs(
+                    m,
+                    dt,
+                    alpha,
+                    form,
+                    Some(springs),
+                    load0,
+                )?))
+            }
+            (Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. }, ModelRef::Sparse(m)) => {
+                let (alpha, form) = self.alpha_os_form().expect("an alpha-OS scheme");
                 let dense = m.to_dense("alpha_os on a nonlinear model")?;
                 Ok(Box::new(AlphaOs::with_springs(
                     &dense,
@@ -227,11 +239,8 @@ impl Scheme {
             Scheme::Newmark { beta, .. } if *beta == 0.0 => "explicit Newmark (central difference)",
             Scheme::Newmark { .. } => "newmark",
             Scheme::Hht { .. } => "hht",
-            Scheme::AlphaOs {
-                form: AlphaOsForm::OnePoint,
-                ..
-            } => "alpha_os",
-            Scheme::AlphaOs { .. } => "alpha_os_tp",
+            Scheme::AlphaOs { .. } => "alpha_os",
+            Scheme::AlphaOsTp { .. } => "alpha_os_tp",
             Scheme::Exact => "the exact scheme",
         }
     }

@@ -1,4 +1,4 @@
-//! Implicit Newmark(β, γ) for a nonlinear model, solved by Newton–Raphson (docs/theory.md §9.3).
+//! Implicit Newmark(β, γ) for a nonlinear model, solved by Newton–Raphson (docs/theory.md §14.3).
 //!
 //! The model is `M ü + C u̇ + r(u) = f(t)` with `r(u) = K₀ u + d(u)` (hysteretic springs, see
 //! [`crate::model::Springs`]). With the Newmark relations `a_{i+1} = a0 (u − u_i) − a2 v_i − a3

@@ -706,10 +706,11 @@ impl Material for BoucWenMaterial {
         let g = self.eval(self.z_trial, self.eps_trial, s, s).g;
         p.alpha * p.stiffness + (1.0 - p.alpha) * p.stiffness * g
     }
-    /// `k (α + (1 − α) A)`.
+    /// `k (α + (1 − α) A)`, evaluated as `α k + (1 − α) k A` (the trial tangent of the virgin
+    /// state, bit for bit).
     fn initial_tangent(&self) -> f64 {
         let p = &self.p;
-        p.stiffness * (p.alpha + (1.0 - p.alpha) * p.a)
+        p.alpha * p.stiffness + (1.0 - p.alpha) * p.stiffness * p.a
     }
     fn commit(&mut self) {
         self.deformation = self.trial_deformation;

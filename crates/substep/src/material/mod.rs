@@ -9,7 +9,7 @@
 //! trial or [`Material::revert`] drops it. The tangent `dF/dδ` of the trial state is available
 //! for Newton–Raphson.
 //!
-//! Laws (docs/theory.md §9.1):
+//! Laws (docs/theory.md §14.1):
 //!
 //! * [`Elastic`]: `F = k δ`.
 //! * [`Bilinear`]: kinematic hardening between the bounds `F = b k δ ± (1 − b) F_y`
@@ -60,12 +60,19 @@ pub trait Material: Send {
 pub struct Elastic {
     stiffness: f64,
     trial: f64,
+    /// Committed deformation (for `revert`; not part of the state vector, the force does not
+    /// depend on the history).
+    committed: f64,
 }
 
 impl Elastic {
     pub fn new(stiffness: f64) -> Result<Self> {
         require_positive("material.stiffness", stiffness)?;
-        Ok(Self { stiffness, trial: 0.0 })
+        Ok(Self {
+            stiffness,
+            trial: 0.0,
+            committed: 0.0,
+        })
     }
 }
 
@@ -73,7 +80,11 @@ impl Elastic {
     /// As [`Elastic::new`], also for a zero stiffness (a fully yielded state).
     pub fn new_or_zero(stiffness: f64) -> Result<Self> {
         crate::error::require_non_negative("material.stiffness", stiffness)?;
-        Ok(Self { stiffness, trial: 0.0 })
+        Ok(Self {
+            stiffness,
+            trial: 0.0,
+            committed: 0.0,
+        })
     }
 }
 
@@ -93,8 +104,12 @@ impl Material for Elastic {
     fn initial_tangent(&self) -> f64 {
         self.stiffness
     }
-    fn commit(&mut self) {}
-    fn revert(&mut self) {}
+    fn commit(&mut self) {
+        self.committed = self.trial;
+    }
+    fn revert(&mut self) {
+        self.trial = self.committed;
+    }
     fn fresh(&self) -> Box<dyn Material> {
         Box::new(Self::new_or_zero(self.stiffness).expect("validated"))
     }
@@ -113,7 +128,7 @@ pub struct Bilinear {
     hardening: f64,
     /// Committed deformation and force.
     deformation: f64,
-    force: f64,
+    committed_force: f64,
     /// Trial deformation, force and tangent.
     trial_deformation: f64,
     trial_force: f64,
@@ -131,7 +146,7 @@ impl Bilinear {
             yield_force,
             hardening,
             deformation: 0.0,
-            force: 0.0,
+            committed_force: 0.0,
             trial_deformation: 0.0,
             trial_force: 0.0,
             trial_tangent: stiffness,
@@ -166,7 +181,7 @@ impl Material for Bilinear {
     }
     fn set_trial(&mut self, deformation: f64) {
         let (k, b) = (self.stiffness, self.hardening);
-        let elastic = self.force + k * (deformation - self.deformation);
+        let elastic = self.committed_force + k * (deformation - self.deformation);
         let half_width = (1.0 - b) * self.yield_force;
         let centre = b * k * deformation;
         self.trial_deformation = deformation;
@@ -192,11 +207,11 @@ impl Material for Bilinear {
     }
     fn commit(&mut self) {
         self.deformation = self.trial_deformation;
-        self.force = self.trial_force;
+        self.committed_force = self.trial_force;
     }
     fn revert(&mut self) {
         self.trial_deformation = self.deformation;
-        self.trial_force = self.force;
+        self.trial_force = self.committed_force;
         self.trial_tangent = self.stiffness;
     }
     fn fresh(&self) -> Box<dyn Material> {
@@ -207,11 +222,11 @@ impl Material for Bilinear {
     }
     fn write_state(&self, out: &mut [f64]) {
         out[0] = self.deformation;
-        out[1] = self.force;
+        out[1] = self.committed_force;
     }
     fn read_state(&mut self, state: &[f64]) {
         self.deformation = state[0];
-        self.force = state[1];
+        self.committed_force = state[1];
         self.revert();
     }
 }

@@ -1,4 +1,4 @@
-//! Hysteretic springs: the nonlinear part of a numerical model (docs/theory.md §9.2).
+//! Hysteretic springs: the nonlinear part of a numerical model (docs/theory.md §14.2).
 //!
 //! A nonlinear model keeps its **initial** stiffness `K₀` in the linear matrices (`M`, `C`,
 //! `K = K₀`) and adds springs whose force departs from their initial slope. Spring `e` acts on

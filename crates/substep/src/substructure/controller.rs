@@ -60,7 +60,7 @@ pub struct SubstepController {
     nonlinear: Option<Box<Splitting>>,
 }
 
-/// The explicit part of the operator splitting (docs/theory.md §9.4).
+/// The explicit part of the operator splitting (docs/theory.md §14.4).
 struct Splitting {
     springs: crate::model::Springs,
     predictor: DVector<f64>,
@@ -132,14 +132,14 @@ impl SubstepController {
     }
 
     /// Make the numerical substructure nonlinear: `r(u) = K₀ u + d(u)` with the model's
-    /// stiffness as `K₀` and `springs` the hysteretic part (docs/theory.md §9.4). Each step then
+    /// stiffness as `K₀` and `springs` the hysteretic part (docs/theory.md §14.4). Each step then
     /// evaluates the springs at the Newmark displacement predictor
     /// `ũ_{i+1} = u_i + Δt v_i + Δt² (½ − β) a_i`, commits them there and moves `d(ũ_{i+1})` to
     /// the right-hand side of the predictor; `K̂` and the gains stay those of `K₀` (operator
     /// splitting in the manner of Nakashima's OS method: no iterations, one spring update and
     /// the usual solves per step, no allocation). Carrying the unbalance `d(u_{i+1}) −
     /// d(ũ_{i+1})` into the next step was tried and dropped: it makes the splitting unstable
-    /// for `k_t/k₀ < 0.25` at `Ω > 0.5` (docs/theory.md §9.5).
+    /// for `k_t/k₀ < 0.25` at `Ω > 0.5` (docs/theory.md §14.5).
     pub fn set_springs(&mut self, springs: crate::model::Springs) {
         let n = self.state.u.len();
         self.nonlinear = Some(Box::new(Splitting {

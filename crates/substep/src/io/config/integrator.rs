@@ -67,7 +67,7 @@ impl RawIntegrator {
     pub(crate) fn check_nonlinear(&self, scheme: Scheme) -> Result<()> {
         match scheme {
             Scheme::Newmark { beta, .. } if beta > 0.0 => Ok(()),
-            Scheme::AlphaOs { .. } => Ok(()),
+            Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. } => Ok(()),
             _ => Err(Error::invalid(
                 "integrator.scheme",
                 format!(
@@ -108,7 +108,7 @@ impl RawIntegrator {
             require_non_negative("integrator.gamma", gamma)?;
         }
         let scheme = Scheme::from_name(name, beta, gamma, self.alpha.unwrap_or(-0.1))?;
-        if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha, .. } = scheme {
+        if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha } | Scheme::AlphaOsTp { alpha } = scheme {
             check_hilber_alpha(alpha)?;
         }
         Ok((name.to_string(), scheme, dt, self.duration))
