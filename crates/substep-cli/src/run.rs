@@ -759,6 +759,8 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
         }
         if let Some(r) = &summary.reference {
             print_reference_error(r.scheme, r.max_displacement_error, r.max_force_error);
+        } else if let Some(why) = substep::io::Reference::unavailable(&def) {
+            println!("  no reference solution: {why}");
         }
         if let Some(e) = &summary.engineering {
             for line in crate::engineering::lines(e) {

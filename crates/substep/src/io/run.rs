@@ -8,9 +8,11 @@
 use super::config::TestDefinition;
 use crate::error::{Error, Result};
 use crate::integrate::{Integrator, Kinematics, Scheme};
+use crate::material::MaterialSpec;
 use crate::model::Model;
+use crate::model::SpringSpec;
 use crate::site::{Mode, RemoteStepTest};
-use crate::specimen::assemble_monolithic_model;
+use crate::specimen::{FrictionModel, SpecimenSpec, assemble_monolithic_model};
 use crate::substructure::{StepRecord, SubstepObserver, SubstructureTest};
 use nalgebra::{DMatrix, DVector};
 
@@ -237,13 +239,37 @@ pub struct Reference {
     mass_influence: DVector<f64>,
     load: DVector<f64>,
     specimens: Vec<SpecimenRows>,
+    /// Hysteretic specimens: their springs start at this index of the integrator's springs,
+    /// one per entry of `hysteretic` = (coupling index, DOF, damping).
+    first_specimen_spring: usize,
+    hysteretic: Vec<(usize, usize, f64)>,
     force: Vec<f64>,
 }
 
 impl Reference {
-    /// `None` for monolithic runs and when a specimen is not linear. Errors name the config.
+    /// `None` for monolithic runs and when a specimen has no model to integrate (replayed
+    /// forces, rate-dependent friction). Hysteretic specimens (Bouc–Wen, stick–slip friction)
+    /// and a nonlinear numerical model give a Newmark + Newton reference. Errors name the config.
     pub fn new(def: &TestDefinition) -> Result<Option<Self>> {
         Self::build(def).map_err(|e| in_config(e, &def.source))
+    }
+
+    /// Why a substructure test has no reference (`None`: it has one, or it is monolithic).
+    pub fn unavailable(def: &TestDefinition) -> Option<String> {
+        let s = def.substructure.as_ref()?;
+        if s.specimens.is_empty() {
+            return Some("the remote site does not describe its specimens".into());
+        }
+        s.specimens.iter().find_map(|spec| match spec {
+            SpecimenSpec::Replay { .. } => {
+                Some("a replayed specimen force has no model to integrate (replay specimen)".into())
+            }
+            SpecimenSpec::Friction {
+                model: FrictionModel::Smooth { .. },
+                ..
+            } => Some("rate-dependent (smooth) friction has no reference model; stick_slip friction has one".into()),
+            _ => None,
+        })
     }
 
     fn build(def: &TestDefinition) -> Result<Option<Self>> {
@@ -255,16 +281,80 @@ impl Reference {
             return Ok(None);
         }
         let mut parts = Vec::with_capacity(s.specimens.len());
+        let mut linear_specimens = Vec::with_capacity(s.specimens.len());
+        // Hysteretic specimens become springs to the ground (with their dashpot) of the
+        // assembled model: (DOF, damping, spring).
+        let mut hysteretic: Vec<(usize, f64, SpringSpec)> = Vec::new();
         for spec in &s.specimens {
-            match spec.linear_matrices() {
-                Some(m) => parts.push(m),
-                None => return Ok(None),
+            if let Some(m) = spec.linear_matrices() {
+                parts.push(m);
+                linear_specimens.push(spec.clone());
+                continue;
             }
+            let (dof, damping, law, stiffness) = match spec {
+                SpecimenSpec::BoucWen { dof, params } => {
+                    let mut p = params.clone();
+                    p.damping = 0.0;
+                    (
+                        *dof,
+                        params.damping,
+                        MaterialSpec::BoucWen(Box::new(p)),
+                        params.stiffness,
+                    )
+                }
+                SpecimenSpec::Friction {
+                    dof,
+                    slip_force,
+                    model: FrictionModel::StickSlip { stiffness },
+                    damping,
+                } => (
+                    *dof,
+                    *damping,
+                    MaterialSpec::Bilinear {
+                        yield_force: *slip_force,
+                        hardening: 0.0,
+                    },
+                    *stiffness,
+                ),
+                // rate-dependent friction, replayed forces: no model to integrate
+                _ => return Ok(None),
+            };
+            hysteretic.push((
+                dof,
+                damping,
+                SpringSpec {
+                    from: None,
+                    to: dof,
+                    stiffness,
+                    law,
+                    what: format!("substructure.specimen ({} at DOF {})", spec.kind(), dof + 1),
+                },
+            ));
         }
-        let mut assembled = assemble_monolithic_model(&def.model, &s.specimens)?;
+        let mut assembled = assemble_monolithic_model(&def.model, &linear_specimens)?;
+        for (dof, damping, spring) in &hysteretic {
+            assembled = add_to_diagonal(assembled, *dof, spring.stiffness, *damping)?;
+        }
         let n = def.model.n_dofs();
         let n_assembled = assembled.n_dofs();
-        let nonlinear = def.hysteresis.is_some();
+        // The numerical model's springs keep their DOFs (numerical DOFs come first in the
+        // assembled model), the specimens' follow.
+        let mut springs = def.hysteresis.clone().unwrap_or_default();
+        let first_specimen_spring = springs.springs.len();
+        springs.springs.extend(hysteretic.iter().map(|h| h.2.clone()));
+        let hysteretic_coupling = hysteretic
+            .iter()
+            .map(|(dof, damping, _)| {
+                let ci = s.coupling_dofs.iter().position(|c| c == dof).ok_or_else(|| {
+                    Error::invalid(
+                        "substructure.specimen",
+                        format!("DOF {} is not one of substructure.coupling_dofs", dof + 1),
+                    )
+                })?;
+                Ok((ci, *dof, *damping))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let nonlinear = !springs.springs.is_empty();
         if n_assembled <= EXACT_REFERENCE_MAX_DOFS && assembled.is_sparse() {
             assembled = Model::Dense(assembled.dense("the exact reference")?.into_owned());
         }
@@ -290,16 +380,16 @@ impl Reference {
         };
         let mass_influence = assembled.effective_mass_vector();
         let load = -&mass_influence * def.ground_motion.accel.first().copied().unwrap_or(0.0);
-        let integrator = match &def.hysteresis {
-            // The numerical DOFs come first in the assembled model: the springs keep their DOFs.
-            Some(h) => scheme.build_nonlinear(
+        let integrator = if nonlinear {
+            scheme.build_nonlinear(
                 &assembled,
-                h.build(n_assembled)?,
+                springs.build(n_assembled)?,
                 def.integrator.dt,
                 def.integrator.newton,
                 &load,
-            )?,
-            None => scheme.build(&assembled, def.integrator.dt, &load)?,
+            )?
+        } else {
+            scheme.build(&assembled, def.integrator.dt, &load)?
         };
         // Same DOF numbering as assemble_monolithic: internal DOFs appended in specimen order.
         let mut next = n;
@@ -338,6 +428,8 @@ impl Reference {
             mass_influence,
             load,
             specimens,
+            first_specimen_spring,
+            hysteretic: hysteretic_coupling,
             force: vec![0.0; s.coupling_dofs.len()],
         }))
     }
@@ -371,6 +463,15 @@ impl Reference {
                 self.force[ci] -= acc;
             }
         }
+        if let Some(springs) = self.integrator.springs() {
+            for ((ci, dof, damping), (_, spring_force)) in self
+                .hysteretic
+                .iter()
+                .zip(springs.states().skip(self.first_specimen_spring))
+            {
+                self.force[*ci] -= spring_force + damping * s.v[*dof];
+            }
+        }
         Ok(())
     }
 
@@ -382,4 +483,29 @@ impl Reference {
     pub fn coupling_force(&self) -> &[f64] {
         &self.force
     }
+}
+
+/// `model` with `stiffness` and `damping` added on the diagonal at `dof` (a spring and dashpot to
+/// the ground).
+fn add_to_diagonal(model: Model, dof: usize, stiffness: f64, damping: f64) -> Result<Model> {
+    Ok(match model {
+        Model::Dense(mut m) => {
+            m.stiffness[(dof, dof)] += stiffness;
+            m.damping[(dof, dof)] += damping;
+            Model::Dense(m)
+        }
+        Model::Sparse(m) => {
+            let n = m.n_dofs();
+            let k = crate::sparse::CscMatrix::from_triplets(n, &[(dof, dof, stiffness)]);
+            let c = crate::sparse::CscMatrix::from_triplets(n, &[(dof, dof, damping)]);
+            let stiffness = crate::sparse::CscMatrix::linear_combination(&[(1.0, &m.stiffness), (1.0, &k)]);
+            let damping = crate::sparse::CscMatrix::linear_combination(&[(1.0, &m.damping), (1.0, &c)]);
+            Model::Sparse(crate::model::SparseModel::new(
+                m.mass,
+                damping,
+                stiffness,
+                Some(m.influence),
+            )?)
+        }
+    })
 }

@@ -6,7 +6,7 @@ use super::{MatrixInput, OneOrMany, SubstructureDefinition, forbid, matrix_with,
 use crate::error::{Error, Result};
 use crate::integrate::Scheme;
 use crate::io::limits::{self, Limits, RunShape};
-use crate::material::{MaterialSpec, check_hardening};
+use crate::material::{BoucWenParams, MaterialSpec, check_hardening};
 use crate::model::{
     DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, Hysteresis, Model, Section, Section3d, ShearBuilding, SparseModel,
     Storage, StructuralModel, TmdSystem, frame_2d, frame_3d, sdof, shear_building_sparse, storey_building,
@@ -236,6 +236,10 @@ pub(crate) struct RawHysteresis {
     pub(crate) kind: String,
     pub(crate) yield_force: Option<OneOrMany>,
     pub(crate) hardening: Option<f64>,
+    /// Bouc–Wen shape: sharpness `n`, `beta`, `gamma` (defaults of the `bouc_wen` specimen).
+    pub(crate) n: Option<f64>,
+    pub(crate) beta: Option<f64>,
+    pub(crate) gamma: Option<f64>,
 }
 
 const STOREYS: &str = "structure.storeys";
@@ -318,6 +322,34 @@ impl RawStoreys {
                         hardening: 0.0,
                     })
                     .collect())
+            }
+            "bouc_wen" => {
+                let hardening = h.hardening.unwrap_or(0.0);
+                check_hardening(&format!("{HYSTERESIS}.hardening"), hardening)?;
+                yield_forces(h)?
+                    .into_iter()
+                    .zip(&self.stiffness)
+                    .enumerate()
+                    .map(|(i, (yield_force, &k))| {
+                        // z is bounded by u_y: the force approaches α k u + (1 − α) F_y
+                        let mut p = BoucWenParams::new(k, hardening, yield_force / k);
+                        p.n = h.n.unwrap_or(p.n);
+                        p.beta = h.beta.unwrap_or(p.beta);
+                        p.gamma = h.gamma.unwrap_or(p.gamma);
+                        p.validate().map_err(|e| match e {
+                            Error::InvalidInput { what, reason } => Error::invalid(
+                                format!(
+                                    "{HYSTERESIS}.{} (storey {})",
+                                    what.trim_start_matches("specimen."),
+                                    i + 1
+                                ),
+                                reason,
+                            ),
+                            other => other,
+                        })?;
+                        Ok(MaterialSpec::BoucWen(Box::new(p)))
+                    })
+                    .collect()
             }
             other => Err(Error::invalid(
                 format!("{HYSTERESIS}.kind"),
