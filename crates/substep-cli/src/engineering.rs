@@ -27,10 +27,17 @@ pub struct ResponseWriter {
     path: PathBuf,
     line: String,
     table: Decimated,
+    /// Drift and storey shear of the first storeys of a nonlinear shear building (for
+    /// `storey_hysteresis.png`), `None` otherwise.
+    loops: Option<Decimated>,
 }
 
+/// Storeys shown in `storey_hysteresis.png` (the lowest ones yield most).
+const LOOP_STOREYS: usize = 4;
+
 impl ResponseWriter {
-    pub fn create(columns: &[String], dir: &Path) -> Result<Self> {
+    /// `hysteretic_storeys`: the number of storeys of a nonlinear shear building (0: none).
+    pub fn create(columns: &[String], dir: &Path, hysteretic_storeys: usize) -> Result<Self> {
         let path = dir.join("response.csv");
         let mut w = BufWriter::new(File::create(&path).with_context(|| format!("cannot write {}", path.display()))?);
         w.write_all((columns.join(",") + "\n").as_bytes())
@@ -41,6 +48,8 @@ impl ResponseWriter {
             line: String::new(),
             // t, ag, base shear, E_I, E_K, E_D, E_S, E_C, E_err
             table: Decimated::new(9, PLOT_ROWS),
+            loops: (hysteretic_storeys > 0)
+                .then(|| Decimated::new(2 * hysteretic_storeys.min(LOOP_STOREYS), PLOT_ROWS)),
         })
     }
 
@@ -70,6 +79,15 @@ impl ResponseWriter {
             e.coupling,
             r.energy_error,
         ]);
+        if let Some(loops) = &mut self.loops {
+            let m = loops.width / 2;
+            if r.drift.len() >= m && r.storey_shear.len() >= m {
+                let mut row = [0.0; 2 * LOOP_STOREYS];
+                row[..m].copy_from_slice(&r.drift[..m]);
+                row[m..2 * m].copy_from_slice(&r.storey_shear[..m]);
+                loops.push(&row[..2 * m]);
+            }
+        }
         Ok(())
     }
 
@@ -116,6 +134,27 @@ impl ResponseWriter {
                     ),
             ),
         ];
+        if let Some(loops) = &self.loops {
+            let m = loops.width / 2;
+            let mut fig = Figure::new("Storey shear (springs and damping) vs inter-storey drift").columns(m.min(3));
+            for k in 0..m {
+                let drift: Vec<f64> = loops.column(k).iter().map(|d| 1e3 * d).collect();
+                let shear: Vec<f64> = loops.column(m + k).iter().map(|v| 1e-3 * v).collect();
+                let storey = k + 1;
+                fig = fig.panel(
+                    Panel::new(
+                        &format!("storey {storey}: drift δ{storey} [mm]"),
+                        &format!("storey shear V{storey} [kN]"),
+                    )
+                    .curves(vec![Curve {
+                        label: format!("storey {}", k + 1),
+                        x: drift,
+                        y: shear,
+                    }]),
+                );
+            }
+            figs.push(("storey_hysteresis", fig));
+        }
         if s.peak_drift_m.len() > 1 {
             let n = s.peak_absolute_acceleration_m_s2.len();
             let storeys: Vec<f64> = (1..=n).map(|k| k as f64).collect();

@@ -494,7 +494,11 @@ impl CliObserver {
             None => None,
         };
         let response = match &layout.response_columns {
-            Some(columns) => Some(ResponseWriter::create(columns, dir)?),
+            Some(columns) => Some(ResponseWriter::create(
+                columns,
+                dir,
+                def.hysteresis.as_ref().map_or(0, |_| def.model.n_dofs()),
+            )?),
             None => None,
         };
         let n_c = layout.coupling_dofs.len();

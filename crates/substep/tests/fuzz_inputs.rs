@@ -245,8 +245,10 @@ fn run_case(text: String, name: String, base: PathBuf) -> Result<Option<String>,
             if let Err(e) = sim.step(&mut ()) {
                 return Some(e.to_string());
             }
-            if let Some(r) = &mut reference {
-                r.step(sim.ground_acceleration(i + 1));
+            if let Some(r) = &mut reference
+                && let Err(e) = r.step(sim.ground_acceleration(i + 1))
+            {
+                return Some(e.to_string());
             }
         }
         None

@@ -493,7 +493,7 @@ mod config {
         assert_eq!(reference.scheme(), "newmark");
         for i in 0..sim.steps_total() {
             sim.step(&mut ()).unwrap();
-            reference.step(d.ground_motion.accel[i + 1]);
+            reference.step(d.ground_motion.accel[i + 1]).unwrap();
         }
         let (u, r) = (&sim.state().u, reference.u());
         let scale = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));

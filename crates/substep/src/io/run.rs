@@ -293,7 +293,7 @@ impl Reference {
             }
             let (dof, damping, law, stiffness) = match spec {
                 SpecimenSpec::BoucWen { dof, params } => {
-                    let mut p = params.clone();
+                    let mut p = *params;
                     p.damping = 0.0;
                     (
                         *dof,
