@@ -302,3 +302,30 @@ def test_the_gil_is_released_while_a_run_steps(root):
 def test_help_is_useful():
     doc = substep.run.__doc__
     assert "ConfigError" in doc and "to_pandas" in doc and "Ctrl-C" in doc
+
+
+def test_a_nonlinear_test_from_python_equals_the_cli_and_has_its_newton_reference(cli, root, tmp_path, monkeypatch):
+    # The yielding building with a Bouc–Wen damper (docs/theory.md §14): same summary as the CLI,
+    # its reference is the converged Newmark + Newton solution of the assembled structure.
+    out = tmp_path / "cli"
+    p = run_cli(cli, "run", "examples/yielding_building.toml", "--out", str(out), "--quiet", "--no-plots", cwd=root)
+    assert p.returncode == 0, p.stderr
+    cli_summary = json.loads((out / "summary.json").read_text())
+    monkeypatch.chdir(root)
+    r = substep.run("examples/yielding_building.toml")
+    assert comparable(r.summary) == comparable(cli_summary)
+    assert r.summary["reference"]["scheme"] == "newmark_newton"
+    assert r.summary["reference"]["max_displacement_error"] < 0.03
+    # A Newton iteration that cannot converge stops the run with exit 1 / RunError naming it.
+    text = (root / "examples" / "yielding_building.toml").read_text()
+    i, j = text.index("[substructure]"), text.index("[output]")
+    mono = text[:i] + text[j:]
+    mono = mono.replace('file = "records/elcentro.csv"', f'file = "{root / "examples" / "records" / "elcentro.csv"}"')
+    mono = mono.replace("duration = 20.0", "duration = 20.0\nmax_iterations = 1")
+    (tmp_path / "newton.toml").write_text(mono)
+    p = run_cli(cli, "run", "newton.toml", "--out", "out", "--quiet", "--no-plots", cwd=tmp_path)
+    assert p.returncode == 1
+    assert "Newton–Raphson did not converge in 1 iterations" in p.stderr
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(substep.RunError, match="did not converge"):
+        substep.run("newton.toml")

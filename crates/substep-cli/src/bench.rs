@@ -43,6 +43,10 @@ pub struct BenchArgs {
     /// Sweep the sparse factor on two cores (a worker thread takes half of the elimination tree)
     #[arg(long)]
     pub two_cores: bool,
+    /// With --model chain: yielding storeys (bilinear springs, docs/theory.md §14): the full step
+    /// with the operator splitting, and Newmark + Newton as the monolithic step
+    #[arg(long, requires = "model")]
+    pub yielding: bool,
     /// DOFs of the --model benchmark (the frame takes the nearest size its layout allows)
     #[arg(long)]
     pub dofs: Option<usize>,
@@ -256,6 +260,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             steps: args.steps,
             substeps: args.substeps,
             second_core: args.two_cores,
+            yielding: args.yielding,
         })?;
         if args.json {
             println!("{}", serde_json::to_string(&r).expect("bench result serialises"));

@@ -331,6 +331,7 @@ pub fn compare(args: &BenchArgs) -> Result<()> {
         steps,
         substeps: args.substeps,
         second_core: args.two_cores,
+        yielding: false,
     })?;
     for (k, t) in tools.iter_mut().enumerate() {
         if t.status == "agreed" && !theirs_rounds[k].is_empty() {

@@ -39,10 +39,21 @@ pub fn print_model_bench(r: &ModelBench) {
         "  full step over {} steps: median {:.1} µs, p99 {:.1} µs, max {:.1} µs (CPU median {:.1} µs); {:.4} x real time",
         r.steps, r.us_per_step_median, r.us_per_step_p99, r.us_per_step_max, r.cpu_us_per_step_median, r.realtime_ratio
     );
-    println!(
-        "  monolithic Newmark step: median {:.1} µs",
-        r.us_per_step_monolithic_median
-    );
+    if r.yielding {
+        println!(
+            "  yielding storeys: {} bilinear springs (operator splitting in the full step); {} of them yielded",
+            r.dofs, r.springs_yielded
+        );
+        println!(
+            "  monolithic Newmark + Newton step: median {:.1} µs ({:.2} iterations per step)",
+            r.us_per_step_monolithic_median, r.newton_iterations_per_step
+        );
+    } else {
+        println!(
+            "  monolithic Newmark step: median {:.1} µs",
+            r.us_per_step_monolithic_median
+        );
+    }
     println!("  peak RSS: {:.1} MiB", r.peak_rss_bytes as f64 / (1024.0 * 1024.0));
 }
 

@@ -164,6 +164,13 @@ pub(super) fn plan(a: &PlanArgs) -> Result<()> {
     if let Some(note) = &result.phase_lag_note {
         let _ = writeln!(table, "{note}");
     }
+    if def.hysteresis.is_some() {
+        let _ = writeln!(
+            table,
+            "note: the numerical substructure yields; the plan uses its initial stiffness (softening keeps a \
+             stable test stable, hardening beyond it does not: analyze stability --vary stiffness_ratio=0:2:41)"
+        );
+    }
     let _ = writeln!(
         table,
         "criteria: peak error ≤ {:.2} %, 1 − ρ ≥ {:.0e}, computation ≤ {:.0} % of dt (measured on this PC)",

@@ -10,6 +10,7 @@
 //!     steps: 5,
 //!     substeps: 4,
 //!     second_core: false,
+//!     yielding: false,
 //! })
 //! .unwrap();
 //! assert_eq!(r.steps, 5);

@@ -148,6 +148,27 @@ pub struct ModelBenchOptions {
     /// Sweep the sparse factor on two cores (opt-in, see
     /// [`SubstepController::enable_second_core`]).
     pub second_core: bool,
+    /// Chain only: bilinear storey springs ([`yielding_springs`]); the full step then runs the
+    /// operator splitting and the monolithic step Newmark + Newton.
+    pub yielding: bool,
+}
+
+/// Yield drift of the yielding chain's storeys \[m\]: the benchmark's 1 m/s² harmonic makes the
+/// lower storeys of the tall chains yield (the count is reported).
+pub const YIELD_DRIFT: f64 = 2.0e-6;
+
+/// Bilinear storey springs (2 % hardening, yield at [`YIELD_DRIFT`]) on the chain `b`.
+pub fn yielding_springs(b: &ShearBuilding) -> crate::model::Hysteresis {
+    let n = b.stories;
+    let k = vec![b.story_stiffness(); n];
+    let laws = vec![
+        crate::material::MaterialSpec::Bilinear {
+            yield_force: b.story_stiffness() * YIELD_DRIFT,
+            hardening: 0.02,
+        };
+        n
+    ];
+    crate::model::storey_springs(&k, &laws, "bench.yielding")
 }
 
 /// The result of one model benchmark.
@@ -192,6 +213,14 @@ pub struct ModelBench {
     /// Peak RSS while the model is held and the substructure test is built and run (the peak
     /// is reset after the model is built; the monolithic run comes after) \[bytes\].
     pub peak_rss_bytes: u64,
+    /// Yielding storeys (`--yielding`): springs past their yield drift at the end of the run,
+    /// and the Newton iterations per monolithic step.
+    #[serde(default)]
+    pub yielding: bool,
+    #[serde(default)]
+    pub springs_yielded: usize,
+    #[serde(default)]
+    pub newton_iterations_per_step: f64,
 }
 
 /// Run the benchmark of `o`.
@@ -225,6 +254,19 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
     let mi = m.effective_mass_vector();
     let mut load = -&mi * ag(0);
     let mut ctrl = SubstepController::new(m, &settings, &load)?;
+    let springs = match (o.yielding, o.model) {
+        (false, _) => None,
+        (true, BenchModel::Chain) => Some(yielding_springs(&chain(o.dofs)?.0)),
+        (true, _) => {
+            return Err(Error::invalid(
+                "--yielding",
+                "needs --model chain (hinged frames are not built yet)",
+            ));
+        }
+    };
+    if let Some(h) = &springs {
+        ctrl.set_springs(h.build(n)?);
+    }
     let second_core = o.second_core && ctrl.enable_second_core();
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let dtau = DT / o.substeps as f64;
@@ -273,13 +315,33 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
     }
     let peak = peak_rss_bytes();
     let (solver, solve_bytes) = (ctrl.solver(), ctrl.solve_bytes());
+    let springs_yielded = ctrl.springs().map_or(0, |s| {
+        s.states()
+            .filter(|(d, _)| d.abs() > YIELD_DRIFT * (1.0 + 1e-9))
+            .count()
+    });
     drop(ctrl);
-    // Monolithic Newmark on the same model (shorter run), after the test is gone.
+    // Monolithic Newmark (+ Newton for yielding storeys) on the same model (shorter run), after
+    // the test is gone.
     let mono_steps = o.steps.clamp(10, 2000);
-    let mut integ = Newmark::new(m, DT, 0.25, 0.5, &(-&mi * ag(0)))?;
-    if o.second_core {
-        integ.enable_second_core();
-    }
+    let mut integ: Box<dyn Integrator> = match &springs {
+        Some(h) => Box::new(crate::integrate::NewmarkNewton::new(
+            m,
+            h.build(n)?,
+            DT,
+            0.25,
+            0.5,
+            crate::integrate::NewtonSettings::default(),
+            &(-&mi * ag(0)),
+        )?),
+        None => {
+            let mut integ = Newmark::new(m, DT, 0.25, 0.5, &(-&mi * ag(0)))?;
+            if o.second_core {
+                integ.enable_second_core();
+            }
+            Box::new(integ)
+        }
+    };
     let mut mono = Vec::with_capacity(mono_steps);
     for i in 0..WARMUP_STEPS + mono_steps {
         let t0 = Instant::now();
@@ -290,6 +352,12 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
             mono.push(t0.elapsed().as_secs_f64() * 1e6);
         }
     }
+    if let Some(reason) = integ.failure() {
+        return Err(Error::numerical("benchmark (monolithic Newton)", reason.to_string()));
+    }
+    let newton_iterations_per_step = integ
+        .newton_iterations()
+        .map_or(0.0, |(total, _)| total as f64 / (WARMUP_STEPS + mono_steps) as f64);
     mono.sort_by(f64::total_cmp);
     cpu.sort_by(f64::total_cmp);
     let bandwidth = super::read_bandwidth_gbs();
@@ -321,6 +389,9 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
         read_bandwidth_gbs: bandwidth,
         solve_floor_us: solve_bytes as f64 / (bandwidth * 1e3),
         peak_rss_bytes: peak,
+        yielding: springs.is_some(),
+        springs_yielded,
+        newton_iterations_per_step,
     })
 }
 

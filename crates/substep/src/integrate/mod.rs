@@ -87,6 +87,10 @@ pub trait Integrator: Send {
     fn springs(&self) -> Option<&crate::model::Springs> {
         None
     }
+    /// Newton iterations of all steps so far and the most in one step (iterative schemes).
+    fn newton_iterations(&self) -> Option<(usize, usize)> {
+        None
+    }
 }
 
 /// The integration schemes offered by name.

@@ -259,4 +259,7 @@ impl Integrator for NewmarkNewton {
     fn springs(&self) -> Option<&Springs> {
         Some(&self.springs)
     }
+    fn newton_iterations(&self) -> Option<(usize, usize)> {
+        Some(self.iterations())
+    }
 }
