@@ -316,9 +316,7 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
     let peak = peak_rss_bytes();
     let (solver, solve_bytes) = (ctrl.solver(), ctrl.solve_bytes());
     let springs_yielded = ctrl.springs().map_or(0, |s| {
-        s.states()
-            .filter(|(d, _)| d.abs() > YIELD_DRIFT * (1.0 + 1e-9))
-            .count()
+        s.states().filter(|(d, _)| d.abs() > YIELD_DRIFT * (1.0 + 1e-9)).count()
     });
     drop(ctrl);
     // Monolithic Newmark (+ Newton for yielding storeys) on the same model (shorter run), after
