@@ -176,14 +176,48 @@ impl Frame2d {
 
     /// Walk all members and lumped masses; `stiff(i, j, v)` and `mass(i, v)` receive the
     /// contributions to the global matrices (to be summed).
-    fn assemble(&self, mut stiff: impl FnMut(usize, usize, f64), mut mass: impl FnMut(usize, f64)) {
+    fn assemble(&self, stiff: impl FnMut(usize, usize, f64), mass: impl FnMut(usize, f64)) {
+        self.assemble_with(None, stiff, mass, |_| {});
+    }
+
+    /// [`Self::assemble`] with rotational hinges at the member ends `hinges` asks for: a hinged
+    /// end gets its own rotation DOF (numbered after the nodes' DOFs, in member order: columns
+    /// then beams of each storey, end `a` before end `b`), the member's rotational inertia at
+    /// that end is split half to it and half to the node (all of it where the node is fixed),
+    /// and `spring` receives the hinge between the node's rotation (`None` at the fixed base)
+    /// and the end's.
+    fn assemble_with(
+        &self,
+        hinges: Option<&FrameHinges>,
+        mut stiff: impl FnMut(usize, usize, f64),
+        mut mass: impl FnMut(usize, f64),
+        mut spring: impl FnMut(HingeSpring),
+    ) {
         let (w, h) = (self.bay_width, self.story_height);
         let node_dofs =
             |level: usize, line: usize| [FrameDof::Ux, FrameDof::Uy, FrameDof::Rz].map(|d| self.dof(level, line, d));
-        let mut member = |a: (usize, usize), b: (usize, usize), sec: Section, dx: f64, dy: f64| {
+        let mut next_hinge = self.n_dofs();
+        let mut member = |a: (usize, usize), b: (usize, usize), sec: Section, dx: f64, dy: f64, is_beam: bool| {
             let len = (dx * dx + dy * dy).sqrt();
             let ke = beam_column_stiffness(self.elastic_modulus, sec, len, dx / len, dy / len);
-            let dofs: Vec<Option<usize>> = node_dofs(a.0, a.1).into_iter().chain(node_dofs(b.0, b.1)).collect();
+            let hinged = hinges.is_some_and(|h| h.at.hinges(is_beam));
+            let mut ends = [node_dofs(a.0, a.1), node_dofs(b.0, b.1)];
+            let node_rz = [ends[0][2], ends[1][2]];
+            if hinged {
+                let h = hinges.expect("hinged");
+                for end in &mut ends {
+                    let node = end[2];
+                    end[2] = Some(next_hinge);
+                    spring(HingeSpring {
+                        node,
+                        hinge: next_hinge,
+                        stiffness: h.stiffness_factor * 6.0 * self.elastic_modulus * sec.inertia / len,
+                        is_beam,
+                    });
+                    next_hinge += 1;
+                }
+            }
+            let dofs: Vec<Option<usize>> = ends[0].into_iter().chain(ends[1]).collect();
             for (r, gr) in dofs.iter().enumerate() {
                 for (c, gc) in dofs.iter().enumerate() {
                     if let (Some(i), Some(j)) = (gr, gc) {
@@ -192,22 +226,28 @@ impl Frame2d {
                 }
             }
             let m_e = self.density * sec.area * len;
-            for end in [a, b] {
-                let [ux, uy, rz] = node_dofs(end.0, end.1);
+            for (end, node_rz) in ends.iter().zip(node_rz) {
+                let [ux, uy, rz] = *end;
                 for d in [ux, uy].into_iter().flatten() {
                     mass(d, 0.5 * m_e);
                 }
-                if let Some(d) = rz {
-                    mass(d, m_e * len * len / 78.0);
+                let inertia = m_e * len * len / 78.0;
+                match (hinged, rz, node_rz) {
+                    (true, Some(hinge), Some(node)) => {
+                        mass(hinge, 0.5 * inertia);
+                        mass(node, 0.5 * inertia);
+                    }
+                    (_, Some(d), _) => mass(d, inertia),
+                    (_, None, _) => {}
                 }
             }
         };
         for s in 1..=self.stories {
             for c in 0..=self.bays {
-                member((s - 1, c), (s, c), self.column, 0.0, h);
+                member((s - 1, c), (s, c), self.column, 0.0, h, false);
             }
             for b in 0..self.bays {
-                member((s, b), (s, b + 1), self.beam, w, 0.0);
+                member((s, b), (s, b + 1), self.beam, w, 0.0, true);
             }
         }
         for s in 1..=self.stories {
@@ -224,7 +264,12 @@ impl Frame2d {
 
     /// Influence vector: 1 on horizontal DOFs.
     fn influence(&self) -> DVector<f64> {
-        let mut iota = DVector::zeros(self.n_dofs());
+        self.influence_of(self.n_dofs())
+    }
+
+    /// Influence vector of a model of `n ≥ n_dofs()` DOFs (hinge rotations: 0).
+    fn influence_of(&self, n: usize) -> DVector<f64> {
+        let mut iota = DVector::zeros(n);
         for s in 1..=self.stories {
             for c in 0..=self.bays {
                 if let Some(d) = self.dof(s, c, FrameDof::Ux) {
@@ -234,6 +279,114 @@ impl Frame2d {
         }
         iota
     }
+}
+
+/// Which member ends get rotational hinges.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HingeLocation {
+    Beams,
+    Columns,
+    Both,
+}
+
+impl HingeLocation {
+    pub fn from_name(name: &str) -> Result<Self> {
+        match name {
+            "beams" => Ok(HingeLocation::Beams),
+            "columns" => Ok(HingeLocation::Columns),
+            "both" => Ok(HingeLocation::Both),
+            other => Err(Error::invalid(
+                "structure.frame.hinges.at",
+                format!("unknown location '{other}' (expected beams, columns or both)"),
+            )),
+        }
+    }
+    fn hinges(self, is_beam: bool) -> bool {
+        match self {
+            HingeLocation::Beams => is_beam,
+            HingeLocation::Columns => !is_beam,
+            HingeLocation::Both => true,
+        }
+    }
+}
+
+/// Concentrated plasticity of a plane frame: a rotational spring at both ends of the members
+/// `at` selects (docs/theory.md §14.2), between the node's rotation and the member end's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameHinges {
+    pub at: HingeLocation,
+    /// Initial hinge stiffness as a multiple of the member's `6 E I / L` (the member end is not
+    /// stiffened; default 10, Ibarra and Krawinkler's `n`).
+    pub stiffness_factor: f64,
+    /// The law of the beams' and of the columns' hinges (moment [N·m] over rotation [rad]).
+    pub beam_law: crate::material::MaterialSpec,
+    pub column_law: crate::material::MaterialSpec,
+}
+
+/// One hinge found by the frame assembly.
+#[derive(Debug, Clone, Copy)]
+struct HingeSpring {
+    node: Option<usize>,
+    hinge: usize,
+    stiffness: f64,
+    is_beam: bool,
+}
+
+/// The frame with hinges: the undamped model (sparse; the hinges' initial stiffness in `K`) and
+/// its springs. DOFs `0..f.n_dofs()` are the nodes' as in [`frame_2d`]; the hinge rotations
+/// follow.
+pub fn frame_2d_hinged(f: &Frame2d, hinges: &FrameHinges) -> Result<(SparseModel, super::Hysteresis)> {
+    f.validate()?;
+    crate::error::require_positive("structure.frame.hinges.stiffness_factor", hinges.stiffness_factor)?;
+    let mut kt = Vec::with_capacity(40 * (2 * f.lines() * f.stories));
+    let mut md = vec![0.0; f.n_dofs()];
+    let mut found = Vec::new();
+    f.assemble_with(
+        Some(hinges),
+        |i, j, v| kt.push((i, j, v)),
+        |i, v| {
+            if i >= md.len() {
+                md.resize(i + 1, 0.0);
+            }
+            md[i] += v
+        },
+        |h| found.push(h),
+    );
+    let n = f.n_dofs() + found.len();
+    md.resize(n, 0.0);
+    let mut springs = Vec::with_capacity(found.len());
+    for h in &found {
+        kt.push((h.hinge, h.hinge, h.stiffness));
+        if let Some(node) = h.node {
+            kt.extend([
+                (node, node, h.stiffness),
+                (node, h.hinge, -h.stiffness),
+                (h.hinge, node, -h.stiffness),
+            ]);
+        }
+        springs.push(super::SpringSpec {
+            from: h.node,
+            to: h.hinge,
+            stiffness: h.stiffness,
+            law: if h.is_beam {
+                hinges.beam_law.clone()
+            } else {
+                hinges.column_law.clone()
+            },
+            what: format!(
+                "structure.frame.hinges ({} hinge at DOF {})",
+                if h.is_beam { "beam" } else { "column" },
+                h.hinge + 1
+            ),
+        });
+    }
+    let model = SparseModel::new(
+        CscMatrix::from_diagonal(&md),
+        CscMatrix::zeros(n),
+        CscMatrix::from_triplets(n, &kt),
+        Some(f.influence_of(n)),
+    )?;
+    Ok((model, super::Hysteresis { springs }))
 }
 
 /// Global stiffness of a 2-D Euler–Bernoulli beam-column from end `a` to end `b` with direction

@@ -16,7 +16,7 @@ pub use builders::{
     ShearBuilding, TmdSystem, sdof, shear_building, shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
 };
 pub use damping::{DampingSpec, modal_damping, rayleigh_coefficients};
-pub use frame::{Frame2d, FrameDof, Section, frame_2d, frame_2d_dense};
+pub use frame::{Frame2d, FrameDof, FrameHinges, HingeLocation, Section, frame_2d, frame_2d_dense, frame_2d_hinged};
 pub use frame3d::{Frame3d, Frame3dDof, Section3d, frame_3d};
 pub use hysteretic::{Hysteresis, SpringSpec, Springs};
 pub use modal::{Modes, modes};

@@ -8,9 +8,9 @@ use crate::integrate::Scheme;
 use crate::io::limits::{self, Limits, RunShape};
 use crate::material::{BoucWenParams, MaterialSpec, check_hardening};
 use crate::model::{
-    DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, Hysteresis, Model, Section, Section3d, ShearBuilding, SparseModel,
-    Storage, StructuralModel, TmdSystem, frame_2d, frame_3d, sdof, shear_building_sparse, storey_building,
-    storey_springs, tmd_two_dof,
+    DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, FrameHinges, HingeLocation, Hysteresis, Model, Section, Section3d,
+    ShearBuilding, SparseModel, Storage, StructuralModel, TmdSystem, frame_2d, frame_2d_hinged, frame_3d, sdof,
+    shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
 };
 use crate::sparse::CscMatrix;
 use crate::transfer::Dynamics;
@@ -61,6 +61,97 @@ pub(crate) struct RawFrame {
     pub(crate) column_torsion: Option<f64>,
     pub(crate) beam_inertia_weak: Option<f64>,
     pub(crate) beam_torsion: Option<f64>,
+    /// `[structure.frame.hinges]`: concentrated plasticity (plane frames).
+    pub(crate) hinges: Option<RawFrameHinges>,
+}
+
+/// `[structure.frame.hinges]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawFrameHinges {
+    pub(crate) at: String,
+    pub(crate) kind: String,
+    pub(crate) beam_yield_moment: Option<f64>,
+    pub(crate) column_yield_moment: Option<f64>,
+    pub(crate) hardening: Option<f64>,
+    pub(crate) stiffness_factor: Option<f64>,
+}
+
+const HINGES: &str = "structure.frame.hinges";
+
+impl RawFrameHinges {
+    fn build(&self, frame: &Frame2d) -> Result<FrameHinges> {
+        let at = HingeLocation::from_name(&self.at)?;
+        if frame.bays == 0 && at != HingeLocation::Columns {
+            return Err(Error::invalid(
+                format!("{HINGES}.at"),
+                format!(
+                    "\"{}\" asks for beam hinges, but the frame has no beams (bays = 0)",
+                    self.at
+                ),
+            ));
+        }
+        let (beams, columns) = match at {
+            HingeLocation::Beams => (true, false),
+            HingeLocation::Columns => (false, true),
+            HingeLocation::Both => (true, true),
+        };
+        let law = |used: bool, key: &str, moment: Option<f64>| -> Result<MaterialSpec> {
+            if !used {
+                if moment.is_some() {
+                    return Err(Error::invalid(
+                        format!("{HINGES}.{key}"),
+                        format!("is not used with at = \"{}\"", self.at),
+                    ));
+                }
+                return Ok(MaterialSpec::Elastic);
+            }
+            if self.kind == "elastic" {
+                return Ok(MaterialSpec::Elastic);
+            }
+            let m = moment.ok_or_else(|| {
+                Error::invalid(
+                    format!("{HINGES}.{key}"),
+                    format!("missing (kind = \"{}\" at = \"{}\" needs it) [N·m]", self.kind, self.at),
+                )
+            })?;
+            if !(m.is_finite() && m > 0.0) {
+                return Err(Error::invalid(
+                    format!("{HINGES}.{key}"),
+                    format!("must be a finite moment > 0 N·m, got {m}"),
+                ));
+            }
+            let hardening = match self.kind.as_str() {
+                "bilinear" => {
+                    let b = self.hardening.ok_or_else(|| {
+                        Error::invalid(
+                            format!("{HINGES}.hardening"),
+                            "missing (kind = \"bilinear\" needs the post-yield over initial stiffness ratio)",
+                        )
+                    })?;
+                    check_hardening(&format!("{HINGES}.hardening"), b)?;
+                    b
+                }
+                "elastic_plastic" => 0.0,
+                other => {
+                    return Err(Error::invalid(
+                        format!("{HINGES}.kind"),
+                        format!("unknown hinge law '{other}' (expected elastic, bilinear or elastic_plastic)"),
+                    ));
+                }
+            };
+            Ok(MaterialSpec::Bilinear {
+                yield_force: m,
+                hardening,
+            })
+        };
+        Ok(FrameHinges {
+            at,
+            stiffness_factor: self.stiffness_factor.unwrap_or(10.0),
+            beam_law: law(beams, "beam_yield_moment", self.beam_yield_moment)?,
+            column_law: law(columns, "column_yield_moment", self.column_yield_moment)?,
+        })
+    }
 }
 
 impl Default for RawFrame {
@@ -87,6 +178,7 @@ impl Default for RawFrame {
             column_torsion: None,
             beam_inertia_weak: None,
             beam_torsion: None,
+            hinges: None,
         }
     }
 }
@@ -396,6 +488,16 @@ impl Default for RawTmd {
 impl RawStructure {
     /// The hysteretic springs of a nonlinear model (`None`: the model is linear).
     pub(crate) fn hysteresis(&self) -> Result<Option<Hysteresis>> {
+        if let Some(f) = &self.frame
+            && let Some(h) = &f.hinges
+            && let FrameKind::Plane(p) = f.kind()?
+        {
+            let hinges = h.build(&p)?;
+            let linear = hinges.beam_law == MaterialSpec::Elastic && hinges.column_law == MaterialSpec::Elastic;
+            return Ok((!linear)
+                .then(|| frame_2d_hinged(&p, &hinges).map(|m| m.1))
+                .transpose()?);
+        }
         let Some(b) = &self.storeys else {
             return Ok(None);
         };
@@ -496,9 +598,16 @@ impl RawStructure {
             };
             SparseModel::new(m.mass, damping, m.stiffness, influence)?.into()
         } else if let Some(f) = &self.frame {
-            let m = match f.kind()? {
-                FrameKind::Plane(p) => frame_2d(&p)?,
-                FrameKind::Space(s) => frame_3d(&s)?,
+            let m = match (f.kind()?, &f.hinges) {
+                (FrameKind::Plane(p), None) => frame_2d(&p)?,
+                (FrameKind::Plane(p), Some(h)) => frame_2d_hinged(&p, &h.build(&p)?)?.0,
+                (FrameKind::Space(_), Some(_)) => {
+                    return Err(Error::invalid(
+                        HINGES,
+                        "hinges are built for plane frames (dimensions = 2) only",
+                    ));
+                }
+                (FrameKind::Space(s), None) => frame_3d(&s)?,
             };
             let damping = match &self.damping {
                 Some(c) => sparse_matrix(c, "structure.damping", base, limits)?,
