@@ -43,8 +43,9 @@ pub struct BenchArgs {
     /// Sweep the sparse factor on two cores (a worker thread takes half of the elimination tree)
     #[arg(long)]
     pub two_cores: bool,
-    /// With --model chain: yielding storeys (bilinear springs, docs/theory.md §14): the full step
-    /// with the operator splitting, and Newmark + Newton as the monolithic step
+    /// With --model chain: yielding storeys; with --model frame: hinges at every member end (both
+    /// bilinear, docs/theory.md §14): the full step with the operator splitting, and Newmark +
+    /// Newton as the monolithic step
     #[arg(long, requires = "model")]
     pub yielding: bool,
     /// DOFs of the --model benchmark (the frame takes the nearest size its layout allows)

@@ -41,8 +41,8 @@ pub fn print_model_bench(r: &ModelBench) {
     );
     if r.yielding {
         println!(
-            "  yielding storeys: {} bilinear springs (operator splitting in the full step); {} of them yielded",
-            r.dofs, r.springs_yielded
+            "  hysteretic springs (operator splitting in the full step): {} past their yield point at the end",
+            r.springs_yielded
         );
         println!(
             "  monolithic Newmark + Newton step: median {:.1} µs ({:.2} iterations per step)",

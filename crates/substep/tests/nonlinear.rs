@@ -349,3 +349,71 @@ fn sparse_and_dense_storage_give_the_same_nonlinear_run() {
         }
     }
 }
+
+/// `[structure.frame.hinges]`: bad input is refused in one line naming the key.
+#[test]
+fn bad_hinge_input_is_refused_with_one_clear_line() {
+    let frame = |frame_keys: &str, hinges: &str| {
+        format!(
+            "[structure.frame]\n{frame_keys}\n[structure.frame.hinges]\n{hinges}\n[ground_motion]\n\
+             file = \"elcentro.csv\"\n[integrator]\nscheme = \"average_acceleration\"\ndt = 0.01\nduration = 1\n"
+        )
+    };
+    let cases = [
+        (
+            frame(
+                "bays = 0\nstories = 3",
+                "at = \"beams\"\nkind = \"bilinear\"\nbeam_yield_moment = 1e5\nhardening = 0.02",
+            ),
+            "structure.frame.hinges.at: \"beams\" asks for beam hinges, but the frame has no beams (bays = 0)",
+        ),
+        (
+            frame("", "at = \"walls\"\nkind = \"bilinear\""),
+            "structure.frame.hinges.at: unknown location 'walls' (expected beams, columns or both)",
+        ),
+        (
+            frame(
+                "",
+                "at = \"beams\"\nkind = \"bilinear\"\nbeam_yield_moment = -1.0\nhardening = 0.02",
+            ),
+            "structure.frame.hinges.beam_yield_moment: must be a finite moment > 0 N·m, got -1",
+        ),
+        (
+            frame(
+                "",
+                "at = \"both\"\nkind = \"bilinear\"\nbeam_yield_moment = 1e5\nhardening = 0.02",
+            ),
+            "structure.frame.hinges.column_yield_moment: missing",
+        ),
+        (
+            frame(
+                "",
+                "at = \"beams\"\nkind = \"bilinear\"\nbeam_yield_moment = 1e5\ncolumn_yield_moment = 1e5\nhardening = 0.02",
+            ),
+            "structure.frame.hinges.column_yield_moment: is not used with at = \"beams\"",
+        ),
+        (
+            frame(
+                "",
+                "at = \"beams\"\nkind = \"bilinear\"\nbeam_yield_moment = 1e5\nhardening = 1.5",
+            ),
+            "structure.frame.hinges.hardening: must lie in [0, 1)",
+        ),
+        (
+            frame(
+                "",
+                "at = \"beams\"\nkind = \"bilinear\"\nbeam_yield_moment = 1e5\nhardening = 0.02\nstiffness_factor = 0.0",
+            ),
+            "structure.frame.hinges.stiffness_factor: must be a finite number > 0",
+        ),
+        (
+            frame("dimensions = 3", "at = \"beams\"\nkind = \"elastic\""),
+            "structure.frame.hinges: hinges are built for plane frames (dimensions = 2) only",
+        ),
+    ];
+    for (text, expected) in cases {
+        let e = refused(&text);
+        assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        assert!(!e.contains('\n'), "one line: {e}");
+    }
+}

@@ -15,11 +15,19 @@
   Newmark (½, ¼) with Newton (`NormDispIncr`), one `analyze(1, dt)` per step.
 
 argv[1]: a JSON spec; argv[2]: the output CSV, one row per step: `t` and every grid node's ux,
-uy, θ in substep's DOF order (floor by floor, column lines in order)."""
+uy, θ in substep's DOF order (floor by floor, column lines in order).
+
+Timing mode (benches/nonlinear_frame.sh): with `"timing": {"warmup": W, "steps": S}` in the spec
+the excitation is a_g = sin(2πt) (substep bench's) instead of `record`, and one JSON line is
+printed instead of the CSV: {"tool": "opensees", "us_per_step_median", "us_per_step_p99",
+"iterations_per_step", "dofs"}. A spec can give the yield moments as yield rotations
+(`"yield_rotation"`: M_y = k_h · θ_y)."""
 
 import json
 import math
+import statistics
 import sys
+import time
 
 spec = json.load(open(sys.argv[1]))
 out_path = sys.argv[2]
@@ -71,7 +79,10 @@ def law(is_beam, k):
     if key in laws:
         return laws[key]
     kind = hinges["kind"]
-    my = hinges["beam_yield_moment"] if is_beam else hinges["column_yield_moment"]
+    if "yield_rotation" in hinges:
+        my = k * hinges["yield_rotation"]
+    else:
+        my = hinges["beam_yield_moment"] if is_beam else hinges["column_yield_moment"]
     if kind == "bilinear":
         ops.uniaxialMaterial("Steel01", next_mat, my, k, hinges["hardening"])
     elif kind == "elastic_plastic":
@@ -136,8 +147,13 @@ for node, m in mass.items():
     if node > tag(0, bays):  # the fixed base carries no mass (substep has no DOF there)
         ops.mass(node, *m)
 
-record = [line.split(",") for line in open(spec["record"]).read().split("\n")[1:] if line.strip()]
-values = [float(r[1]) for r in record]
+timing = spec.get("timing")
+if timing:
+    total = timing["warmup"] + timing["steps"] + 2
+    values = [math.sin(2 * math.pi * i * dt) for i in range(total)]
+else:
+    record = [line.split(",") for line in open(spec["record"]).read().split("\n")[1:] if line.strip()]
+    values = [float(r[1]) for r in record]
 ops.timeSeries("Path", 1, "-dt", dt, "-values", *values, "-factor", scale)
 ops.pattern("UniformExcitation", 1, 1, "-accel", 1)
 ops.rayleigh(spec["rayleigh"]["alpha"], 0.0, spec["rayleigh"]["beta"], 0.0)
@@ -148,6 +164,27 @@ ops.test("NormDispIncr", 1e-13, 50)
 ops.algorithm("Newton")
 ops.integrator("Newmark", 0.5, 0.25)
 ops.analysis("Transient")
+
+if timing:
+    times, iterations = [], []
+    for i in range(timing["warmup"] + timing["steps"]):
+        c0 = time.process_time()
+        if ops.analyze(1, dt) != 0:
+            print(json.dumps({"skipped": f"OpenSees did not converge at step {i + 1}"}))
+            sys.exit(0)
+        c1 = time.process_time()
+        if i >= timing["warmup"]:
+            times.append((c1 - c0) * 1e6)
+            iterations.append(ops.testIter())
+    times.sort()
+    print(json.dumps({
+        "tool": "opensees",
+        "dofs": 3 * stories * (bays + 1) + (next_node - 100000),
+        "us_per_step_median": statistics.median(times),
+        "us_per_step_p99": times[min(len(times) - 1, int(0.99 * len(times)))],
+        "iterations_per_step": sum(iterations) / len(iterations),
+    }))
+    sys.exit(0)
 
 grid = [tag(s, c) for s in range(1, stories + 1) for c in range(bays + 1)]
 steps = len(values) - 1

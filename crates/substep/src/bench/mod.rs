@@ -23,7 +23,7 @@ mod stats;
 
 pub use compare::{check_agreement, max_rel_difference};
 pub use models::{
-    BenchModel, BuiltModel, DT, ModelBench, ModelBenchOptions, YIELD_DRIFT, ZETA, ag, bench_model, build, chain,
-    monolithic_run, yielding_springs,
+    BenchModel, BuiltModel, DT, ModelBench, ModelBenchOptions, YIELD_DRIFT, YIELD_ROTATION, ZETA, ag,
+    bench_frame_hinges, bench_model, build, build_hinged_frame, chain, monolithic_run, yielding_springs,
 };
 pub use stats::{Spread, median, peak_rss_bytes, quantile, read_bandwidth_gbs, reset_peak_rss, thread_cpu_seconds};

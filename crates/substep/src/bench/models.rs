@@ -85,6 +85,8 @@ pub struct BuiltModel {
     pub roof: usize,
     /// `"129 bays x 256 stories"` and the like.
     pub layout: String,
+    /// Bays of a frame (0 for the chain).
+    pub bays: usize,
     pub stories: usize,
     /// Rayleigh `(α, β)` of the damping `C = α M + β K`.
     pub rayleigh: (f64, f64),
@@ -109,6 +111,7 @@ pub fn build(model: BenchModel, dofs: usize) -> Result<BuiltModel> {
                 model: m,
                 roof: dofs - 1,
                 layout: format!("{dofs} stories"),
+                bays: 0,
                 stories: dofs,
                 rayleigh: (alpha, beta),
             })
@@ -120,6 +123,7 @@ pub fn build(model: BenchModel, dofs: usize) -> Result<BuiltModel> {
                 model: m,
                 roof: f.dof(f.stories, 0, FrameDof::Ux).expect("roof node exists"),
                 layout: format!("{} bays x {} stories", f.bays, f.stories),
+                bays: f.bays,
                 stories: f.stories,
                 rayleigh,
             })
@@ -131,11 +135,57 @@ pub fn build(model: BenchModel, dofs: usize) -> Result<BuiltModel> {
                 model: m,
                 roof: f.roof_x_dof(),
                 layout: format!("{} x {} bays x {} stories", f.bays_x, f.bays_y, f.stories),
+                bays: f.bays_x,
                 stories: f.stories,
                 rayleigh,
             })
         }
     }
+}
+
+/// Yield rotation of the hinged frame's hinges \[rad\] (the yield moment is this times the
+/// hinge's initial stiffness): the benchmark's 1 m/s² harmonic yields part of them (the count
+/// is reported).
+pub const YIELD_ROTATION: f64 = 2.0e-6;
+
+/// The hinges of the yielding frame benchmark: at every member end, bilinear (2 % hardening),
+/// initial stiffness 10 · 6EI/L, yield at [`YIELD_ROTATION`].
+pub fn bench_frame_hinges(f: &Frame2d) -> crate::model::FrameHinges {
+    let law = |sec: crate::model::Section, len: f64| crate::material::MaterialSpec::Bilinear {
+        yield_force: 10.0 * 6.0 * f.elastic_modulus * sec.inertia / len * YIELD_ROTATION,
+        hardening: 0.02,
+    };
+    crate::model::FrameHinges {
+        at: crate::model::HingeLocation::Both,
+        stiffness_factor: 10.0,
+        beam_law: law(f.beam, f.bay_width),
+        column_law: law(f.column, f.story_height),
+    }
+}
+
+/// The plane frame with hinges at every member end whose DOFs (nodes and hinges) come to about
+/// `dofs` (a node carries 3 DOFs and about 4 hinge rotations: the nodes get 3/7 of them),
+/// Rayleigh 5 % at modes 1 and 2 of the initial stiffness.
+pub fn build_hinged_frame(dofs: usize) -> Result<(BuiltModel, crate::model::Hysteresis)> {
+    if dofs < 3 {
+        return Err(Error::invalid("--dofs", "must be at least 3"));
+    }
+    let f = Frame2d::with_about_dofs((3 * dofs / 7).max(3));
+    let (m, springs) = crate::model::frame_2d_hinged(&f, &bench_frame_hinges(&f))?;
+    let w = crate::sparse::lowest_frequencies(&m.mass, &m.stiffness, 2)?;
+    let (alpha, beta) = rayleigh_coefficients(ZETA, w[0], w[1])?;
+    let n_hinges = springs.springs.len();
+    Ok((
+        BuiltModel {
+            model: m.with_damping(&DampingSpec::Rayleigh { alpha, beta })?,
+            roof: f.dof(f.stories, 0, FrameDof::Ux).expect("roof node exists"),
+            layout: format!("{} bays x {} stories, {n_hinges} hinges", f.bays, f.stories),
+            bays: f.bays,
+            stories: f.stories,
+            rayleigh: (alpha, beta),
+        },
+        springs,
+    ))
 }
 
 /// What to run.
@@ -148,8 +198,9 @@ pub struct ModelBenchOptions {
     /// Sweep the sparse factor on two cores (opt-in, see
     /// [`SubstepController::enable_second_core`]).
     pub second_core: bool,
-    /// Chain only: bilinear storey springs ([`yielding_springs`]); the full step then runs the
-    /// operator splitting and the monolithic step Newmark + Newton.
+    /// Bilinear storey springs on the chain ([`yielding_springs`]) or hinges at every member
+    /// end of the frame ([`build_hinged_frame`]); the full step then runs the operator
+    /// splitting and the monolithic step Newmark + Newton.
     pub yielding: bool,
 }
 
@@ -221,6 +272,12 @@ pub struct ModelBench {
     pub springs_yielded: usize,
     #[serde(default)]
     pub newton_iterations_per_step: f64,
+    /// Rayleigh `(α, β)` of the model (`C = α M + β K`, initial stiffness).
+    #[serde(default)]
+    pub rayleigh: (f64, f64),
+    /// Bays of a frame model (0 for the chain).
+    #[serde(default)]
+    pub bays: usize,
 }
 
 /// Run the benchmark of `o`.
@@ -232,7 +289,13 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
         return Err(Error::invalid("--steps", "must be at least 1"));
     }
     let t_setup = Instant::now();
-    let built = build(o.model, o.dofs)?;
+    let (built, springs_of_frame) = match (o.yielding, o.model) {
+        (true, BenchModel::Frame) => {
+            let (b, h) = build_hinged_frame(o.dofs)?;
+            (b, Some(h))
+        }
+        _ => (build(o.model, o.dofs)?, None),
+    };
     reset_peak_rss();
     let (m, roof) = (&built.model, built.roof);
     let n = m.n_dofs();
@@ -257,10 +320,11 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
     let springs = match (o.yielding, o.model) {
         (false, _) => None,
         (true, BenchModel::Chain) => Some(yielding_springs(&chain(o.dofs)?.0)),
-        (true, _) => {
+        (true, BenchModel::Frame) => springs_of_frame,
+        (true, BenchModel::Frame3d) => {
             return Err(Error::invalid(
                 "--yielding",
-                "needs --model chain (hinged frames are not built yet)",
+                "needs --model chain or frame (space frames have no hinges)",
             ));
         }
     };
@@ -390,6 +454,8 @@ pub fn bench_model(o: &ModelBenchOptions) -> Result<ModelBench> {
         yielding: springs.is_some(),
         springs_yielded,
         newton_iterations_per_step,
+        rayleigh: built.rayleigh,
+        bays: built.bays,
     })
 }
 
