@@ -318,7 +318,7 @@ pub struct FrameHinges {
     /// Initial hinge stiffness as a multiple of the member's `6 E I / L` (the member end is not
     /// stiffened; default 10, Ibarra and Krawinkler's `n`).
     pub stiffness_factor: f64,
-    /// The law of the beams' and of the columns' hinges (moment [N·m] over rotation [rad]).
+    /// The law of the beams' and of the columns' hinges (moment \[N·m\] over rotation \[rad\]).
     pub beam_law: crate::material::MaterialSpec,
     pub column_law: crate::material::MaterialSpec,
 }

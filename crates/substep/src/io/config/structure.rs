@@ -494,9 +494,7 @@ impl RawStructure {
         {
             let hinges = h.build(&p)?;
             let linear = hinges.beam_law == MaterialSpec::Elastic && hinges.column_law == MaterialSpec::Elastic;
-            return Ok((!linear)
-                .then(|| frame_2d_hinged(&p, &hinges).map(|m| m.1))
-                .transpose()?);
+            return (!linear).then(|| frame_2d_hinged(&p, &hinges).map(|m| m.1)).transpose();
         }
         let Some(b) = &self.storeys else {
             return Ok(None);
