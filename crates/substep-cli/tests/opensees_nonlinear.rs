@@ -428,87 +428,90 @@ fn alpha_os_tp_matches_opensees_alphaos_tp() {
     nonlinear_case("elastic_plastic", "alpha_os_tp");
 }
 
-/// A plane frame with rotational hinges at every member end (`[structure.frame.hinges]`,
-/// bilinear and elastic–perfectly plastic), Newmark + Newton, against OpenSees
-/// (`tests/opensees/hinged_frame.py`: `elasticBeamColumn` + `zeroLength` hinges with `Steel01` /
-/// `ElasticPP`, `equalDOF`, the same lumped masses and Rayleigh on the initial stiffness):
-/// every grid DOF (ux, uy, θ of 9 nodes) within 1e-6 of its peak; the hinges yield (the response
-/// differs from the same frame with elastic hinges by more than 5 %).
-#[test]
-fn hinged_frame_newton_matches_opensees() {
-    require_openseespy!();
-    let dir = temp_dir("hinged-frame");
-    let record = write_record(&dir);
-    let (bays, stories) = (2usize, 3usize);
-    let n = 3 * (bays + 1) * stories;
-    let scale = 3.0;
-    let frame = |kind: &str| {
-        let law = match kind {
-            "bilinear" => "kind = \"bilinear\"\nhardening = 0.02\n",
-            "elastic_plastic" => "kind = \"elastic_plastic\"\n",
-            _ => "kind = \"elastic\"\n",
-        };
-        let moments = if kind == "elastic" {
-            String::new()
-        } else {
-            "beam_yield_moment = 4.6e5\ncolumn_yield_moment = 6.6e5\n".to_string()
-        };
-        format!(
-            "[structure.frame]\nbays = {bays}\nstories = {stories}\n\n[structure.frame.hinges]\nat = \"both\"\n\
-             {law}{moments}stiffness_factor = 10.0\n\n[structure.rayleigh]\nalpha = 0.2\nbeta = 0.001\n\n\
-             [ground_motion]\nfile = \"record.csv\"\nscale = {scale:?}\n\n[integrator]\n\
-             scheme = \"average_acceleration\"\ndt = {DT:?}\nduration = {DURATION:?}\ntolerance = 1e-12\n\n\
-             [output]\ndir = \"out\"\nplots = false\n"
-        )
+/// The 2-bay, 3-storey hinged frame of the frame tests: `kind` of its hinges (`elastic`,
+/// `bilinear`, `elastic_plastic`), with or without gravity and P-Δ of the columns.
+fn hinged_frame_config(kind: &str, p_delta: bool, scale: f64) -> String {
+    let law = match kind {
+        "bilinear" => "kind = \"bilinear\"\nhardening = 0.02\n",
+        "elastic_plastic" => "kind = \"elastic_plastic\"\n",
+        _ => "kind = \"elastic\"\n",
     };
-    let run = |config: &str| -> Vec<Vec<f64>> {
-        std::fs::write(dir.join("test.toml"), config).unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_substep"))
-            .args(["run", "test.toml", "--quiet", "--no-plots"])
-            .current_dir(&dir)
-            .output()
-            .expect("the substep binary runs");
-        assert!(
-            out.status.success(),
-            "substep failed: {}\n{config}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        read_displacements(&dir.join("out/history.csv"), n)
+    let moments = if kind == "elastic" {
+        ""
+    } else {
+        "beam_yield_moment = 4.6e5\ncolumn_yield_moment = 6.6e5\n"
     };
-    let elastic = run(&frame("elastic"));
-    for kind in ["bilinear", "elastic_plastic"] {
-        let sub = run(&frame(kind));
-        let spec = serde_json::json!({
-            "bays": bays, "stories": stories, "bay_width": 6.0, "story_height": 3.5,
-            "elastic_modulus": 210e9,
-            "column": {"area": 149.1e-4, "inertia": 25_170e-8},
-            "beam": {"area": 84.46e-4, "inertia": 23_130e-8},
-            "density": 7850.0, "floor_mass_per_bay": 20_000.0,
-            "hinges": {"at": "both", "kind": kind, "beam_yield_moment": 4.6e5, "column_yield_moment": 6.6e5,
-                       "hardening": 0.02, "stiffness_factor": 10.0},
-            "rayleigh": {"alpha": 0.2, "beta": 0.001},
-            "dt": DT, "scale": scale, "record": record,
-        });
-        let spec_path = dir.join("frame.json");
-        std::fs::write(&spec_path, spec.to_string()).unwrap();
-        let out_path = dir.join("opensees_frame.csv");
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/opensees/hinged_frame.py");
-        let o = Command::new(python())
-            .arg(&script)
-            .arg(&spec_path)
-            .arg(&out_path)
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "OpenSees failed: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        let os = read_displacements(&out_path, n);
-        // Deviations per DOF kind (ux, uy, θ) relative to the peak of that kind over the
-        // nodes: the middle column's uy is zero by symmetry (1e-19 m in OpenSees).
-        let of_kind = |a: &[Vec<f64>], b: &[Vec<f64>], k: usize| -> f64 {
-            let cols: Vec<usize> = (0..n).filter(|d| d % 3 == k).map(|d| d + 1).collect();
+    let gravity = if p_delta {
+        "p_delta = true\ngravity = true\n"
+    } else {
+        ""
+    };
+    format!(
+        "[structure.frame]\nbays = 2\nstories = 3\n{gravity}\n[structure.frame.hinges]\nat = \"both\"\n\
+         {law}{moments}stiffness_factor = 10.0\n\n[structure.rayleigh]\nalpha = 0.2\nbeta = 0.001\n\n\
+         [ground_motion]\nfile = \"record.csv\"\nscale = {scale:?}\n\n[integrator]\n\
+         scheme = \"average_acceleration\"\ndt = {DT:?}\nduration = {DURATION:?}\ntolerance = 1e-12\n\n\
+         [output]\ndir = \"out\"\nplots = false\n"
+    )
+}
+
+/// DOFs of the frame grid (3 per node, 3 column lines, 3 storeys).
+const FRAME_DOFS: usize = 27;
+
+/// Runs substep on a frame config in `dir`: the grid DOFs' columns.
+fn run_frame(dir: &Path, config: &str) -> Vec<Vec<f64>> {
+    std::fs::write(dir.join("test.toml"), config).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_substep"))
+        .args(["run", "test.toml", "--quiet", "--no-plots"])
+        .current_dir(dir)
+        .output()
+        .expect("the substep binary runs");
+    assert!(
+        out.status.success(),
+        "substep failed: {}\n{config}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    read_displacements(&dir.join("out/history.csv"), FRAME_DOFS)
+}
+
+/// Runs `tests/opensees/hinged_frame.py` on the frame of [`hinged_frame_config`].
+fn run_opensees_frame(dir: &Path, record: &Path, kind: &str, p_delta: bool, scale: f64) -> Vec<Vec<f64>> {
+    let spec = serde_json::json!({
+        "bays": 2, "stories": 3, "bay_width": 6.0, "story_height": 3.5,
+        "elastic_modulus": 210e9,
+        "column": {"area": 149.1e-4, "inertia": 25_170e-8},
+        "beam": {"area": 84.46e-4, "inertia": 23_130e-8},
+        "density": 7850.0, "floor_mass_per_bay": 20_000.0,
+        "hinges": {"at": "both", "kind": kind, "beam_yield_moment": 4.6e5, "column_yield_moment": 6.6e5,
+                   "hardening": 0.02, "stiffness_factor": 10.0},
+        "rayleigh": {"alpha": 0.2, "beta": 0.001},
+        "p_delta": p_delta, "gravity": p_delta,
+        "dt": DT, "scale": scale, "record": record,
+    });
+    let spec_path = dir.join("frame.json");
+    std::fs::write(&spec_path, spec.to_string()).unwrap();
+    let out_path = dir.join("opensees_frame.csv");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/opensees/hinged_frame.py");
+    let o = Command::new(python())
+        .arg(&script)
+        .arg(&spec_path)
+        .arg(&out_path)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "OpenSees failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    read_displacements(&out_path, FRAME_DOFS)
+}
+
+/// Largest deviation of `a` from `b` per DOF kind (ux, uy, θ) relative to the peak of that kind
+/// over the nodes (the middle column's uy is zero by symmetry without gravity).
+fn frame_deviations(a: &[Vec<f64>], b: &[Vec<f64>]) -> Vec<f64> {
+    (0..3)
+        .map(|k| {
+            let cols: Vec<usize> = (0..FRAME_DOFS).filter(|d| d % 3 == k).map(|d| d + 1).collect();
             let peak = cols
                 .iter()
                 .flat_map(|&c| b[c].iter())
@@ -518,17 +521,65 @@ fn hinged_frame_newton_matches_opensees() {
                 .flat_map(|&c| a[c].iter().zip(&b[c]))
                 .fold(0.0_f64, |m, (x, y)| m.max((x - y).abs()));
             dev / peak
-        };
-        // the hinges yield: far from the elastic-hinge response
-        let change = of_kind(&sub, &elastic, 0);
+        })
+        .collect()
+}
+
+/// A plane frame with rotational hinges at every member end (`[structure.frame.hinges]`,
+/// bilinear and elastic–perfectly plastic), Newmark + Newton, against OpenSees
+/// (`tests/opensees/hinged_frame.py`: `elasticBeamColumn` + `zeroLength` hinges with `Steel01` /
+/// `ElasticPP`, `equalDOF`, the same lumped masses and Rayleigh on the initial stiffness):
+/// every grid DOF (ux, uy, θ of 9 nodes) within 1e-6 of the peak of its kind; the hinges yield
+/// (the response differs from the same frame with elastic hinges by more than 5 %).
+#[test]
+fn hinged_frame_newton_matches_opensees() {
+    require_openseespy!();
+    let dir = temp_dir("hinged-frame");
+    let record = write_record(&dir);
+    let scale = 3.0;
+    let elastic = run_frame(&dir, &hinged_frame_config("elastic", false, scale));
+    for kind in ["bilinear", "elastic_plastic"] {
+        let sub = run_frame(&dir, &hinged_frame_config(kind, false, scale));
+        let os = run_opensees_frame(&dir, &record, kind, false, scale);
+        let change = frame_deviations(&sub, &elastic)[0];
         eprintln!("{kind} hinges: largest ux change against elastic hinges {change:.3e} of the peak");
         assert!(change > 0.05, "the hinges hardly yield: {change}");
-        let dev: Vec<f64> = (0..3).map(|k| of_kind(&sub, &os, k)).collect();
+        let dev = frame_deviations(&sub, &os);
         eprintln!(
             "hinged frame, {kind} hinges, Newton vs OpenSees: max deviation (ux, uy, θ) / peak of its kind = {}",
             exp(&dev)
         );
         assert!(dev.iter().all(|d| *d <= TOLERANCE), "{kind}: {}", exp(&dev));
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The hinged frame under gravity (a static Newton state first, as OpenSees' static analysis and
+/// `loadConst`) with P-Δ of the columns (OpenSees' `PDelta` transformation: the axial force
+/// follows the response), Newmark + Newton against OpenSees: within 1e-6 of the peak of each
+/// DOF kind, gravity state included; P-Δ changes the response (against gravity without P-Δ).
+#[test]
+fn hinged_frame_with_gravity_and_p_delta_matches_opensees() {
+    require_openseespy!();
+    let dir = temp_dir("hinged-frame-pdelta");
+    let record = write_record(&dir);
+    let scale = 3.0;
+    let sub = run_frame(&dir, &hinged_frame_config("bilinear", true, scale));
+    let os = run_opensees_frame(&dir, &record, "bilinear", true, scale);
+    let dev = frame_deviations(&sub, &os);
+    eprintln!(
+        "hinged frame with gravity and P-Delta, Newton vs OpenSees: max deviation (ux, uy, θ) / peak of its kind = {}",
+        exp(&dev)
+    );
+    assert!(dev.iter().all(|d| *d <= TOLERANCE), "{}", exp(&dev));
+    // the gravity state is there (the first row) and P-Δ matters
+    assert!(sub[2][0] < -1e-5, "floor 1 uy at t = 0: {}", sub[2][0]);
+    let without = run_frame(
+        &dir,
+        &hinged_frame_config("bilinear", true, scale).replace("p_delta = true\n", ""),
+    );
+    let effect = frame_deviations(&sub, &without)[0];
+    eprintln!("P-Delta changes ux by {effect:.3e} of the peak");
+    assert!(effect > 1e-3, "P-Delta has no effect: {effect}");
     let _ = std::fs::remove_dir_all(&dir);
 }

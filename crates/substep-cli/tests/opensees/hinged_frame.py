@@ -58,6 +58,8 @@ for s in range(stories + 1):
         if s == 0:
             ops.fix(tag(s, c), 1, 1, 1)
 ops.geomTransf("Linear", 1)
+# P-Δ of the columns (substep's [structure.frame] p_delta): OpenSees' PDelta transformation
+ops.geomTransf("PDelta" if spec.get("p_delta") else "Linear", 2)
 mass = {}
 
 
@@ -130,7 +132,8 @@ def member(a, b, sec, is_beam):
     else:
         for i, (s, c) in enumerate([a, b]):
             add_mass(ends[i], me / 2, me / 2, inertia)
-    ops.element("elasticBeamColumn", next_elem, hinge_ends[0], hinge_ends[1], sec["area"], E, sec["inertia"], 1)
+    transf = 1 if is_beam else 2
+    ops.element("elasticBeamColumn", next_elem, hinge_ends[0], hinge_ends[1], sec["area"], E, sec["inertia"], transf)
     next_elem += 1
 
 
@@ -146,6 +149,26 @@ for s in range(1, stories + 1):
 for node, m in mass.items():
     if node > tag(0, bays):  # the fixed base carries no mass (substep has no DOF there)
         ops.mass(node, *m)
+
+if spec.get("gravity"):
+    # gravity on the lumped masses, a static analysis (Newton), then held (loadConst)
+    ops.timeSeries("Linear", 2)
+    ops.pattern("Plain", 2, 2)
+    for node, m in mass.items():
+        if node > tag(0, bays) and node < 100000:
+            ops.load(node, 0.0, -9.80665 * m[1], 0.0)
+    ops.constraints("Transformation")
+    ops.numberer("RCM")
+    ops.system("UmfPack")
+    ops.test("NormDispIncr", 1e-13, 50)
+    ops.algorithm("Newton")
+    ops.integrator("LoadControl", 1.0)
+    ops.analysis("Static")
+    if ops.analyze(1) != 0:
+        print("OpenSees: no static state under gravity", file=sys.stderr)
+        sys.exit(1)
+    ops.loadConst("-time", 0.0)
+    ops.wipeAnalysis()
 
 timing = spec.get("timing")
 if timing:
@@ -190,7 +213,10 @@ grid = [tag(s, c) for s in range(1, stories + 1) for c in range(bays + 1)]
 steps = len(values) - 1
 with open(out_path, "w") as f:
     f.write("t," + ",".join(f"u{i + 1}" for i in range(3 * len(grid))) + "\n")
-    f.write("0.0," + ",".join("0.0" for _ in range(3 * len(grid))) + "\n")
+    row0 = []
+    for n in grid:
+        row0.extend(ops.nodeDisp(n)[:3])
+    f.write("0.0," + ",".join(repr(x) for x in row0) + "\n")
     for i in range(steps):
         if ops.analyze(1, dt) != 0:
             print(f"OpenSees did not converge at step {i + 1}", file=sys.stderr)

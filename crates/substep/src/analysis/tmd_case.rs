@@ -238,6 +238,7 @@ impl AnalysisCase {
                     },
                     what: "stiffness_ratio".into(),
                 }],
+                p_delta: Vec::new(),
             };
             controller.set_springs(springs.build(1)?);
         }

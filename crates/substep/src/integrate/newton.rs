@@ -125,6 +125,69 @@ impl NewmarkNewton {
         })
     }
 
+    /// Start from the static solution `u_s` of `r(u) = static_load` (Newton–Raphson on `K_t`;
+    /// e.g. gravity, which OpenSees applies by a static analysis before `loadConst`): `u₀ = u_s`,
+    /// `v₀ = 0`, `a₀` as constructed (the dynamic load at `t = 0` over `M`). The springs are
+    /// committed at `u_s`. The loads of the steps must then include `static_load`.
+    pub fn preload<'a>(&mut self, model: impl Into<ModelRef<'a>>, static_load: &DVector<f64>) -> Result<()> {
+        let model = model.into();
+        let n = model.n_dofs();
+        let mut u = DVector::zeros(n);
+        let mut r = DVector::zeros(n);
+        let mut triplets = Vec::new();
+        for it in 1..=self.settings.max_iterations {
+            self.springs.set_trial(u.as_slice());
+            // R = F − K₀ u − d(u)
+            r.copy_from(static_load);
+            match model {
+                ModelRef::Dense(m) => r.gemv(-1.0, &m.stiffness, &u, 1.0),
+                ModelRef::Sparse(m) => m.stiffness.sym_mul_add(-1.0, u.as_slice(), 1.0, r.as_mut_slice()),
+            }
+            self.springs.add_deviation(-1.0, r.as_mut_slice());
+            let solved = match model {
+                ModelRef::Dense(m) => {
+                    let mut k = m.stiffness.clone();
+                    self.springs.add_tangent_deviation(&mut k);
+                    k.lu().solve_mut(&mut r)
+                }
+                ModelRef::Sparse(m) => {
+                    self.springs.tangent_deviation_triplets(&mut triplets);
+                    let dev = CscMatrix::from_triplets(n, &triplets);
+                    let k = CscMatrix::linear_combination(&[(1.0, &m.stiffness), (1.0, &dev)]);
+                    SymmetricFactor::new(&k, FactorKind::Auto, "tangent stiffness of the static state")?
+                        .solve_in_place(r.as_mut_slice());
+                    true
+                }
+            };
+            if !solved || !r.iter().all(|x| x.is_finite()) {
+                return Err(Error::numerical(
+                    "structure.frame.gravity",
+                    "the static state under gravity cannot be found (singular tangent stiffness)",
+                ));
+            }
+            u += &r;
+            if r.amax() <= self.settings.tolerance * u.amax() {
+                self.springs.set_trial(u.as_slice());
+                self.springs.commit();
+                self.scale = u.amax();
+                self.state.u.copy_from(&u);
+                self.next.u.copy_from(&u);
+                self.tangents.iter_mut().for_each(|t| *t = f64::NAN);
+                return Ok(());
+            }
+            if it == self.settings.max_iterations {
+                break;
+            }
+        }
+        Err(Error::numerical(
+            "structure.frame.gravity",
+            format!(
+                "Newton–Raphson found no static state under gravity in {} iterations",
+                self.settings.max_iterations
+            ),
+        ))
+    }
+
     /// Newton iterations of all steps so far, and the most in one step.
     pub fn iterations(&self) -> (usize, usize) {
         (self.iterations, self.most_iterations)

@@ -25,6 +25,8 @@ enum Engine {
         integrator: Box<dyn Integrator>,
         mass_influence: DVector<f64>,
         load: DVector<f64>,
+        /// A constant load held from the static preload on (gravity).
+        static_load: Option<DVector<f64>>,
     },
     Substructured(Box<SubstructureTest>),
     /// A remote site in per-step mode (the site runs the sub-steps).
@@ -60,6 +62,35 @@ impl Simulation {
             None => None,
         };
         let engine = match &def.substructure {
+            None if def.static_load.is_some() => {
+                let static_load = def.static_load.clone().expect("checked");
+                let Scheme::Newmark { beta, gamma } = def.integrator.scheme else {
+                    return Err(Error::invalid(
+                        "structure.frame.gravity",
+                        "needs an implicit Newmark scheme (Newton–Raphson)",
+                    ));
+                };
+                let springs = match springs {
+                    Some(s) => s,
+                    None => crate::model::Hysteresis::default().build(model.n_dofs())?,
+                };
+                let mut newton = crate::integrate::NewmarkNewton::new(
+                    model,
+                    springs,
+                    dt,
+                    beta,
+                    gamma,
+                    def.integrator.newton,
+                    &load0,
+                )?;
+                newton.preload(model, &static_load)?;
+                Engine::Monolithic {
+                    integrator: Box::new(newton),
+                    load: load0,
+                    mass_influence,
+                    static_load: Some(static_load),
+                }
+            }
             None => Engine::Monolithic {
                 integrator: match springs {
                     Some(springs) => {
@@ -71,6 +102,7 @@ impl Simulation {
                 },
                 load: load0,
                 mass_influence,
+                static_load: None,
             },
             Some(s) if s.remote.as_ref().is_some_and(|r| r.mode == Mode::PerStep) => {
                 if springs.is_some() {
@@ -178,9 +210,13 @@ impl Simulation {
                 integrator,
                 mass_influence,
                 load,
+                static_load,
             } => {
                 load.copy_from(mass_influence);
                 load.scale_mut(-ag_next);
+                if let Some(s) = static_load {
+                    *load += &*s;
+                }
                 integrator.step(load);
                 if let Some(reason) = integrator.failure() {
                     return Err(Error::Diverged {

@@ -229,5 +229,6 @@ pub fn storey_springs(stiffness: &[f64], laws: &[crate::material::MaterialSpec],
                 what: format!("{what} (storey {})", i + 1),
             })
             .collect(),
+        p_delta: Vec::new(),
     }
 }

@@ -386,7 +386,47 @@ pub fn frame_2d_hinged(f: &Frame2d, hinges: &FrameHinges) -> Result<(SparseModel
         CscMatrix::from_triplets(n, &kt),
         Some(f.influence_of(n)),
     )?;
-    Ok((model, super::Hysteresis { springs }))
+    Ok((
+        model,
+        super::Hysteresis {
+            springs,
+            p_delta: Vec::new(),
+        },
+    ))
+}
+
+/// The columns of `f` under P-Δ ([`super::PDeltaSpec`], OpenSees' `PDelta` transformation):
+/// their end translations are the nodes' (hinges change only rotations).
+pub fn frame_p_delta(f: &Frame2d) -> Vec<super::PDeltaSpec> {
+    let mut out = Vec::with_capacity(f.stories * f.lines());
+    for s in 1..=f.stories {
+        for c in 0..=f.bays {
+            let end = |level| [f.dof(level, c, FrameDof::Ux), f.dof(level, c, FrameDof::Uy)];
+            out.push(super::PDeltaSpec {
+                a: end(s - 1),
+                b: end(s),
+                cos: 0.0,
+                sin: 1.0,
+                axial_stiffness: f.elastic_modulus * f.column.area / f.story_height,
+                length: f.story_height,
+            });
+        }
+    }
+    out
+}
+
+/// Gravity on the nodes of `f` in a model of `n ≥ f.n_dofs()` DOFs with the diagonal mass
+/// `mass`: `−g m` on every vertical DOF, `m` the mass lumped there \[N\] (`g` = 9.80665 m/s²).
+pub fn frame_gravity(f: &Frame2d, mass: &[f64], n: usize) -> DVector<f64> {
+    let mut load = DVector::zeros(n);
+    for s in 1..=f.stories {
+        for c in 0..=f.bays {
+            if let Some(d) = f.dof(s, c, FrameDof::Uy) {
+                load[d] = -9.80665 * mass[d];
+            }
+        }
+    }
+    load
 }
 
 /// Global stiffness of a 2-D Euler–Bernoulli beam-column from end `a` to end `b` with direction

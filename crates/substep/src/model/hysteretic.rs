@@ -40,6 +40,49 @@ pub struct SpringSpec {
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Hysteresis {
     pub springs: Vec<SpringSpec>,
+    /// Members with P-Δ (geometric nonlinearity, OpenSees' `PDelta` transformation).
+    pub p_delta: Vec<PDeltaSpec>,
+}
+
+/// An elastic member under P-Δ as OpenSees' `PDelta` coordinate transformation has it: with the
+/// local displacements `ul = R u` (axial `ul0, ul3`, transverse `ul1, ul4` of ends `a`, `b`),
+/// the axial force `q0 = (EA/L)(ul3 − ul0)` (tension positive) adds the transverse end forces
+/// `±q0 (ul1 − ul4)/L` and the tangent `(q0/L)[[1, −1], [−1, 1]]` on `ul1, ul4` (no `∂q0/∂u`
+/// term, as OpenSees). The member's elastic stiffness is in `K₀`; this is the deviation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PDeltaSpec {
+    /// `(ux, uy)` DOFs of end `a` and of end `b` (`None`: fixed).
+    pub a: [Option<usize>; 2],
+    pub b: [Option<usize>; 2],
+    /// Direction cosines of `a → b`.
+    pub cos: f64,
+    pub sin: f64,
+    /// `EA/L` \[N/m\] and `L` \[m\].
+    pub axial_stiffness: f64,
+    pub length: f64,
+}
+
+impl PDeltaSpec {
+    fn value(&self, u: &[f64], end: [Option<usize>; 2]) -> (f64, f64) {
+        let x = end[0].map_or(0.0, |d| u[d]);
+        let y = end[1].map_or(0.0, |d| u[d]);
+        (self.cos * x + self.sin * y, -self.sin * x + self.cos * y)
+    }
+    /// `(q0, ul1 − ul4)` at `u`.
+    fn state(&self, u: &[f64]) -> (f64, f64) {
+        let (axial_a, transverse_a) = self.value(u, self.a);
+        let (axial_b, transverse_b) = self.value(u, self.b);
+        (self.axial_stiffness * (axial_b - axial_a), transverse_a - transverse_b)
+    }
+    /// Global `(dof, transverse direction component)` of the ends' translations.
+    fn transverse(&self) -> [(Option<usize>, f64); 4] {
+        [
+            (self.a[0], -self.sin),
+            (self.a[1], self.cos),
+            (self.b[0], self.sin),
+            (self.b[1], -self.cos),
+        ]
+    }
 }
 
 impl Hysteresis {
@@ -68,14 +111,29 @@ impl Hysteresis {
                 committed_deformation: 0.0,
             });
         }
-        Ok(Springs { springs })
+        for p in &self.p_delta {
+            for d in p.a.iter().chain(&p.b).flatten() {
+                if *d >= n {
+                    return Err(Error::invalid(
+                        "structure.frame.p_delta",
+                        format!("DOF {} is out of range (the model has DOFs 1..={n})", d + 1),
+                    ));
+                }
+            }
+        }
+        Ok(Springs {
+            springs,
+            p_delta: self.p_delta.iter().map(|p| (p.clone(), 0.0, 0.0)).collect(),
+        })
     }
 
     /// Whether every spring is elastic (then the model is linear).
     pub fn is_linear(&self) -> bool {
-        self.springs
-            .iter()
-            .all(|s| matches!(s.law, MaterialSpec::Elastic | MaterialSpec::Scaled { .. }))
+        self.p_delta.is_empty()
+            && self
+                .springs
+                .iter()
+                .all(|s| matches!(s.law, MaterialSpec::Elastic | MaterialSpec::Scaled { .. }))
     }
 
     /// The same springs on DOFs renumbered by `map` (old → new).
@@ -88,6 +146,15 @@ impl Hysteresis {
                     from: s.from.map(&map),
                     to: map(s.to),
                     ..s.clone()
+                })
+                .collect(),
+            p_delta: self
+                .p_delta
+                .iter()
+                .map(|p| PDeltaSpec {
+                    a: p.a.map(|d| d.map(&map)),
+                    b: p.b.map(|d| d.map(&map)),
+                    ..p.clone()
                 })
                 .collect(),
         }
@@ -118,21 +185,26 @@ impl Spring {
     }
 }
 
-/// The springs with their material states. Trial and commit never allocate.
+/// The springs with their material states (and the P-Δ members with their trial `q0` and
+/// `ul1 − ul4`). Trial and commit never allocate.
 pub struct Springs {
     springs: Vec<Spring>,
+    p_delta: Vec<(PDeltaSpec, f64, f64)>,
 }
 
 impl Springs {
+    /// Springs and P-Δ members (each has one tangent quantity, see
+    /// [`Springs::tangents_unchanged`]).
     pub fn len(&self) -> usize {
-        self.springs.len()
+        self.springs.len() + self.p_delta.len()
     }
     pub fn is_empty(&self) -> bool {
-        self.springs.is_empty()
+        self.len() == 0
     }
-    /// Whether every spring is linear (then a step is a linear map of the state).
+    /// Whether every spring is linear and there is no P-Δ (then a step is a linear map of the
+    /// state).
     pub fn is_linear(&self) -> bool {
-        self.springs.iter().all(|s| s.material.kind() == "elastic")
+        self.p_delta.is_empty() && self.springs.iter().all(|s| s.material.kind() == "elastic")
     }
 
     /// Trial state at the displacements `u` (from the committed state).
@@ -142,6 +214,9 @@ impl Springs {
             s.trial_deformation = d;
             s.material.set_trial(d);
         }
+        for (p, q0, ul14) in &mut self.p_delta {
+            (*q0, *ul14) = p.state(u);
+        }
     }
 
     /// `out += scale · d(u)` of the trial state, `d` the deviation force.
@@ -149,6 +224,15 @@ impl Springs {
         for s in &self.springs {
             let d = s.material.force() - s.stiffness * s.deformation_of_trial();
             s.add(scale * d, out);
+        }
+        for (p, q0, ul14) in &self.p_delta {
+            // local transverse forces +P at a, −P at b; the direction signs are in `transverse`
+            let force = scale * q0 * ul14 / p.length;
+            for (dof, t) in p.transverse() {
+                if let Some(d) = dof {
+                    out[d] += force * t;
+                }
+            }
         }
     }
 
@@ -166,6 +250,16 @@ impl Springs {
                 k[(s.to, f)] -= dk;
             }
         }
+        for (p, q0, _) in &self.p_delta {
+            let g = q0 / p.length;
+            for (di, ti) in p.transverse() {
+                for (dj, tj) in p.transverse() {
+                    if let (Some(i), Some(j)) = (di, dj) {
+                        k[(i, j)] += g * ti * tj;
+                    }
+                }
+            }
+        }
     }
 
     /// The entries of `Σ a aᵀ (k_t − k₀)` of the trial state as `(row, column, value)`.
@@ -181,14 +275,28 @@ impl Springs {
                 out.extend([(f, f, dk), (f, s.to, -dk), (s.to, f, -dk)]);
             }
         }
+        for (p, q0, _) in &self.p_delta {
+            let g = q0 / p.length;
+            for (di, ti) in p.transverse() {
+                for (dj, tj) in p.transverse() {
+                    if let (Some(i), Some(j)) = (di, dj) {
+                        out.push((i, j, g * ti * tj));
+                    }
+                }
+            }
+        }
     }
 
     /// Whether the trial tangents equal those in `tangents` (then a factorised tangent can be
     /// reused); writes the current ones into it.
     pub fn tangents_unchanged(&self, tangents: &mut [f64]) -> bool {
         let mut same = true;
-        for (s, t) in self.springs.iter().zip(tangents.iter_mut()) {
-            let now = s.material.tangent();
+        let quantities = self
+            .springs
+            .iter()
+            .map(|s| s.material.tangent())
+            .chain(self.p_delta.iter().map(|p| p.1));
+        for (now, t) in quantities.zip(tangents.iter_mut()) {
             if now != *t {
                 same = false;
                 *t = now;

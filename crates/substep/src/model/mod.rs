@@ -16,9 +16,12 @@ pub use builders::{
     ShearBuilding, TmdSystem, sdof, shear_building, shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
 };
 pub use damping::{DampingSpec, modal_damping, rayleigh_coefficients};
-pub use frame::{Frame2d, FrameDof, FrameHinges, HingeLocation, Section, frame_2d, frame_2d_dense, frame_2d_hinged};
+pub use frame::{
+    Frame2d, FrameDof, FrameHinges, HingeLocation, Section, frame_2d, frame_2d_dense, frame_2d_hinged, frame_gravity,
+    frame_p_delta,
+};
 pub use frame3d::{Frame3d, Frame3dDof, Section3d, frame_3d};
-pub use hysteretic::{Hysteresis, SpringSpec, Springs};
+pub use hysteretic::{Hysteresis, PDeltaSpec, SpringSpec, Springs};
 pub use modal::{Modes, modes};
 pub use sparse::{
     AUTO_SPARSE_MAX_DENSITY, AUTO_SPARSE_MIN_DOFS, DENSE_MAX_DOFS, Model, ModelRef, SparseModel, Storage,

@@ -84,6 +84,9 @@ pub struct TestDefinition {
     /// The hysteretic springs of a nonlinear numerical substructure (`[structure.storeys.hysteresis]`);
     /// `None` for a linear one. `model` holds the initial stiffness.
     pub hysteresis: Option<Hysteresis>,
+    /// A constant load applied statically before the excitation (`[structure.frame] gravity`)
+    /// \[N\]; the run then starts from its static solution. Monolithic runs only.
+    pub static_load: Option<nalgebra::DVector<f64>>,
     pub ground_motion: GroundMotion,
     pub integrator: IntegratorDefinition,
     pub substructure: Option<SubstructureDefinition>,
@@ -447,6 +450,21 @@ impl RawConfig {
         if hysteresis.is_some() {
             self.integrator.check_nonlinear(scheme)?;
         }
+        let static_load = self.structure.static_load(&model)?;
+        if static_load.is_some() {
+            if !matches!(scheme, Scheme::Newmark { beta, .. } if beta > 0.0) {
+                return Err(Error::invalid(
+                    "structure.frame.gravity",
+                    "needs an implicit Newmark scheme (the static gravity state is found by Newton–Raphson)",
+                ));
+            }
+            if self.substructure.is_some() {
+                return Err(Error::invalid(
+                    "structure.frame.gravity",
+                    "is for monolithic runs: the sub-step algorithm starts at rest",
+                ));
+            }
+        }
         if shape.is_none() {
             self.check_run(&limits, ModelShape::of(&model), steps as f64, dt)?;
         }
@@ -473,6 +491,7 @@ impl RawConfig {
             source: name.to_string(),
             model,
             hysteresis,
+            static_load,
             ground_motion,
             integrator: IntegratorDefinition {
                 name: name_s,

@@ -9,8 +9,8 @@ use crate::io::limits::{self, Limits, RunShape};
 use crate::material::{BoucWenParams, MaterialSpec, check_hardening};
 use crate::model::{
     DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, FrameHinges, HingeLocation, Hysteresis, Model, Section, Section3d,
-    ShearBuilding, SparseModel, Storage, StructuralModel, TmdSystem, frame_2d, frame_2d_hinged, frame_3d, sdof,
-    shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
+    ShearBuilding, SparseModel, Storage, StructuralModel, TmdSystem, frame_2d, frame_2d_hinged, frame_3d,
+    frame_gravity, frame_p_delta, sdof, shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
 };
 use crate::sparse::CscMatrix;
 use crate::transfer::Dynamics;
@@ -63,6 +63,10 @@ pub(crate) struct RawFrame {
     pub(crate) beam_torsion: Option<f64>,
     /// `[structure.frame.hinges]`: concentrated plasticity (plane frames).
     pub(crate) hinges: Option<RawFrameHinges>,
+    /// P-Δ of the columns (OpenSees' `PDelta` transformation; plane frames).
+    pub(crate) p_delta: bool,
+    /// Gravity on the lumped masses, applied statically before the excitation (plane frames).
+    pub(crate) gravity: bool,
 }
 
 /// `[structure.frame.hinges]`.
@@ -179,6 +183,8 @@ impl Default for RawFrame {
             beam_inertia_weak: None,
             beam_torsion: None,
             hinges: None,
+            p_delta: false,
+            gravity: false,
         }
     }
 }
@@ -489,12 +495,17 @@ impl RawStructure {
     /// The hysteretic springs of a nonlinear model (`None`: the model is linear).
     pub(crate) fn hysteresis(&self) -> Result<Option<Hysteresis>> {
         if let Some(f) = &self.frame
-            && let Some(h) = &f.hinges
+            && (f.hinges.is_some() || f.p_delta)
             && let FrameKind::Plane(p) = f.kind()?
         {
-            let hinges = h.build(&p)?;
-            let linear = hinges.beam_law == MaterialSpec::Elastic && hinges.column_law == MaterialSpec::Elastic;
-            return (!linear).then(|| frame_2d_hinged(&p, &hinges).map(|m| m.1)).transpose();
+            let mut h = match &f.hinges {
+                Some(h) => frame_2d_hinged(&p, &h.build(&p)?)?.1,
+                None => Hysteresis::default(),
+            };
+            if f.p_delta {
+                h.p_delta = frame_p_delta(&p);
+            }
+            return Ok((!h.is_linear()).then_some(h));
         }
         let Some(b) = &self.storeys else {
             return Ok(None);
@@ -504,6 +515,23 @@ impl RawStructure {
             return Ok(None);
         }
         Ok(Some(storey_springs(&b.stiffness, &laws, HYSTERESIS)))
+    }
+
+    /// The static load applied before the excitation (`[structure.frame] gravity`), for a model
+    /// of `n` DOFs with the lumped masses of `model`.
+    pub(crate) fn static_load(&self, model: &Model) -> Result<Option<DVector<f64>>> {
+        let Some(f) = &self.frame else { return Ok(None) };
+        if !f.gravity {
+            return Ok(None);
+        }
+        let FrameKind::Plane(p) = f.kind()? else {
+            return Ok(None);
+        };
+        let mass: Vec<f64> = match model {
+            Model::Dense(m) => m.mass.diagonal().iter().copied().collect(),
+            Model::Sparse(m) => m.mass.diagonal(),
+        };
+        Ok(Some(frame_gravity(&p, &mass, model.n_dofs())))
     }
 
     /// The model in the storage `[structure] storage` asks for; `sparse_capable` is false when
@@ -603,6 +631,16 @@ impl RawStructure {
                     return Err(Error::invalid(
                         HINGES,
                         "hinges are built for plane frames (dimensions = 2) only",
+                    ));
+                }
+                (FrameKind::Space(_), None) if f.p_delta || f.gravity => {
+                    return Err(Error::invalid(
+                        if f.p_delta {
+                            "structure.frame.p_delta"
+                        } else {
+                            "structure.frame.gravity"
+                        },
+                        "is built for plane frames (dimensions = 2) only",
                     ));
                 }
                 (FrameKind::Space(s), None) => frame_3d(&s)?,

@@ -266,6 +266,7 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
         source: format!("vst: {}", method.name),
         model: structure()?.into(),
         hysteresis: None,
+        static_load: None,
         ground_motion: GroundMotion {
             accel: record.accel,
             description: format!(
