@@ -410,6 +410,16 @@ fn bad_hinge_input_is_refused_with_one_clear_line() {
             frame("dimensions = 3", "at = \"beams\"\nkind = \"elastic\""),
             "structure.frame.hinges: hinges are built for plane frames (dimensions = 2) only",
         ),
+        (
+            frame("gravity = true", "at = \"beams\"\nkind = \"elastic\"")
+                .replace("\"average_acceleration\"", "\"alpha_os\""),
+            "structure.frame.gravity: needs an implicit Newmark scheme",
+        ),
+        (
+            frame("gravity = true", "at = \"beams\"\nkind = \"elastic\"")
+                + "[substructure]\ncoupling_dofs = [1]\nsubsteps = 4\n[[substructure.specimen]]\nkind = \"linear_sdof\"\ndof = 1\nstiffness = 1e6\n",
+            "structure.frame.gravity: is for monolithic runs: the sub-step algorithm starts at rest",
+        ),
     ];
     for (text, expected) in cases {
         let e = refused(&text);
