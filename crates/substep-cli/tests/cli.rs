@@ -536,3 +536,67 @@ fn a_run_killed_at_any_moment_leaves_no_broken_summary() {
         ]
     );
 }
+
+/// Nonlinear models (docs/theory.md §14): bad input gives one line and exit 2; a Newton
+/// iteration that does not converge gives exit 1, names the step and the residual, and keeps
+/// the rows before.
+#[test]
+fn nonlinear_bad_input_exits_2_and_a_failed_newton_exits_1() {
+    let storeys = |hysteresis: &str, integrator: &str| {
+        format!(
+            "[structure.storeys]\nmasses = [2.0e5, 2.0e5]\nstiffness = [3.0e8, 2.5e8]\n\
+             [structure.storeys.hysteresis]\n{hysteresis}\n\
+             [ground_motion]\ngenerator = \"harmonic\"\namplitude = 3.0\nfrequency = 2.0\nduration = 2.0\n\
+             [integrator]\ndt = 0.01\n{integrator}\n"
+        )
+    };
+    let bilinear = "kind = \"bilinear\"\nyield_force = 1.0e5\nhardening = 0.02";
+    for (name, config, expected) in [
+        (
+            "nl-yield",
+            storeys("kind = \"bilinear\"\nyield_force = 0.0\nhardening = 0.02", ""),
+            "structure.storeys.hysteresis.yield_force: storey 1: must be a finite force > 0 N",
+        ),
+        (
+            "nl-hardening",
+            storeys("kind = \"bilinear\"\nyield_force = 1.0e5\nhardening = 1.0", ""),
+            "structure.storeys.hysteresis.hardening: must lie in [0, 1)",
+        ),
+        (
+            "nl-tolerance",
+            storeys(bilinear, "tolerance = 0.0"),
+            "integrator.tolerance: must lie in (0, 1)",
+        ),
+        (
+            "nl-scheme",
+            storeys(bilinear, "scheme = \"hht\""),
+            "\"hht\" cannot integrate a nonlinear model",
+        ),
+        (
+            "nl-hinge",
+            "[structure.frame]\nbays = 0\n[structure.frame.hinges]\nat = \"beams\"\nkind = \"elastic\"\n\
+             [ground_motion]\ngenerator = \"harmonic\"\namplitude = 1.0\nfrequency = 1.0\nduration = 1.0\n\
+             [integrator]\ndt = 0.01\n"
+                .to_string(),
+            "structure.frame.hinges.at: \"beams\" asks for beam hinges, but the frame has no beams (bays = 0)",
+        ),
+    ] {
+        assert_bad_input(name, &config, &[], expected);
+    }
+    let dir = temp_dir("nl-newton");
+    std::fs::write(dir.join("cfg.toml"), storeys(bilinear, "max_iterations = 1")).unwrap();
+    let out = substep(&dir, &["run", "cfg.toml", "--out", "out"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.starts_with("error: diverged at step "), "{stderr}");
+    assert!(
+        stderr.contains("Newton–Raphson did not converge in 1 iterations"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("largest residual force"), "{stderr}");
+    let summary = json(&dir.join("out/summary.json"));
+    assert_eq!(summary["completed"], false);
+    assert_eq!(summary["diverged"], true);
+    let done = summary["steps_done"].as_u64().unwrap() as usize;
+    assert_eq!(lines(&dir.join("out/history.csv")).len(), 1 + done + 1);
+}
