@@ -212,8 +212,9 @@ fn read_displacements(path: &Path, n: usize) -> Vec<Vec<f64>> {
     cols
 }
 
-/// Runs substep on `config`; `Err(stderr)` if it refuses or fails.
-fn run_substep(dir: &Path, config: &str) -> Result<Vec<Vec<f64>>, String> {
+/// Runs substep on `config`: `t` and the first `n` displacements of `history.csv`;
+/// `Err(stderr)` if it refuses or fails.
+fn run_substep_dofs(dir: &Path, config: &str, n: usize) -> Result<Vec<Vec<f64>>, String> {
     std::fs::write(dir.join("test.toml"), config).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_substep"))
         .args(["run", "test.toml", "--quiet", "--no-plots"])
@@ -227,7 +228,12 @@ fn run_substep(dir: &Path, config: &str) -> Result<Vec<Vec<f64>>, String> {
             String::from_utf8_lossy(&out.stderr)
         ));
     }
-    Ok(read_displacements(&dir.join("out/history.csv"), MASSES.len()))
+    Ok(read_displacements(&dir.join("out/history.csv"), n))
+}
+
+/// [`run_substep_dofs`] for the shear building.
+fn run_substep(dir: &Path, config: &str) -> Result<Vec<Vec<f64>>, String> {
+    run_substep_dofs(dir, config, MASSES.len())
 }
 
 /// Runs `tests/opensees/shear_building.py` with `integrator` ("newmark", "alpha_os",
@@ -460,18 +466,7 @@ const FRAME_DOFS: usize = 27;
 
 /// Runs substep on a frame config in `dir`: the grid DOFs' columns.
 fn run_frame(dir: &Path, config: &str) -> Vec<Vec<f64>> {
-    std::fs::write(dir.join("test.toml"), config).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_substep"))
-        .args(["run", "test.toml", "--quiet", "--no-plots"])
-        .current_dir(dir)
-        .output()
-        .expect("the substep binary runs");
-    assert!(
-        out.status.success(),
-        "substep failed: {}\n{config}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    read_displacements(&dir.join("out/history.csv"), FRAME_DOFS)
+    run_substep_dofs(dir, config, FRAME_DOFS).unwrap_or_else(|e| panic!("substep failed: {e}\n{config}"))
 }
 
 /// Runs `tests/opensees/hinged_frame.py` on the frame of [`hinged_frame_config`].

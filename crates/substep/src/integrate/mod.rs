@@ -203,20 +203,12 @@ impl Scheme {
             (Scheme::Newmark { beta, gamma }, _) if beta > 0.0 => Ok(Box::new(NewmarkNewton::new(
                 model, springs, dt, beta, gamma, newton, load0,
             )?)),
-            (Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. }, ModelRef::Dense(m)) => {
+            (Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. }, model) => {
                 let (alpha, form) = self.alpha_os_form().expect("an alpha-OS scheme");
-                Ok(Box::new(AlphaOs::with_springs(
-                    m,
-                    dt,
-                    alpha,
-                    form,
-                    Some(springs),
-                    load0,
-                )?))
-            }
-            (Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. }, ModelRef::Sparse(m)) => {
-                let (alpha, form) = self.alpha_os_form().expect("an alpha-OS scheme");
-                let dense = m.to_dense("alpha_os on a nonlinear model")?;
+                let dense = match model {
+                    ModelRef::Dense(m) => std::borrow::Cow::Borrowed(m),
+                    ModelRef::Sparse(m) => std::borrow::Cow::Owned(m.to_dense("alpha_os on a nonlinear model")?),
+                };
                 Ok(Box::new(AlphaOs::with_springs(
                     &dense,
                     dt,

@@ -47,9 +47,62 @@ enum Base {
     Sparse(CscMatrix),
 }
 
+impl Base {
+    /// `K₀` alone (the static state) of `model`.
+    fn stiffness(model: ModelRef) -> Self {
+        match model {
+            ModelRef::Dense(m) => Base::Dense(m.stiffness.clone()),
+            ModelRef::Sparse(m) => Base::Sparse(m.stiffness.clone()),
+        }
+    }
+
+    /// `out −= B u`.
+    fn mul_sub(&self, u: &DVector<f64>, out: &mut DVector<f64>) {
+        match self {
+            Base::Dense(k) => out.gemv(-1.0, k, u, 1.0),
+            Base::Sparse(k) => k.sym_mul_add(-1.0, u.as_slice(), 1.0, out.as_mut_slice()),
+        }
+    }
+
+    /// `B + Σ a aᵀ (k_t − k₀)` of the springs' trial state, factorised (`triplets`: work space).
+    fn factor_with(
+        &self,
+        springs: &Springs,
+        triplets: &mut Vec<(usize, usize, f64)>,
+        what: &str,
+    ) -> Result<TangentFactor> {
+        Ok(match self {
+            Base::Dense(k0) => {
+                let mut k = k0.clone();
+                springs.add_tangent_deviation(&mut k);
+                TangentFactor::Dense(k.lu())
+            }
+            Base::Sparse(k0) => {
+                springs.tangent_deviation_triplets(triplets);
+                let dev = CscMatrix::from_triplets(k0.n(), triplets);
+                let k = CscMatrix::linear_combination(&[(1.0, k0), (1.0, &dev)]);
+                TangentFactor::Sparse(Box::new(SymmetricFactor::new(&k, FactorKind::Auto, what)?))
+            }
+        })
+    }
+}
+
 enum TangentFactor {
     Dense(nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>),
     Sparse(Box<SymmetricFactor>),
+}
+
+impl TangentFactor {
+    /// `x ← K⁻¹ x`; `false` if the matrix is singular.
+    fn solve(&mut self, x: &mut DVector<f64>) -> bool {
+        match self {
+            TangentFactor::Dense(lu) => lu.solve_mut(x),
+            TangentFactor::Sparse(f) => {
+                f.solve_in_place(x.as_mut_slice());
+                true
+            }
+        }
+    }
 }
 
 /// Newmark + Newton–Raphson on a model with hysteretic springs.
@@ -65,6 +118,8 @@ pub struct NewmarkNewton {
     /// Tangents of the springs in the current factor, and the factor (`None`: `K̂₀`'s).
     tangents: Vec<f64>,
     factor: Option<TangentFactor>,
+    /// Work space of the sparse tangent's assembly.
+    triplets: Vec<(usize, usize, f64)>,
     initial_tangents: Vec<f64>,
     scale: f64,
     failure: Option<String>,
@@ -118,6 +173,7 @@ impl NewmarkNewton {
             initial_tangents: tangents.clone(),
             tangents,
             factor: None,
+            triplets: Vec::new(),
             scale: 0.0,
             failure: None,
             iterations: 0,
@@ -130,35 +186,23 @@ impl NewmarkNewton {
     /// `v₀ = 0`, `a₀` as constructed (the dynamic load at `t = 0` over `M`). The springs are
     /// committed at `u_s`. The loads of the steps must then include `static_load`.
     pub fn preload<'a>(&mut self, model: impl Into<ModelRef<'a>>, static_load: &DVector<f64>) -> Result<()> {
-        let model = model.into();
-        let n = model.n_dofs();
+        let base = Base::stiffness(model.into());
+        let n = self.state.u.len();
         let mut u = DVector::zeros(n);
         let mut r = DVector::zeros(n);
-        let mut triplets = Vec::new();
         for it in 1..=self.settings.max_iterations {
             self.springs.set_trial(u.as_slice());
             // R = F − K₀ u − d(u)
             r.copy_from(static_load);
-            match model {
-                ModelRef::Dense(m) => r.gemv(-1.0, &m.stiffness, &u, 1.0),
-                ModelRef::Sparse(m) => m.stiffness.sym_mul_add(-1.0, u.as_slice(), 1.0, r.as_mut_slice()),
-            }
+            base.mul_sub(&u, &mut r);
             self.springs.add_deviation(-1.0, r.as_mut_slice());
-            let solved = match model {
-                ModelRef::Dense(m) => {
-                    let mut k = m.stiffness.clone();
-                    self.springs.add_tangent_deviation(&mut k);
-                    k.lu().solve_mut(&mut r)
-                }
-                ModelRef::Sparse(m) => {
-                    self.springs.tangent_deviation_triplets(&mut triplets);
-                    let dev = CscMatrix::from_triplets(n, &triplets);
-                    let k = CscMatrix::linear_combination(&[(1.0, &m.stiffness), (1.0, &dev)]);
-                    SymmetricFactor::new(&k, FactorKind::Auto, "tangent stiffness of the static state")?
-                        .solve_in_place(r.as_mut_slice());
-                    true
-                }
-            };
+            let solved = base
+                .factor_with(
+                    &self.springs,
+                    &mut self.triplets,
+                    "tangent stiffness of the static state",
+                )?
+                .solve(&mut r);
             if !solved || !r.iter().all(|x| x.is_finite()) {
                 return Err(Error::numerical(
                     "structure.frame.gravity",
@@ -193,35 +237,15 @@ impl NewmarkNewton {
         (self.iterations, self.most_iterations)
     }
 
-    /// The springs (their committed state after each step).
-    pub fn springs(&self) -> &Springs {
-        &self.springs
-    }
-
     fn refactor(&mut self) -> Result<()> {
         if self.tangents == self.initial_tangents {
             self.factor = None;
             return Ok(());
         }
-        self.factor = Some(match &self.base {
-            Base::Dense(k0) => {
-                let mut k = k0.clone();
-                self.springs.add_tangent_deviation(&mut k);
-                TangentFactor::Dense(k.lu())
-            }
-            Base::Sparse(k0) => {
-                let n = k0.n();
-                let mut triplets = Vec::new();
-                self.springs.tangent_deviation_triplets(&mut triplets);
-                let dev = CscMatrix::from_triplets(n, &triplets);
-                let k = CscMatrix::linear_combination(&[(1.0, k0), (1.0, &dev)]);
-                TangentFactor::Sparse(Box::new(SymmetricFactor::new(
-                    &k,
-                    FactorKind::Auto,
-                    "tangent effective stiffness",
-                )?))
-            }
-        });
+        self.factor = Some(
+            self.base
+                .factor_with(&self.springs, &mut self.triplets, "tangent effective stiffness")?,
+        );
         Ok(())
     }
 
@@ -231,11 +255,7 @@ impl NewmarkNewton {
                 self.core.solve_in_place(&mut self.residual);
                 true
             }
-            Some(TangentFactor::Dense(lu)) => lu.solve_mut(&mut self.residual),
-            Some(TangentFactor::Sparse(f)) => {
-                f.solve_in_place(self.residual.as_mut_slice());
-                true
-            }
+            Some(f) => f.solve(&mut self.residual),
         }
     }
 

@@ -135,30 +135,6 @@ impl Hysteresis {
                 .iter()
                 .all(|s| matches!(s.law, MaterialSpec::Elastic | MaterialSpec::Scaled { .. }))
     }
-
-    /// The same springs on DOFs renumbered by `map` (old → new).
-    pub fn renumbered(&self, map: impl Fn(usize) -> usize) -> Self {
-        Self {
-            springs: self
-                .springs
-                .iter()
-                .map(|s| SpringSpec {
-                    from: s.from.map(&map),
-                    to: map(s.to),
-                    ..s.clone()
-                })
-                .collect(),
-            p_delta: self
-                .p_delta
-                .iter()
-                .map(|p| PDeltaSpec {
-                    a: p.a.map(|d| d.map(&map)),
-                    b: p.b.map(|d| d.map(&map)),
-                    ..p.clone()
-                })
-                .collect(),
-        }
-    }
 }
 
 struct Spring {
