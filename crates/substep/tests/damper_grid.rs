@@ -98,3 +98,74 @@ fn arx_compensation_on_the_damper_grid_behind_a_second_order_actuator() {
     table("second order 40 Hz + delay", &rows);
     check(&rows);
 }
+
+/// The floor displacements of one grid run, step by step.
+struct Displacements(Vec<Vec<f64>>);
+
+impl substep::substructure::SubstepObserver for Displacements {}
+
+impl substep::run::RunObserver for Displacements {
+    fn step(&mut self, row: &substep::run::StepRow<'_>) -> std::ops::ControlFlow<()> {
+        self.0.push(row.u.to_vec());
+        std::ops::ControlFlow::Continue(())
+    }
+}
+
+fn displacements(damper: f64, delay: f64, k_sub: usize, actuator: GridActuator, arx: bool) -> Vec<Vec<f64>> {
+    let def = substep::study::vst::grid::definition(damper, delay, k_sub, actuator, arx).unwrap();
+    let mut out = Displacements(Vec::new());
+    let s = substep::run::execute(&def, &mut out, &std::sync::atomic::AtomicBool::new(false)).unwrap();
+    assert!(s.completed, "{damper} {delay} {k_sub} {actuator:?} {arx}");
+    out.0
+}
+
+/// Largest difference of two runs over steps and floors, relative to the peak of `b`.
+fn distance(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
+    let (mut diff, mut peak) = (0.0f64, 0.0f64);
+    for (x, y) in a.iter().zip(b) {
+        for (xi, yi) in x.iter().zip(y) {
+            diff = diff.max((xi - yi).abs());
+            peak = peak.max(yi.abs());
+        }
+    }
+    diff / peak
+}
+
+/// Why the ≤ 1.2 × line is out of reach at half a step of delay (docs/vst.md, "Half a step of
+/// delay"): measured against the same test with a delay-free ideal actuator, (1) a pure delay
+/// shorter than a step is not felt by the damper at all — the actuator reproduces the
+/// piecewise-linear command path, the damper's force is `c` × the slope of the segment the
+/// delayed time falls in, and the sub-steps of one step share nearly one slope — so there is no
+/// delay effect to remove and any lead can only add error; (2) where the delay is felt (a step)
+/// the compensator removes it (≤ 0.1 × the uncompensated distance); (3) behind the 40 Hz
+/// actuator, whose smooth motion the damper does feel, the compensated test is closer to the
+/// delay-free test than the uncompensated one at half a step too, even where it is farther from
+/// the exact solution.
+#[test]
+fn at_half_a_step_the_compensator_removes_what_the_damper_feels_of_the_actuator() {
+    let second_order = GridActuator::SecondOrder {
+        frequency: 40.0,
+        zeta: 0.7,
+    };
+    for damper in [1.0e6, 2.5e6] {
+        for k_sub in [1, 3] {
+            let ideal = displacements(damper, 0.0, k_sub, GridActuator::PureDelay, false);
+            let half = displacements(damper, 0.005, k_sub, GridActuator::PureDelay, false);
+            let felt = distance(&half, &ideal);
+            println!("{damper:e} N·s/m, k_sub {k_sub}: 5 ms pure delay vs none: {felt:.2e}");
+            assert!(felt < 2e-3, "{damper} {k_sub}: {felt:e}");
+
+            let step = displacements(damper, 0.01, k_sub, GridActuator::PureDelay, false);
+            let step_arx = displacements(damper, 0.01, k_sub, GridActuator::PureDelay, true);
+            let (none, arx) = (distance(&step, &ideal), distance(&step_arx, &ideal));
+            println!("  10 ms pure delay vs none: uncompensated {none:.2e}, ARX {arx:.2e}");
+            assert!(none > 0.03 && arx < 0.1 * none, "{damper} {k_sub}: {none:e} {arx:e}");
+
+            let smooth = displacements(damper, 0.005, k_sub, second_order, false);
+            let smooth_arx = displacements(damper, 0.005, k_sub, second_order, true);
+            let (none, arx) = (distance(&smooth, &ideal), distance(&smooth_arx, &ideal));
+            println!("  40 Hz + 5 ms vs none: uncompensated {none:.2e}, ARX {arx:.2e}");
+            assert!(arx < 0.9 * none, "{damper} {k_sub}: {none:e} {arx:e}");
+        }
+    }
+}
