@@ -1,0 +1,531 @@
+//! One maRTHS run: the loop of the toolset's Simulink model at 1024 Hz, the evaluation J1–J10 of
+//! `S5_Evaluation.m`, the realisability flag.
+
+use super::data::{
+    DOF_R2, DOF_R3, DOF_THETA, DOF_X1, DOF_X2, DOF_X3, Frame, InitialParameters, PARTITION_DOFS, Partition,
+    PlantParameters, VirtualFrame,
+};
+use super::rodeac::{RlsAc, rodeac};
+use super::structure::{FrameForce, NewmarkFrame, solve_ideal};
+use crate::benchmark::rths::GroundRecord;
+use crate::compensate::{ArxPhaseLagSpec, PhaseLagCompensator, Ramp};
+use crate::error::{Error, Result};
+use crate::transfer::kinematics::Coupler;
+use crate::transfer::mimo::MimoRk4;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use std::sync::Arc;
+
+/// The toolset's rate, 1024 Hz.
+pub const SAMPLE_TIME: f64 = 1.0 / 1024.0;
+/// σ of the displacement-sensor noise \[mm\]: Band-Limited White Noise of power 1.5e-7 at `h`.
+pub const NOISE_STD_MM: f64 = 0.012393546707863733;
+/// Command limit \[V\] (the realisability flag).
+pub const COMMAND_LIMIT_V: f64 = 3.8;
+/// Volts of a command: `(u/c)/g − o/g` per actuator (`S1_Input_Data.m`).
+const V2D_GAIN: [f64; 2] = [7.4921, 7.3907];
+const V2D_CONST: [f64; 2] = [0.0092, -0.0059];
+const CORRECTION_GAIN: [f64; 2] = [1.053, 1.055];
+/// A run stops as diverged when a frame displacement leaves this \[m\] (the specimen's stroke is
+/// centimetres) or a value is not finite.
+pub const DIVERGENCE_LIMIT: f64 = 1.0;
+/// Lags searched by J1's correlation: ±this many samples (±250 ms).
+pub const MAX_LAG: usize = 256;
+
+/// The command in volts of actuator `a` for `u` \[mm\].
+pub fn volts(a: usize, u_mm: f64) -> f64 {
+    u_mm / CORRECTION_GAIN[a] / V2D_GAIN[a] - V2D_CONST[a] / V2D_GAIN[a]
+}
+
+/// What drives the actuators.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ControllerKind {
+    /// `u = x_t`.
+    None,
+    /// The toolset's RoDeAC.
+    Rodeac,
+    /// The project's ARX phase-lag compensator, per actuator after the kinematics.
+    Arx(ArxPhaseLagSpec),
+}
+
+impl ControllerKind {
+    pub fn parse(s: &str) -> Result<Self> {
+        Ok(match s {
+            "none" => Self::None,
+            "rodeac" => Self::Rodeac,
+            "arx" => Self::Arx(arx_default()),
+            _ => {
+                return Err(Error::invalid(
+                    "controller",
+                    format!("unknown controller `{s}` (none, rodeac, arx)"),
+                ));
+            }
+        })
+    }
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Rodeac => "rodeac",
+            Self::Arx(_) => "arx",
+        }
+    }
+}
+
+/// The ARX compensator's setting on this benchmark (docs/benchmark.md): `k_lag` about the
+/// actuators' lag at the frame's first frequency, velocities over 8 samples.
+pub fn arx_default() -> ArxPhaseLagSpec {
+    ArxPhaseLagSpec {
+        lambda: 0.999,
+        ..ArxPhaseLagSpec::new(16).with_span(8)
+    }
+}
+
+/// What sits between the commands and the specimen.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Transfer {
+    /// The 2×2 plant (RK4 at `h`) with sensor noise (`Some(seed)`) or without.
+    Plant {
+        plant: PlantParameters,
+        noise_seed: Option<u64>,
+    },
+    /// Measured = target in the same sample, no noise: the coupled step solved implicitly.
+    Ideal,
+}
+
+/// Everything one run needs.
+#[derive(Debug, Clone)]
+pub struct MarthsInput {
+    pub record: Arc<GroundRecord>,
+    pub intensity: f64,
+    pub transfer: Transfer,
+    pub controller: ControllerKind,
+    /// The coupler's inverse as the toolset codes it (default) or exact.
+    pub toolset_inverse: bool,
+    pub keep_history: bool,
+}
+
+impl MarthsInput {
+    pub fn new(record: Arc<GroundRecord>) -> Self {
+        Self {
+            record,
+            intensity: 0.4,
+            transfer: Transfer::Plant {
+                plant: PlantParameters::nominal(),
+                noise_seed: Some(123),
+            },
+            controller: ControllerKind::Rodeac,
+            toolset_inverse: true,
+            keep_history: false,
+        }
+    }
+    /// Samples `0 ..= floor(t_end/h)`.
+    pub fn samples(&self) -> usize {
+        (self.record.duration() / SAMPLE_TIME).floor() as usize + 1
+    }
+    fn validate(&self) -> Result<()> {
+        if !(self.intensity.is_finite() && self.intensity > 0.0 && self.intensity <= 10.0) {
+            return Err(Error::invalid(
+                "intensity",
+                format!("must be in (0, 10] (a scale of the record), got {}", self.intensity),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// J1–J10 in the toolset's order: J1–J4 per actuator \[ms, %, %, ms\], J5–J7 and J9 per frame
+/// component `(x, θ)` [%], J8 and J10 `(x, θ)` of storeys 2 and 3 [%].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Criteria {
+    pub j1: [f64; 2],
+    pub j2: [f64; 2],
+    pub j3: [f64; 2],
+    pub j4: [f64; 2],
+    pub j5: [f64; 2],
+    pub j6: [f64; 2],
+    pub j7: [f64; 2],
+    pub j8: [f64; 4],
+    pub j9: [f64; 2],
+    pub j10: [f64; 4],
+}
+
+impl Criteria {
+    /// `("J1", values) … ("J10", values)`.
+    pub fn lists(&self) -> [(&'static str, Vec<f64>); 10] {
+        [
+            ("J1", self.j1.to_vec()),
+            ("J2", self.j2.to_vec()),
+            ("J3", self.j3.to_vec()),
+            ("J4", self.j4.to_vec()),
+            ("J5", self.j5.to_vec()),
+            ("J6", self.j6.to_vec()),
+            ("J7", self.j7.to_vec()),
+            ("J8", self.j8.to_vec()),
+            ("J9", self.j9.to_vec()),
+            ("J10", self.j10.to_vec()),
+        ]
+    }
+    /// Every value through `f` (rounding, averaging helpers).
+    pub fn map(&self, f: impl Fn(f64) -> f64) -> Self {
+        Self {
+            j1: self.j1.map(&f),
+            j2: self.j2.map(&f),
+            j3: self.j3.map(&f),
+            j4: self.j4.map(&f),
+            j5: self.j5.map(&f),
+            j6: self.j6.map(&f),
+            j7: self.j7.map(&f),
+            j8: self.j8.map(&f),
+            j9: self.j9.map(&f),
+            j10: self.j10.map(&f),
+        }
+    }
+    /// The mean of several (the toolset's average over uncertain trials).
+    pub fn mean(all: &[Criteria]) -> Option<Self> {
+        let n = all.len() as f64;
+        let first = *all.first()?;
+        let mut m = first.map(|_| 0.0);
+        for c in all {
+            let add = |a: &mut [f64], b: &[f64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y / n);
+            add(&mut m.j1, &c.j1);
+            add(&mut m.j2, &c.j2);
+            add(&mut m.j3, &c.j3);
+            add(&mut m.j4, &c.j4);
+            add(&mut m.j5, &c.j5);
+            add(&mut m.j6, &c.j6);
+            add(&mut m.j7, &c.j7);
+            add(&mut m.j8, &c.j8);
+            add(&mut m.j9, &c.j9);
+            add(&mut m.j10, &c.j10);
+        }
+        Some(m)
+    }
+}
+
+/// MATLAB's `round(x, 1)` (half away from zero).
+pub fn round1(x: f64) -> f64 {
+    (x * 10.0).round() / 10.0
+}
+
+/// The logged signals of a run, per sample (the toolset's `To Workspace` blocks).
+#[derive(Debug, Clone, Default)]
+pub struct History {
+    pub target: [Vec<f64>; 2],
+    pub measured: [Vec<f64>; 2],
+    pub command: [Vec<f64>; 2],
+    /// Frame `(x [mm], θ [rad])` from the measured strokes, of the numerical substructure and of
+    /// the reference.
+    pub frame_measured: [Vec<f64>; 2],
+    pub frame_numerical: [Vec<f64>; 2],
+    pub frame_reference: [Vec<f64>; 2],
+    /// Storeys 2 and 3, `[x₂, θ₂, x₃, θ₃]` [m, rad], numerical and reference.
+    pub storeys_numerical: [Vec<f64>; 4],
+    pub storeys_reference: [Vec<f64>; 4],
+}
+
+impl History {
+    fn with_capacity(n: usize) -> Self {
+        let v = || Vec::with_capacity(n);
+        Self {
+            target: [v(), v()],
+            measured: [v(), v()],
+            command: [v(), v()],
+            frame_measured: [v(), v()],
+            frame_numerical: [v(), v()],
+            frame_reference: [v(), v()],
+            storeys_numerical: [v(), v(), v(), v()],
+            storeys_reference: [v(), v(), v(), v()],
+        }
+    }
+    pub fn len(&self) -> usize {
+        self.target[0].len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The reference structure's logged signals (independent of the plant and controller).
+#[derive(Debug, Clone)]
+pub struct Reference {
+    pub frame: [Vec<f64>; 2],
+    pub storeys: [Vec<f64>; 4],
+}
+
+/// The full frame integrated like the toolset's reference block, for `input`'s record and
+/// intensity.
+pub fn reference(input: &MarthsInput) -> Result<Reference> {
+    let frame = Frame::reference();
+    let mut s = NewmarkFrame::new(&frame.k, &frame.m, &frame.c, &frame.influence, SAMPLE_TIME)?;
+    let n = input.samples();
+    let mut ag = Vec::with_capacity(n);
+    input
+        .record
+        .sample_sorted((0..n).map(|k| k as f64 * SAMPLE_TIME), input.intensity, &mut ag);
+    let v = || Vec::with_capacity(n);
+    let mut r = Reference {
+        frame: [v(), v()],
+        storeys: [v(), v(), v(), v()],
+    };
+    for &a in &ag {
+        s.step(a, [0.0; 3]);
+        r.frame[0].push(1000.0 * s.u[DOF_X1]);
+        r.frame[1].push(-s.u[DOF_THETA]);
+        for (k, d) in [DOF_X2, DOF_R2, DOF_X3, DOF_R3].into_iter().enumerate() {
+            r.storeys[k].push(s.u[d]);
+        }
+    }
+    Ok(r)
+}
+
+/// The numerical substructure of `build_numerical.m`: the frame less the ideal partition (mass
+/// only at `x₂₇`).
+pub fn numerical_matrices() -> Frame {
+    let mut f = Frame::reference();
+    let p = Partition::toolset();
+    for (i, &di) in PARTITION_DOFS.iter().enumerate() {
+        for (j, &dj) in PARTITION_DOFS.iter().enumerate() {
+            f.k[(di, dj)] -= p.k[i][j];
+            f.c[(di, dj)] -= p.c[i][j];
+        }
+    }
+    f.m[(DOF_X1, DOF_X1)] -= p.m[0];
+    f
+}
+
+/// Outcome of one run.
+#[derive(Debug, Clone)]
+pub struct MarthsResult {
+    /// `None` if the run diverged.
+    pub criteria: Option<Criteria>,
+    pub diverged: bool,
+    /// Sample at which a diverged run stopped.
+    pub stopped_at: Option<usize>,
+    /// Peak command per actuator \[V\].
+    pub peak_volts: [f64; 2],
+    /// The toolset's flag: both actuators above [`COMMAND_LIMIT_V`].
+    pub realizable: bool,
+    pub history: Option<History>,
+}
+
+enum Drive {
+    None,
+    Rodeac(Box<[RlsAc; 2]>),
+    Arx(Vec<Box<dyn PhaseLagCompensator>>, Ramp),
+}
+
+/// Run `input` against `reference` (from [`reference`] with the same record and intensity).
+pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
+    input.validate()?;
+    let n = input.samples();
+    if reference.frame[0].len() != n {
+        return Err(Error::invalid(
+            "marths.reference",
+            format!("has {} samples, the run {n}", reference.frame[0].len()),
+        ));
+    }
+    let h = SAMPLE_TIME;
+    let numerical = numerical_matrices();
+    let mut structure = NewmarkFrame::new(&numerical.k, &numerical.m, &numerical.c, &numerical.influence, h)?;
+    let mut feedback = FrameForce::new(&VirtualFrame::toolset(), h);
+    let coupler = if input.toolset_inverse {
+        Coupler::marths().toolset_inverse()?
+    } else {
+        Coupler::marths()
+    };
+    let (mut plant, mut noise): (Option<MimoRk4>, Option<ChaCha8Rng>) = match &input.transfer {
+        Transfer::Plant { plant, noise_seed } => (
+            Some(plant.transfer_matrix()?.to_state_space().rk4(h)?),
+            noise_seed.map(ChaCha8Rng::seed_from_u64),
+        ),
+        Transfer::Ideal => (None, None),
+    };
+    let mut drive = match &input.controller {
+        ControllerKind::None => Drive::None,
+        ControllerKind::Rodeac => Drive::Rodeac(Box::new(rodeac(&InitialParameters::toolset()))),
+        ControllerKind::Arx(spec) => {
+            let c = (0..2)
+                .map(|_| spec.build().map(|c| Box::new(c) as Box<dyn PhaseLagCompensator>))
+                .collect::<Result<Vec<_>>>()?;
+            Drive::Arx(c, Ramp::new(0, 1024))
+        }
+    };
+    let mut ag = Vec::with_capacity(n);
+    input
+        .record
+        .sample_sorted((0..n).map(|k| k as f64 * h), input.intensity, &mut ag);
+    let mut hist = History::with_capacity(n);
+    let mut measured_mm = [0.0; 2];
+    let mut command = [0.0; 2];
+    let mut peak_volts = [0.0f64; 2];
+    let mut stopped_at = None;
+    for (k, &a) in ag.iter().enumerate() {
+        // Measured, the frame motion from it, the feedback force, the numerical step.
+        let (q_measured, target_mm) = match &mut plant {
+            Some(p) => {
+                p.output(&command, &mut measured_mm);
+                if let Some(rng) = &mut noise {
+                    // The toolset gives both sensor blocks the same seed: one draw for both.
+                    let e: f64 = rng.sample(StandardNormal);
+                    measured_mm.iter_mut().for_each(|m| *m += NOISE_STD_MM * e);
+                }
+                let q = coupler.dofs([measured_mm[0] / 1000.0, measured_mm[1] / 1000.0])?;
+                let f = feedback.force(q);
+                structure.step(a, f);
+                let target = [structure.u[DOF_X1], -structure.u[DOF_THETA]];
+                let s = coupler.strokes(target);
+                (q, [1000.0 * s[0], 1000.0 * s[1]])
+            }
+            None => {
+                structure.predict(a);
+                let q = solve_ideal(&mut structure, &feedback)?;
+                let f = feedback.force(q);
+                structure.correct(f);
+                structure.commit();
+                let s = coupler.strokes(q);
+                measured_mm = [1000.0 * s[0], 1000.0 * s[1]];
+                (q, measured_mm)
+            }
+        };
+        // The controller.
+        match &mut drive {
+            Drive::None => command = target_mm,
+            Drive::Rodeac(c) => {
+                for i in 0..2 {
+                    command[i] = c[i].command(target_mm[i], measured_mm[i]);
+                }
+            }
+            Drive::Arx(c, ramp) => {
+                let r = ramp.value(k);
+                for i in 0..2 {
+                    command[i] = target_mm[i] + c[i].correction(target_mm[i], measured_mm[i], r);
+                }
+            }
+        }
+        for i in 0..2 {
+            peak_volts[i] = peak_volts[i].max(volts(i, command[i]).abs());
+        }
+        if let Some(p) = &mut plant {
+            p.step(&command, &mut [0.0; 2]);
+        }
+        hist.target[0].push(target_mm[0]);
+        hist.target[1].push(target_mm[1]);
+        hist.measured[0].push(measured_mm[0]);
+        hist.measured[1].push(measured_mm[1]);
+        hist.command[0].push(command[0]);
+        hist.command[1].push(command[1]);
+        hist.frame_measured[0].push(1000.0 * q_measured[0]);
+        hist.frame_measured[1].push(q_measured[1]);
+        hist.frame_numerical[0].push(1000.0 * structure.u[DOF_X1]);
+        hist.frame_numerical[1].push(-structure.u[DOF_THETA]);
+        for (j, d) in [DOF_X2, DOF_R2, DOF_X3, DOF_R3].into_iter().enumerate() {
+            hist.storeys_numerical[j].push(structure.u[d]);
+        }
+        let runaway =
+            !(structure.u[DOF_X1].abs() < DIVERGENCE_LIMIT && command.iter().all(|c| c.abs() < 1e3 * DIVERGENCE_LIMIT));
+        if runaway {
+            stopped_at = Some(k);
+            break;
+        }
+    }
+    let diverged = stopped_at.is_some();
+    let criteria = if diverged {
+        None
+    } else {
+        Some(evaluate(&hist, reference)?)
+    };
+    Ok(MarthsResult {
+        criteria,
+        diverged,
+        stopped_at,
+        peak_volts,
+        realizable: !(peak_volts[0] > COMMAND_LIMIT_V && peak_volts[1] > COMMAND_LIMIT_V),
+        history: input.keep_history.then(|| {
+            let mut h = hist;
+            h.frame_reference = reference.frame.clone();
+            h.storeys_reference = reference.storeys.clone();
+            h
+        }),
+    })
+}
+
+/// MATLAB's `finddelay(x, y)` over lags `±max_lag`: the lag `d` maximising
+/// `|Σ x(n) y(n + d)|` (positive when `y` lags `x`); ties go to the smallest `|d|`, positive
+/// first. 0 if either signal is all zero.
+pub fn find_delay(x: &[f64], y: &[f64], max_lag: usize) -> isize {
+    let n = x.len().min(y.len());
+    if x[..n].iter().all(|v| *v == 0.0) || y[..n].iter().all(|v| *v == 0.0) {
+        return 0;
+    }
+    let corr = |d: isize| -> f64 {
+        let (xs, ys) = if d >= 0 {
+            let d = d as usize;
+            (&x[..n.saturating_sub(d)], &y[d.min(n)..n])
+        } else {
+            let d = (-d) as usize;
+            (&x[d.min(n)..n], &y[..n.saturating_sub(d)])
+        };
+        xs.iter().zip(ys).map(|(a, b)| a * b).sum::<f64>().abs()
+    };
+    let mut best = (0isize, corr(0));
+    let max_lag = max_lag.min(n.saturating_sub(1)) as isize;
+    for m in 1..=max_lag {
+        for d in [m, -m] {
+            let c = corr(d);
+            if c > best.1 {
+                best = (d, c);
+            }
+        }
+    }
+    best.0
+}
+
+fn nrms(x: &[f64], r: &[f64]) -> f64 {
+    100.0 * crate::analysis::metrics::nrms_error(x, r).unwrap_or(f64::NAN)
+}
+fn peak(x: &[f64], r: &[f64]) -> f64 {
+    100.0 * crate::analysis::metrics::peak_error(x, r).unwrap_or(f64::NAN)
+}
+
+/// J1–J10 of a complete history against the reference, as `S5_Evaluation.m` codes them.
+pub fn evaluate(h: &History, reference: &Reference) -> Result<Criteria> {
+    let delay = |a: usize| find_delay(&h.target[a], &h.measured[a], MAX_LAG) as f64 * SAMPLE_TIME * 1000.0;
+    let j1 = [delay(0), delay(1)];
+    let per = |f: &dyn Fn(&[f64], &[f64]) -> f64, x: &[Vec<f64>], r: &[Vec<f64>]| -> [f64; 2] {
+        [f(&x[0], &r[0]), f(&x[1], &r[1])]
+    };
+    let per4 = |f: &dyn Fn(&[f64], &[f64]) -> f64| -> [f64; 4] {
+        std::array::from_fn(|i| f(&h.storeys_numerical[i], &reference.storeys[i]))
+    };
+    Ok(Criteria {
+        j1,
+        j2: per(&nrms, &h.measured, &h.target),
+        j3: per(&peak, &h.measured, &h.target),
+        j4: j1,
+        j5: per(&nrms, &h.frame_measured, &h.frame_numerical),
+        j6: per(&peak, &h.frame_measured, &h.frame_numerical),
+        j7: per(&nrms, &h.frame_measured, &reference.frame),
+        j8: per4(&nrms),
+        j9: per(&peak, &h.frame_measured, &reference.frame),
+        j10: per4(&peak),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn find_delay_finds_a_shift_either_way() {
+        let x: Vec<f64> = (0..500)
+            .map(|k| (k as f64 * 0.05).sin() * (k as f64 * 0.013).cos())
+            .collect();
+        let mut y = vec![0.0; 500];
+        y[7..].copy_from_slice(&x[..493]);
+        assert_eq!(find_delay(&x, &y, 50), 7);
+        assert_eq!(find_delay(&y, &x, 50), -7);
+        assert_eq!(find_delay(&x, &x, 50), 0);
+        assert_eq!(find_delay(&x, &vec![0.0; 500], 50), 0);
+    }
+}

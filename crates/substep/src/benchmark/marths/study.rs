@@ -1,0 +1,134 @@
+//! Uncertain plants and trials: the toolset's `fcn_build_uncert_plant.m` with a seeded generator,
+//! the nominal run and `N` uncertain trials in parallel, and the average the toolset reports.
+
+use super::data::PlantParameters;
+use super::run::{Criteria, MarthsInput, MarthsResult, Reference, Transfer, reference, run};
+use crate::error::{Error, Result};
+use nalgebra::Complex;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+
+/// Most uncertain trials one study runs.
+pub const MAX_TRIALS: usize = 1000;
+
+/// Relative σ of the perturbed zeros and poles (`fcn_build_uncert_plant.m`): H11/H21 zeros,
+/// H11/H21 real poles, H12 and H22 zeros, H12/H22 real poles, the frame pair.
+pub const SIGMA_H1_ZEROS: f64 = 0.055;
+pub const SIGMA_H1_POLES: f64 = 0.06;
+pub const SIGMA_H2: f64 = 0.03;
+pub const SIGMA_FRAME: f64 = 0.05;
+
+/// The plant of uncertain trial `index` (0-based) under `seed`: every zero and pole `v` becomes
+/// `v (1 + σ n)`, `n` standard normal from ChaCha8 (seed `seed`, stream `index`) in the
+/// toolset's draw order (h1z₁, h1z₂, h1p₁, h1p₂, frame pole, h12z, h2p₁, h2p₂, h22z; the frame
+/// pair scaled by one real draw, its conjugate mirrored); each channel's gain rescaled so that
+/// its static gain stays nominal (the toolset matches the magnitude at the lowest frequency of a
+/// Bode grid, 0.01 Hz for H11).
+pub fn uncertain_plant(seed: u64, index: u64) -> Result<PlantParameters> {
+    let nominal = PlantParameters::nominal();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(index);
+    let mut draw = || -> f64 { StandardNormal.sample(&mut rng) };
+    let mut p = nominal;
+    p.h1_zeros[0] *= 1.0 + SIGMA_H1_ZEROS * draw();
+    p.h1_zeros[1] *= 1.0 + SIGMA_H1_ZEROS * draw();
+    p.h1_poles[0] *= 1.0 + SIGMA_H1_POLES * draw();
+    p.h1_poles[1] *= 1.0 + SIGMA_H1_POLES * draw();
+    p.frame_pole *= Complex::new(1.0 + SIGMA_FRAME * draw(), 0.0);
+    p.h12_zero *= 1.0 + SIGMA_H2 * draw();
+    p.h2_poles[0] *= 1.0 + SIGMA_H2 * draw();
+    p.h2_poles[1] *= 1.0 + SIGMA_H2 * draw();
+    p.h22_zero *= 1.0 + SIGMA_H2 * draw();
+    let dc_nominal = nominal.transfer_matrix()?.dc_gain();
+    let dc = p.transfer_matrix()?.dc_gain();
+    for i in 0..2 {
+        for j in 0..2 {
+            p.gains[2 * i + j] *= dc_nominal[(i, j)] / dc[(i, j)];
+        }
+    }
+    Ok(p)
+}
+
+/// A nominal run and `trials` uncertain ones.
+#[derive(Debug, Clone)]
+pub struct Study {
+    pub nominal: MarthsResult,
+    pub trials: Vec<(PlantParameters, MarthsResult)>,
+}
+
+impl Study {
+    /// What the toolset reports: the nominal values with no trials, else the mean over the
+    /// trials (nominal excluded); `None` if a run it needs diverged.
+    pub fn reported(&self) -> Option<Criteria> {
+        if self.trials.is_empty() {
+            return self.nominal.criteria;
+        }
+        let all: Option<Vec<Criteria>> = self.trials.iter().map(|(_, r)| r.criteria).collect();
+        Criteria::mean(&all?)
+    }
+    /// Every run stable.
+    pub fn stable(&self) -> bool {
+        !self.nominal.diverged && self.trials.iter().all(|(_, r)| !r.diverged)
+    }
+    /// The toolset's realisability over the runs it reports (both actuators over 3.8 V in a run
+    /// makes the test not realisable; the toolset looks at its last trial only).
+    pub fn realizable(&self) -> bool {
+        if self.trials.is_empty() {
+            self.nominal.realizable
+        } else {
+            self.trials.iter().all(|(_, r)| r.realizable)
+        }
+    }
+}
+
+/// The nominal run of `input` (its transfer system as given) and `trials` uncertain plants
+/// (noise seeded per trial from `seed` when the nominal run has noise), in parallel.
+pub fn run_study(input: &MarthsInput, trials: usize, seed: u64) -> Result<Study> {
+    if trials > MAX_TRIALS {
+        return Err(Error::invalid("trials", format!("at most {MAX_TRIALS}, got {trials}")));
+    }
+    let reference = reference(input)?;
+    run_with(input, &reference, trials, seed)
+}
+
+/// [`run_study`] against a reference computed once.
+pub fn run_with(input: &MarthsInput, reference: &Reference, trials: usize, seed: u64) -> Result<Study> {
+    let noisy = matches!(
+        input.transfer,
+        Transfer::Plant {
+            noise_seed: Some(_),
+            ..
+        }
+    );
+    let inputs: Vec<MarthsInput> = (0..trials as u64)
+        .map(|i| -> Result<MarthsInput> {
+            let mut one = input.clone();
+            one.transfer = Transfer::Plant {
+                plant: uncertain_plant(seed, i)?,
+                noise_seed: noisy.then(|| seed.wrapping_add(1 + i).wrapping_mul(0x9E37_79B9_7F4A_7C15)),
+            };
+            Ok(one)
+        })
+        .collect::<Result<_>>()?;
+    let (nominal, trials) = rayon::join(
+        || run(input, reference),
+        || {
+            inputs
+                .par_iter()
+                .map(|one| {
+                    let plant = match one.transfer {
+                        Transfer::Plant { plant, .. } => plant,
+                        Transfer::Ideal => unreachable!("trials run a plant"),
+                    };
+                    run(one, reference).map(|r| (plant, r))
+                })
+                .collect::<Result<Vec<_>>>()
+        },
+    );
+    Ok(Study {
+        nominal: nominal?,
+        trials: trials?,
+    })
+}
