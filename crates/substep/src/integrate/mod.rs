@@ -39,6 +39,10 @@ impl Kinematics {
     pub fn at_rest<'a>(model: impl Into<ModelRef<'a>>, load0: &DVector<f64>) -> Result<Self> {
         let model = model.into();
         let mut k = Self::zeros(model.n_dofs());
+        if load0.iter().all(|&f| f == 0.0) {
+            // At rest without load: a = 0 whatever M is (also for massless DOFs).
+            return Ok(k);
+        }
         k.a.copy_from(load0);
         match model {
             ModelRef::Dense(model) => {

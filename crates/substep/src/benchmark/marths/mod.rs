@@ -31,8 +31,8 @@ mod study;
 pub use data::{InitialParameters, PlantParameters, Record};
 pub use rodeac::{BUTTER_A, BUTTER_B, Butterworth, RlsAc, rodeac};
 pub use run::{
-    COMMAND_LIMIT_V, ControllerKind, Criteria, DIVERGENCE_LIMIT, History, MAX_LAG, MarthsInput, MarthsResult,
-    NOISE_STD_MM, Reference, SAMPLE_TIME, Transfer, arx_default, evaluate, find_delay, numerical_matrices, reference,
-    round1, run, volts,
+    Algorithm, COMMAND_LIMIT_V, ControllerKind, Criteria, DIVERGENCE_LIMIT, History, MAX_LAG, MarthsInput,
+    MarthsResult, NOISE_STD_MM, Reference, SAMPLE_TIME, SubstepSpec, Transfer, arx_default, evaluate, find_delay,
+    numerical_matrices, reference, round1, run, volts,
 };
 pub use study::{MAX_TRIALS, Study, run_study, run_with, uncertain_plant};

@@ -10,8 +10,11 @@ use super::structure::{FrameForce, NewmarkFrame, solve_ideal};
 use crate::benchmark::rths::GroundRecord;
 use crate::compensate::{ArxPhaseLagSpec, PhaseLagCompensator, Ramp};
 use crate::error::{Error, Result};
+use crate::model::StructuralModel;
+use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings};
 use crate::transfer::kinematics::Coupler;
 use crate::transfer::mimo::MimoRk4;
+use nalgebra::DVector;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -93,6 +96,55 @@ pub enum Transfer {
     Ideal,
 }
 
+/// How the numerical substructure is integrated.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Algorithm {
+    /// The toolset's loop: one Newmark step per sample with the force measured in that sample.
+    Benchmark,
+    /// The project's sub-step algorithm (docs/benchmark.md, "maRTHS with the sub-step
+    /// algorithm").
+    Substep(SubstepSpec),
+}
+
+/// The sub-step algorithm on this benchmark: Newmark (average acceleration) at
+/// `Δt = samples_per_step · h`, `k_sub` sub-steps, error-force compensation; the coupling DOFs
+/// `x₂₇, θ₂₁, θ₂₉` (the last receives the virtual frame's moment but is not commanded).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubstepSpec {
+    pub samples_per_step: usize,
+    pub k_sub: usize,
+    pub error_force: ErrorForceSpec,
+}
+
+impl Default for SubstepSpec {
+    /// Δt = 2 samples (1/512 s), `k_sub = 2` (Δτ = one sample), P = 1.
+    fn default() -> Self {
+        Self {
+            samples_per_step: 2,
+            k_sub: 2,
+            error_force: ErrorForceSpec::Pid { p: 1.0, i: 0.0, d: 0.0 },
+        }
+    }
+}
+
+impl SubstepSpec {
+    fn validate(&self) -> Result<()> {
+        if !(1..=1024).contains(&self.samples_per_step) {
+            return Err(Error::invalid(
+                "substep.samples_per_step",
+                format!("must be in 1..=1024, got {}", self.samples_per_step),
+            ));
+        }
+        if !(1..=1000).contains(&self.k_sub) {
+            return Err(Error::invalid(
+                "substep.k_sub",
+                format!("must be in 1..=1000, got {}", self.k_sub),
+            ));
+        }
+        self.error_force.validate()
+    }
+}
+
 /// Everything one run needs.
 #[derive(Debug, Clone)]
 pub struct MarthsInput {
@@ -102,6 +154,7 @@ pub struct MarthsInput {
     pub controller: ControllerKind,
     /// The coupler's inverse as the toolset codes it (default) or exact.
     pub toolset_inverse: bool,
+    pub algorithm: Algorithm,
     pub keep_history: bool,
 }
 
@@ -116,6 +169,7 @@ impl MarthsInput {
             },
             controller: ControllerKind::Rodeac,
             toolset_inverse: true,
+            algorithm: Algorithm::Benchmark,
             keep_history: false,
         }
     }
@@ -129,6 +183,15 @@ impl MarthsInput {
                 "intensity",
                 format!("must be in (0, 10] (a scale of the record), got {}", self.intensity),
             ));
+        }
+        if let Algorithm::Substep(spec) = &self.algorithm {
+            spec.validate()?;
+            if self.transfer == Transfer::Ideal {
+                return Err(Error::invalid(
+                    "transfer",
+                    "the ideal transfer system solves the toolset's step implicitly: not with the sub-step algorithm",
+                ));
+            }
         }
         Ok(())
     }
@@ -315,6 +378,118 @@ enum Drive {
     Arx(Vec<Box<dyn PhaseLagCompensator>>, Ramp),
 }
 
+/// The lab side of one sample: the plant (or nothing: ideal), sensors, the coupler, the virtual
+/// frame's force and the controller.
+struct Lab {
+    plant: Option<MimoRk4>,
+    noise: Option<ChaCha8Rng>,
+    coupler: Coupler,
+    feedback: FrameForce,
+    drive: Drive,
+    command: [f64; 2],
+    peak_volts: [f64; 2],
+}
+
+impl Lab {
+    fn new(input: &MarthsInput) -> Result<Self> {
+        let h = SAMPLE_TIME;
+        let (plant, noise) = match &input.transfer {
+            Transfer::Plant { plant, noise_seed } => (
+                Some(plant.transfer_matrix()?.to_state_space().rk4(h)?),
+                noise_seed.map(ChaCha8Rng::seed_from_u64),
+            ),
+            Transfer::Ideal => (None, None),
+        };
+        let drive = match &input.controller {
+            ControllerKind::None => Drive::None,
+            ControllerKind::Rodeac => Drive::Rodeac(Box::new(rodeac(&InitialParameters::toolset()))),
+            ControllerKind::Arx(spec) => {
+                let c = (0..2)
+                    .map(|_| spec.build().map(|c| Box::new(c) as Box<dyn PhaseLagCompensator>))
+                    .collect::<Result<Vec<_>>>()?;
+                Drive::Arx(c, Ramp::new(0, 1024))
+            }
+        };
+        Ok(Self {
+            plant,
+            noise,
+            coupler: if input.toolset_inverse {
+                Coupler::marths().toolset_inverse()?
+            } else {
+                Coupler::marths()
+            },
+            feedback: FrameForce::new(&VirtualFrame::toolset(), h),
+            drive,
+            command: [0.0; 2],
+            peak_volts: [0.0; 2],
+        })
+    }
+
+    /// The measured strokes \[mm\] of this sample (plant output plus noise), the frame motion
+    /// `(x, θ)` from them and the virtual frame's force.
+    fn measure(&mut self) -> Result<([f64; 2], [f64; 2], [f64; 3])> {
+        let mut measured = [0.0; 2];
+        if let Some(p) = &self.plant {
+            p.output(&self.command, &mut measured);
+        }
+        if let Some(rng) = &mut self.noise {
+            // The toolset gives both sensor blocks the same seed: one draw for both.
+            let e: f64 = rng.sample(StandardNormal);
+            measured.iter_mut().for_each(|m| *m += NOISE_STD_MM * e);
+        }
+        let q = self.coupler.dofs([measured[0] / 1000.0, measured[1] / 1000.0])?;
+        let f = self.feedback.force(q);
+        Ok((measured, q, f))
+    }
+
+    /// The controller's commands for the target strokes, then the plant's step.
+    fn drive(&mut self, k: usize, target: [f64; 2], measured: [f64; 2]) {
+        match &mut self.drive {
+            Drive::None => self.command = target,
+            Drive::Rodeac(c) => {
+                for i in 0..2 {
+                    self.command[i] = c[i].command(target[i], measured[i]);
+                }
+            }
+            Drive::Arx(c, ramp) => {
+                let r = ramp.value(k);
+                for i in 0..2 {
+                    self.command[i] = target[i] + c[i].correction(target[i], measured[i], r);
+                }
+            }
+        }
+        for i in 0..2 {
+            self.peak_volts[i] = self.peak_volts[i].max(volts(i, self.command[i]).abs());
+        }
+        if let Some(p) = &mut self.plant {
+            p.step(&self.command, &mut [0.0; 2]);
+        }
+    }
+
+    fn runaway(&self) -> bool {
+        !self.command.iter().all(|c| c.abs() < 1e3 * DIVERGENCE_LIMIT)
+    }
+}
+
+fn record_sample(
+    hist: &mut History,
+    target: [f64; 2],
+    measured: [f64; 2],
+    command: [f64; 2],
+    q: [f64; 2],
+    numerical: [f64; 2],
+) {
+    for i in 0..2 {
+        hist.target[i].push(target[i]);
+        hist.measured[i].push(measured[i]);
+        hist.command[i].push(command[i]);
+    }
+    hist.frame_measured[0].push(1000.0 * q[0]);
+    hist.frame_measured[1].push(q[1]);
+    hist.frame_numerical[0].push(1000.0 * numerical[0]);
+    hist.frame_numerical[1].push(numerical[1]);
+}
+
 /// Run `input` against `reference` (from [`reference`] with the same record and intensity).
 pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
     input.validate()?;
@@ -326,115 +501,35 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
         ));
     }
     let h = SAMPLE_TIME;
-    let numerical = numerical_matrices();
-    let mut structure = NewmarkFrame::new(&numerical.k, &numerical.m, &numerical.c, &numerical.influence, h)?;
-    let mut feedback = FrameForce::new(&VirtualFrame::toolset(), h);
-    let coupler = if input.toolset_inverse {
-        Coupler::marths().toolset_inverse()?
-    } else {
-        Coupler::marths()
-    };
-    let (mut plant, mut noise): (Option<MimoRk4>, Option<ChaCha8Rng>) = match &input.transfer {
-        Transfer::Plant { plant, noise_seed } => (
-            Some(plant.transfer_matrix()?.to_state_space().rk4(h)?),
-            noise_seed.map(ChaCha8Rng::seed_from_u64),
-        ),
-        Transfer::Ideal => (None, None),
-    };
-    let mut drive = match &input.controller {
-        ControllerKind::None => Drive::None,
-        ControllerKind::Rodeac => Drive::Rodeac(Box::new(rodeac(&InitialParameters::toolset()))),
-        ControllerKind::Arx(spec) => {
-            let c = (0..2)
-                .map(|_| spec.build().map(|c| Box::new(c) as Box<dyn PhaseLagCompensator>))
-                .collect::<Result<Vec<_>>>()?;
-            Drive::Arx(c, Ramp::new(0, 1024))
-        }
-    };
     let mut ag = Vec::with_capacity(n);
     input
         .record
         .sample_sorted((0..n).map(|k| k as f64 * h), input.intensity, &mut ag);
+    let mut lab = Lab::new(input)?;
     let mut hist = History::with_capacity(n);
-    let mut measured_mm = [0.0; 2];
-    let mut command = [0.0; 2];
-    let mut peak_volts = [0.0f64; 2];
-    let mut stopped_at = None;
-    for (k, &a) in ag.iter().enumerate() {
-        // Measured, the frame motion from it, the feedback force, the numerical step.
-        let (q_measured, target_mm) = match &mut plant {
-            Some(p) => {
-                p.output(&command, &mut measured_mm);
-                if let Some(rng) = &mut noise {
-                    // The toolset gives both sensor blocks the same seed: one draw for both.
-                    let e: f64 = rng.sample(StandardNormal);
-                    measured_mm.iter_mut().for_each(|m| *m += NOISE_STD_MM * e);
-                }
-                let q = coupler.dofs([measured_mm[0] / 1000.0, measured_mm[1] / 1000.0])?;
-                let f = feedback.force(q);
-                structure.step(a, f);
-                let target = [structure.u[DOF_X1], -structure.u[DOF_THETA]];
-                let s = coupler.strokes(target);
-                (q, [1000.0 * s[0], 1000.0 * s[1]])
-            }
-            None => {
-                structure.predict(a);
-                let q = solve_ideal(&mut structure, &feedback)?;
-                let f = feedback.force(q);
-                structure.correct(f);
-                structure.commit();
-                let s = coupler.strokes(q);
-                measured_mm = [1000.0 * s[0], 1000.0 * s[1]];
-                (q, measured_mm)
-            }
-        };
-        // The controller.
-        match &mut drive {
-            Drive::None => command = target_mm,
-            Drive::Rodeac(c) => {
-                for i in 0..2 {
-                    command[i] = c[i].command(target_mm[i], measured_mm[i]);
-                }
-            }
-            Drive::Arx(c, ramp) => {
-                let r = ramp.value(k);
-                for i in 0..2 {
-                    command[i] = target_mm[i] + c[i].correction(target_mm[i], measured_mm[i], r);
-                }
-            }
+    let (stopped_at, storey_reference) = match &input.algorithm {
+        Algorithm::Benchmark => (run_benchmark(&ag, &mut lab, &mut hist)?, None),
+        Algorithm::Substep(spec) => {
+            let stopped = run_substep(spec, &ag, &mut lab, &mut hist)?;
+            // The storeys exist at the step ends: the reference there.
+            let every = spec.samples_per_step;
+            let steps = hist.storeys_numerical[0].len();
+            let r: [Vec<f64>; 4] =
+                std::array::from_fn(|i| (0..steps).map(|j| reference.storeys[i][j * every]).collect());
+            (stopped, Some(r))
         }
-        for i in 0..2 {
-            peak_volts[i] = peak_volts[i].max(volts(i, command[i]).abs());
-        }
-        if let Some(p) = &mut plant {
-            p.step(&command, &mut [0.0; 2]);
-        }
-        hist.target[0].push(target_mm[0]);
-        hist.target[1].push(target_mm[1]);
-        hist.measured[0].push(measured_mm[0]);
-        hist.measured[1].push(measured_mm[1]);
-        hist.command[0].push(command[0]);
-        hist.command[1].push(command[1]);
-        hist.frame_measured[0].push(1000.0 * q_measured[0]);
-        hist.frame_measured[1].push(q_measured[1]);
-        hist.frame_numerical[0].push(1000.0 * structure.u[DOF_X1]);
-        hist.frame_numerical[1].push(-structure.u[DOF_THETA]);
-        for (j, d) in [DOF_X2, DOF_R2, DOF_X3, DOF_R3].into_iter().enumerate() {
-            hist.storeys_numerical[j].push(structure.u[d]);
-        }
-        let runaway =
-            !(structure.u[DOF_X1].abs() < DIVERGENCE_LIMIT && command.iter().all(|c| c.abs() < 1e3 * DIVERGENCE_LIMIT));
-        if runaway {
-            stopped_at = Some(k);
-            break;
-        }
-    }
+    };
     let diverged = stopped_at.is_some();
     let criteria = if diverged {
         None
     } else {
-        Some(evaluate(&hist, reference)?)
+        let r = Reference {
+            frame: reference.frame.clone(),
+            storeys: storey_reference.clone().unwrap_or_else(|| reference.storeys.clone()),
+        };
+        Some(evaluate(&hist, &r)?)
     };
+    let peak_volts = lab.peak_volts;
     Ok(MarthsResult {
         criteria,
         diverged,
@@ -444,10 +539,145 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
         history: input.keep_history.then(|| {
             let mut h = hist;
             h.frame_reference = reference.frame.clone();
-            h.storeys_reference = reference.storeys.clone();
+            h.storeys_reference = storey_reference.unwrap_or_else(|| reference.storeys.clone());
             h
         }),
     })
+}
+
+/// The toolset's loop (module docs); returns the sample a diverging run stopped at.
+fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<usize>> {
+    let numerical = numerical_matrices();
+    let mut structure = NewmarkFrame::new(
+        &numerical.k,
+        &numerical.m,
+        &numerical.c,
+        &numerical.influence,
+        SAMPLE_TIME,
+    )?;
+    for (k, &a) in ag.iter().enumerate() {
+        let (measured, q, target) = if lab.plant.is_some() {
+            let (measured, q, f) = lab.measure()?;
+            structure.step(a, f);
+            let target = [structure.u[DOF_X1], -structure.u[DOF_THETA]];
+            (measured, q, target)
+        } else {
+            structure.predict(a);
+            let q = solve_ideal(&mut structure, &lab.feedback)?;
+            let f = lab.feedback.force(q);
+            structure.correct(f);
+            structure.commit();
+            let s = lab.coupler.strokes(q);
+            ([1000.0 * s[0], 1000.0 * s[1]], q, q)
+        };
+        let s = lab.coupler.strokes(target);
+        let target_mm = [1000.0 * s[0], 1000.0 * s[1]];
+        lab.drive(k, target_mm, measured);
+        record_sample(hist, target_mm, measured, lab.command, q, target);
+        for (j, d) in [DOF_X2, DOF_R2, DOF_X3, DOF_R3].into_iter().enumerate() {
+            hist.storeys_numerical[j].push(structure.u[d]);
+        }
+        if !(structure.u[DOF_X1].abs() < DIVERGENCE_LIMIT) || lab.runaway() {
+            return Ok(Some(k));
+        }
+    }
+    Ok(None)
+}
+
+/// The numerical substructure by the sub-step algorithm, mapped onto the samples as in the RTHS
+/// benchmark (docs/benchmark.md): the command signal is linear between the sub-step commands
+/// and sampled at `t_k` as the target; the force fed back at the end of sub-step `s` is the
+/// latest sample at or before `s Δτ`; a sub-step is computed when the target first needs it.
+fn run_substep(spec: &SubstepSpec, ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<usize>> {
+    let n = ag.len();
+    let numerical = numerical_matrices();
+    let influence = DVector::from_column_slice(&numerical.influence);
+    let mass_iota = &numerical.m * &influence;
+    let model = StructuralModel::with_massless_dofs(
+        numerical.m.clone(),
+        numerical.c.clone(),
+        numerical.k.clone(),
+        Some(influence),
+    )?;
+    let (per_step, k_sub) = (spec.samples_per_step, spec.k_sub);
+    let settings = SubstepSettings {
+        dt: per_step as f64 * SAMPLE_TIME,
+        beta: 0.25,
+        gamma: 0.5,
+        substeps: k_sub,
+        coupling_dofs: vec![DOF_X1, DOF_THETA, super::data::DOF_THETA29],
+        error_force: spec.error_force,
+    };
+    let load_at = |k: usize, out: &mut DVector<f64>| {
+        let a = ag[k.min(n - 1)];
+        for (o, m) in out.iter_mut().zip(mass_iota.iter()) {
+            *o = -m * a;
+        }
+    };
+    let mut load = DVector::zeros(super::data::N_DOF);
+    load_at(0, &mut load);
+    let mut sc = SubstepController::new(&model, &settings, &load)?;
+    let mut forces = vec![[0.0; 3]; n];
+    let mut issued = 0usize;
+    let (mut d_prev, mut d_cur) = ([0.0; 2], [0.0; 2]);
+    let boundary = |s: usize| s as f64 * per_step as f64 / k_sub as f64;
+    for k in 0..n {
+        while boundary(issued) < k as f64 {
+            let s = issued;
+            if s > 0 {
+                let f = forces[(s * per_step) / k_sub];
+                // The force on the numerical substructure (the toolset subtracts F).
+                sc.feedback(&[-f[0], -f[1], -f[2]]);
+                if s.is_multiple_of(k_sub) {
+                    sc.finish_step();
+                    let u = &sc.state().u;
+                    for (j, d) in [DOF_X2, DOF_R2, DOF_X3, DOF_R3].into_iter().enumerate() {
+                        hist.storeys_numerical[j].push(u[d]);
+                    }
+                    if !u.iter().all(|v| v.is_finite() && v.abs() <= DIVERGENCE_LIMIT) {
+                        return Ok(Some(k));
+                    }
+                }
+            } else {
+                for j in 0..4 {
+                    hist.storeys_numerical[j].push(0.0);
+                }
+            }
+            if s.is_multiple_of(k_sub) {
+                load_at((s / k_sub + 1) * per_step, &mut load);
+                sc.begin_step(&load);
+            }
+            d_prev = d_cur;
+            let c = sc.next_command();
+            d_cur = [c[0], -c[1]];
+            issued += 1;
+        }
+        let q_target = if issued == 0 {
+            [0.0; 2]
+        } else {
+            let (b0, b1) = (boundary(issued - 1), boundary(issued));
+            let r = (k as f64 - b0) / (b1 - b0);
+            [
+                d_prev[0] + r * (d_cur[0] - d_prev[0]),
+                d_prev[1] + r * (d_cur[1] - d_prev[1]),
+            ]
+        };
+        let s = lab.coupler.strokes(q_target);
+        let target_mm = [1000.0 * s[0], 1000.0 * s[1]];
+        let (measured, q, f) = lab.measure()?;
+        forces[k] = f;
+        lab.drive(k, target_mm, measured);
+        record_sample(hist, target_mm, measured, lab.command, q, q_target);
+        if !(q_target[0].abs() < DIVERGENCE_LIMIT) || lab.runaway() {
+            return Ok(Some(k));
+        }
+    }
+    // Steps whose end lies beyond the last sample are not complete.
+    let complete = (n - 1) / per_step + 1;
+    for v in hist.storeys_numerical.iter_mut() {
+        v.truncate(complete);
+    }
+    Ok(None)
 }
 
 /// MATLAB's `finddelay(x, y)` over lags `±max_lag`: the lag `d` maximising
