@@ -466,9 +466,15 @@ impl Lab {
         }
     }
 
+    /// A command beyond 1000 × the divergence limit in mm (or not finite).
     fn runaway(&self) -> bool {
         !self.command.iter().all(|c| c.abs() < 1e3 * DIVERGENCE_LIMIT)
     }
+}
+
+/// `Some(x)` if `x` is finite and inside ±[`DIVERGENCE_LIMIT`].
+fn within(x: f64) -> Option<f64> {
+    (x.abs() < DIVERGENCE_LIMIT).then_some(x)
 }
 
 fn record_sample(
@@ -577,7 +583,7 @@ fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option
         for (j, d) in [DOF_X2, DOF_R2, DOF_X3, DOF_R3].into_iter().enumerate() {
             hist.storeys_numerical[j].push(structure.u[d]);
         }
-        if !(structure.u[DOF_X1].abs() < DIVERGENCE_LIMIT) || lab.runaway() {
+        if within(structure.u[DOF_X1]).is_none() || lab.runaway() {
             return Ok(Some(k));
         }
     }
@@ -668,7 +674,7 @@ fn run_substep(spec: &SubstepSpec, ag: &[f64], lab: &mut Lab, hist: &mut History
         forces[k] = f;
         lab.drive(k, target_mm, measured);
         record_sample(hist, target_mm, measured, lab.command, q, q_target);
-        if !(q_target[0].abs() < DIVERGENCE_LIMIT) || lab.runaway() {
+        if within(q_target[0]).is_none() || lab.runaway() {
             return Ok(Some(k));
         }
     }
