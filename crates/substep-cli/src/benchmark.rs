@@ -23,6 +23,10 @@ pub enum Which {
     /// The virtual RTHS benchmark (Silva et al. 2020): 3-storey frame, servo-hydraulic actuator
     /// with CSI, J1–J9 against the exact reference (docs/benchmark.md)
     Rths(RthsArgs),
+    /// The multi-axial RTHS benchmark (maRTHS, Condori Uribe et al. 2023): two actuators on a
+    /// coupler drive x and θ of a frame node; J1–J10 as the public toolset codes them
+    /// (docs/benchmark.md)
+    Marths(crate::benchmark_marths::MarthsArgs),
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -82,6 +86,7 @@ pub struct RthsArgs {
 pub fn benchmark(args: &BenchmarkArgs) -> Result<()> {
     match &args.which {
         Which::Rths(a) => rths(a),
+        Which::Marths(a) => crate::benchmark_marths::marths(a),
     }
 }
 

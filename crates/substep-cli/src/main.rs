@@ -10,6 +10,7 @@ mod bench;
 mod bench_compare;
 mod bench_models;
 mod benchmark;
+mod benchmark_marths;
 mod container;
 mod engineering;
 mod lab;

@@ -22,12 +22,14 @@
 //! so J1–J6 vanish and J7–J10 show the benchmark's floor (the virtual frame is not the partition
 //! it replaces; the partition's mass and its ground-inertia force are lost).
 
+mod config;
 pub mod data;
 mod rodeac;
 mod run;
 pub mod structure;
 mod study;
 
+pub use config::MarthsConfig;
 pub use data::{InitialParameters, PlantParameters, Record};
 pub use rodeac::{BUTTER_A, BUTTER_B, Butterworth, RlsAc, rodeac};
 pub use run::{

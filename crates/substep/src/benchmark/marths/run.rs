@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::model::StructuralModel;
 use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings};
 use crate::transfer::kinematics::Coupler;
-use crate::transfer::mimo::MimoRk4;
+use crate::transfer::mimo::{MimoRk4, TransferMatrix};
 use nalgebra::DVector;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -87,9 +87,10 @@ pub fn arx_default() -> ArxPhaseLagSpec {
 /// What sits between the commands and the specimen.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Transfer {
-    /// The 2×2 plant (RK4 at `h`) with sensor noise (`Some(seed)`) or without.
+    /// A 2×2 plant (commands \[mm\] → strokes \[mm\], RK4 at `h`) with sensor noise
+    /// (`Some(seed)`) or without.
     Plant {
-        plant: PlantParameters,
+        plant: TransferMatrix,
         noise_seed: Option<u64>,
     },
     /// Measured = target in the same sample, no noise: the coupled step solved implicitly.
@@ -152,8 +153,8 @@ pub struct MarthsInput {
     pub intensity: f64,
     pub transfer: Transfer,
     pub controller: ControllerKind,
-    /// The coupler's inverse as the toolset codes it (default) or exact.
-    pub toolset_inverse: bool,
+    /// The coupler (default: the benchmark's, with the inverse as the toolset codes it).
+    pub coupler: Coupler,
     pub algorithm: Algorithm,
     pub keep_history: bool,
 }
@@ -164,11 +165,15 @@ impl MarthsInput {
             record,
             intensity: 0.4,
             transfer: Transfer::Plant {
-                plant: PlantParameters::nominal(),
+                plant: PlantParameters::nominal()
+                    .transfer_matrix()
+                    .expect("the nominal plant is valid"),
                 noise_seed: Some(123),
             },
             controller: ControllerKind::Rodeac,
-            toolset_inverse: true,
+            coupler: Coupler::marths()
+                .toolset_inverse()
+                .expect("the benchmark's coupler is symmetric"),
             algorithm: Algorithm::Benchmark,
             keep_history: false,
         }
@@ -182,6 +187,18 @@ impl MarthsInput {
             return Err(Error::invalid(
                 "intensity",
                 format!("must be in (0, 10] (a scale of the record), got {}", self.intensity),
+            ));
+        }
+        if let Transfer::Plant { plant, .. } = &self.transfer
+            && (plant.outputs() != 2 || plant.inputs() != 2)
+        {
+            return Err(Error::invalid(
+                "plant",
+                format!(
+                    "must be 2×2 (two actuators, two commands), got {}×{}",
+                    plant.outputs(),
+                    plant.inputs()
+                ),
             ));
         }
         if let Algorithm::Substep(spec) = &self.algorithm {
@@ -369,6 +386,9 @@ pub struct MarthsResult {
     pub peak_volts: [f64; 2],
     /// The toolset's flag: both actuators above [`COMMAND_LIMIT_V`].
     pub realizable: bool,
+    /// RoDeAC's weights `[θ₁, θ₂]` at the start and after every second (empty for the other
+    /// controllers).
+    pub rodeac_weights: Vec<[[f64; 4]; 2]>,
     pub history: Option<History>,
 }
 
@@ -388,6 +408,7 @@ struct Lab {
     drive: Drive,
     command: [f64; 2],
     peak_volts: [f64; 2],
+    weights: Vec<[[f64; 4]; 2]>,
 }
 
 impl Lab {
@@ -395,7 +416,7 @@ impl Lab {
         let h = SAMPLE_TIME;
         let (plant, noise) = match &input.transfer {
             Transfer::Plant { plant, noise_seed } => (
-                Some(plant.transfer_matrix()?.to_state_space().rk4(h)?),
+                Some(plant.to_state_space().rk4(h)?),
                 noise_seed.map(ChaCha8Rng::seed_from_u64),
             ),
             Transfer::Ideal => (None, None),
@@ -413,15 +434,12 @@ impl Lab {
         Ok(Self {
             plant,
             noise,
-            coupler: if input.toolset_inverse {
-                Coupler::marths().toolset_inverse()?
-            } else {
-                Coupler::marths()
-            },
+            coupler: input.coupler.clone(),
             feedback: FrameForce::new(&VirtualFrame::toolset(), h),
             drive,
             command: [0.0; 2],
             peak_volts: [0.0; 2],
+            weights: Vec::with_capacity(input.samples() / 1024 + 2),
         })
     }
 
@@ -447,6 +465,9 @@ impl Lab {
         match &mut self.drive {
             Drive::None => self.command = target,
             Drive::Rodeac(c) => {
+                if k.is_multiple_of(1024) && self.weights.len() < self.weights.capacity() {
+                    self.weights.push([c[0].theta, c[1].theta]);
+                }
                 for i in 0..2 {
                     self.command[i] = c[i].command(target[i], measured[i]);
                 }
@@ -511,6 +532,7 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
     input
         .record
         .sample_sorted((0..n).map(|k| k as f64 * h), input.intensity, &mut ag);
+    check_coupler(&input.coupler, reference)?;
     let mut lab = Lab::new(input)?;
     let mut hist = History::with_capacity(n);
     let (stopped_at, storey_reference) = match &input.algorithm {
@@ -542,6 +564,7 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
         stopped_at,
         peak_volts,
         realizable: !(peak_volts[0] > COMMAND_LIMIT_V && peak_volts[1] > COMMAND_LIMIT_V),
+        rodeac_weights: std::mem::take(&mut lab.weights),
         history: input.keep_history.then(|| {
             let mut h = hist;
             h.frame_reference = reference.frame.clone();
@@ -549,6 +572,42 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
             h
         }),
     })
+}
+
+/// The coupler must move the node through the reference's motion and back: every corner of
+/// `±x_peak × ±θ_peak` (and 2× beyond, for the tracking errors of a test) must map to strokes
+/// whose inverse returns it.
+fn check_coupler(coupler: &Coupler, reference: &Reference) -> Result<()> {
+    let peak = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let (xp, tp) = (
+        2.0 * peak(&reference.frame[0]) / 1000.0,
+        2.0 * peak(&reference.frame[1]),
+    );
+    for sx in [-1.0, 0.0, 1.0] {
+        for st in [-1.0, 0.0, 1.0] {
+            let q = [sx * xp, st * tp];
+            let back = coupler.dofs(coupler.strokes(q)).map_err(|e| {
+                Error::invalid(
+                    "coupler",
+                    format!(
+                        "cannot reach the target x = {:.4e} m, θ = {:.4e} rad (twice the reference's peak): {e}",
+                        q[0], q[1]
+                    ),
+                )
+            })?;
+            // 1e-3: the toolset's inverse is off by O(θ³) (2e-5 of the peak here), a wrong branch by far more.
+            if (back[0] - q[0]).abs() > 1e-3 * xp.max(1e-6) || (back[1] - q[1]).abs() > 1e-3 * tp.max(1e-6) {
+                return Err(Error::invalid(
+                    "coupler",
+                    format!(
+                        "cannot reach the target x = {:.4e} m, θ = {:.4e} rad: its inverse returns x = {:.4e} m, θ = {:.4e} rad",
+                        q[0], q[1], back[0], back[1]
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The toolset's loop (module docs); returns the sample a diverging run stopped at.

@@ -102,14 +102,15 @@ pub fn run_with(input: &MarthsInput, reference: &Reference, trials: usize, seed:
             ..
         }
     );
-    let inputs: Vec<MarthsInput> = (0..trials as u64)
-        .map(|i| -> Result<MarthsInput> {
+    let inputs: Vec<(PlantParameters, MarthsInput)> = (0..trials as u64)
+        .map(|i| -> Result<(PlantParameters, MarthsInput)> {
             let mut one = input.clone();
+            let params = uncertain_plant(seed, i)?;
             one.transfer = Transfer::Plant {
-                plant: uncertain_plant(seed, i)?,
+                plant: params.transfer_matrix()?,
                 noise_seed: noisy.then(|| seed.wrapping_add(1 + i).wrapping_mul(0x9E37_79B9_7F4A_7C15)),
             };
-            Ok(one)
+            Ok((params, one))
         })
         .collect::<Result<_>>()?;
     let (nominal, trials) = rayon::join(
@@ -117,13 +118,7 @@ pub fn run_with(input: &MarthsInput, reference: &Reference, trials: usize, seed:
         || {
             inputs
                 .par_iter()
-                .map(|one| {
-                    let plant = match one.transfer {
-                        Transfer::Plant { plant, .. } => plant,
-                        Transfer::Ideal => unreachable!("trials run a plant"),
-                    };
-                    run(one, reference).map(|r| (plant, r))
-                })
+                .map(|(params, one)| run(one, reference).map(|r| (*params, r)))
                 .collect::<Result<Vec<_>>>()
         },
     );

@@ -1,0 +1,332 @@
+//! `substep benchmark marths`: the multi-axial RTHS benchmark (maRTHS) as a built-in. Thin: parse
+//! the flags, call `substep::benchmark::marths`, print the table or one JSON object, write the
+//! traces and `marths.md`.
+
+use anyhow::{Context, Result};
+use serde_json::{Value, json};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use substep::benchmark::marths::{
+    Algorithm, COMMAND_LIMIT_V, ControllerKind, Criteria, MarthsConfig, MarthsInput, Record, Study, SubstepSpec,
+    Transfer, reference, round1, run, run_with,
+};
+use substep::benchmark::rths::GroundRecord;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct MarthsArgs {
+    /// Ground motion: elcentro, kobe, morgan (shipped, unscaled) or a two-column `t,a_g` CSV in m/s²
+    #[arg(long, default_value = "elcentro")]
+    pub record: String,
+    /// Scale of the record (the toolset's EQ_intensity)
+    #[arg(long, default_value_t = 0.4)]
+    pub intensity: f64,
+    /// Tracking controller per actuator: none, rodeac (the toolset's) or arx (substep's phase-lag
+    /// compensation after the kinematics)
+    #[arg(long, default_value = "rodeac")]
+    pub controller: String,
+    /// Uncertain plants: with 0 the J are the nominal plant's, otherwise the mean over the N
+    /// trials (nominal excluded), as the toolset reports
+    #[arg(long, default_value_t = 0)]
+    pub trials: usize,
+    /// Seed of the uncertain plants and of the sensor noise
+    #[arg(long, default_value_t = 123)]
+    pub seed: u64,
+    /// No sensor noise (for sample-by-sample comparisons with other implementations)
+    #[arg(long)]
+    pub no_noise: bool,
+    /// An ideal transfer system instead of the plant: measured = target in the same sample, no
+    /// noise (J1–J6 vanish; J7–J10 show the benchmark's floor)
+    #[arg(long)]
+    pub ideal: bool,
+    /// benchmark (the toolset's loop) or substep (the numerical substructure by the sub-step
+    /// algorithm)
+    #[arg(long, default_value = "benchmark")]
+    pub algorithm: String,
+    /// Plant, coupler, ARX and sub-step settings (TOML, docs/benchmark.md)
+    #[arg(long, value_name = "FILE.toml")]
+    pub config: Option<PathBuf>,
+    /// Print one JSON object instead of the table (no files written)
+    #[arg(long)]
+    pub json: bool,
+    /// Write the nominal run's traces (trace.csv, every sample) and marths.md here
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+fn out(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+}
+
+fn record(name: &str) -> Result<GroundRecord> {
+    match Record::all().into_iter().find(|r| r.name() == name) {
+        Some(r) => Ok(r.load()),
+        None => {
+            let path = Path::new(name);
+            if !path.exists() && path.extension().is_none() {
+                return Err(substep::Error::invalid(
+                    "--record",
+                    format!("unknown record `{name}` (elcentro, kobe, morgan, or a t,a_g CSV file in m/s²)"),
+                )
+                .into());
+            }
+            let text = substep::io::limits::read_record_text(path, &substep::io::limits::Limits::default())?;
+            Ok(GroundRecord::parse_csv(name, &text)?)
+        }
+    }
+}
+
+/// The input the flags describe.
+fn input(args: &MarthsArgs) -> Result<(MarthsInput, Option<MarthsConfig>)> {
+    let mut input = MarthsInput::new(Arc::new(record(&args.record)?));
+    input.intensity = args.intensity;
+    input.controller = ControllerKind::parse(&args.controller)?;
+    input.algorithm = match args.algorithm.as_str() {
+        "benchmark" => Algorithm::Benchmark,
+        "substep" => Algorithm::Substep(SubstepSpec::default()),
+        other => {
+            return Err(substep::Error::invalid(
+                "--algorithm",
+                format!("unknown algorithm `{other}` (benchmark, substep)"),
+            )
+            .into());
+        }
+    };
+    if args.ideal {
+        if args.trials > 0 {
+            return Err(substep::Error::invalid("--trials", "uncertain plants need the plant, not --ideal").into());
+        }
+        input.transfer = Transfer::Ideal;
+    } else if let Transfer::Plant { noise_seed, .. } = &mut input.transfer {
+        *noise_seed = (!args.no_noise).then_some(args.seed);
+    }
+    let config = match &args.config {
+        Some(path) => {
+            let text = substep::io::limits::read_text(path, substep::io::limits::CONFIG_MAX_BYTES)?;
+            let c = MarthsConfig::from_toml(&text, &path.display().to_string())?;
+            if c.plant.is_some() && args.trials > 0 {
+                return Err(substep::Error::invalid(
+                    "--trials",
+                    "the uncertain plants perturb the toolset's plant: with [plant] in --config use --trials 0",
+                )
+                .into());
+            }
+            c.apply(&mut input);
+            Some(c)
+        }
+        None => None,
+    };
+    Ok((input, config))
+}
+
+fn criteria_json(c: &Criteria) -> Value {
+    let mut m = serde_json::Map::new();
+    for (name, v) in c.lists() {
+        m.insert(name.into(), json!(v));
+    }
+    Value::Object(m)
+}
+
+const LABELS: [(&str, &str, &[&str]); 10] = [
+    ("J1", "delay [ms]", &["act. 1", "act. 2"]),
+    ("J2", "NRMS tracking [%]", &["act. 1", "act. 2"]),
+    ("J3", "peak tracking [%]", &["act. 1", "act. 2"]),
+    ("J4", "delay, as coded = J1 [ms]", &["act. 1", "act. 2"]),
+    ("J5", "NRMS frame vs numerical [%]", &["x", "θ"]),
+    ("J6", "peak frame vs numerical [%]", &["x", "θ"]),
+    ("J7", "NRMS frame vs reference [%]", &["x", "θ"]),
+    ("J8", "NRMS storeys 2, 3 [%]", &["x₂", "θ₂", "x₃", "θ₃"]),
+    ("J9", "peak frame vs reference [%]", &["x", "θ"]),
+    ("J10", "peak storeys 2, 3 [%]", &["x₂", "θ₂", "x₃", "θ₃"]),
+];
+
+fn describe(args: &MarthsArgs, input: &MarthsInput) -> String {
+    let transfer = match input.transfer {
+        Transfer::Ideal => "ideal transfer system".to_string(),
+        Transfer::Plant { noise_seed, .. } => format!(
+            "{} plant, {}",
+            if args.config.is_some() {
+                "configured"
+            } else {
+                "the toolset's"
+            },
+            noise_seed.map_or("no sensor noise".to_string(), |s| format!("sensor noise (seed {s})"))
+        ),
+    };
+    format!(
+        "maRTHS benchmark: {} × {}, controller {}, algorithm {}, {transfer}",
+        input.record.name,
+        input.intensity,
+        input.controller.name(),
+        args.algorithm
+    )
+}
+
+fn table(head: &str, study: &Study, trials: usize) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "{head}");
+    let what = if trials == 0 {
+        "nominal plant".to_string()
+    } else {
+        format!("mean over {trials} uncertain plants (nominal excluded), rounded as the toolset reports")
+    };
+    let _ = writeln!(s, "J1–J10: {what}");
+    match study.reported() {
+        Some(c) => {
+            let c = c.map(round1);
+            for ((name, values), (_, label, parts)) in c.lists().iter().zip(LABELS) {
+                let cells: Vec<String> = values.iter().zip(parts).map(|(v, p)| format!("{p} {v:.1}")).collect();
+                let _ = writeln!(s, "  {name:<4} {label:<30} {}", cells.join("   "));
+            }
+        }
+        None => {
+            let _ = writeln!(s, "  no score: a run diverged");
+        }
+    }
+    let v = study.nominal.peak_volts;
+    let _ = writeln!(
+        s,
+        "realizable: {} (peak command, nominal: {:.2} / {:.2} V; limit {COMMAND_LIMIT_V} V on both actuators)",
+        if study.realizable() { "yes" } else { "NO" },
+        v[0],
+        v[1]
+    );
+    let diverged = usize::from(study.nominal.diverged) + study.trials.iter().filter(|(_, r)| r.diverged).count();
+    let _ = writeln!(
+        s,
+        "runs: 1 nominal + {} uncertain, {}",
+        study.trials.len(),
+        if diverged == 0 {
+            "all stable".to_string()
+        } else {
+            format!("{diverged} DIVERGED")
+        }
+    );
+    s
+}
+
+fn trace(input: &MarthsInput, dir: &Path) -> Result<PathBuf> {
+    let mut one = input.clone();
+    one.keep_history = true;
+    let reference = reference(&one)?;
+    let result = run(&one, &reference)?;
+    let h = result.history.context("the run kept no history")?;
+    let n = h.len();
+    let mut text = String::with_capacity(n * 300);
+    text.push_str(
+        "t [s],target 1 [mm],target 2 [mm],measured 1 [mm],measured 2 [mm],command 1 [mm],command 2 [mm],x measured [mm],θ measured [rad],x numerical [mm],θ numerical [rad],x reference [mm],θ reference [rad]\n",
+    );
+    for k in 0..n {
+        let _ = writeln!(
+            text,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            k as f64 * substep::benchmark::marths::SAMPLE_TIME,
+            h.target[0][k],
+            h.target[1][k],
+            h.measured[0][k],
+            h.measured[1][k],
+            h.command[0][k],
+            h.command[1][k],
+            h.frame_measured[0][k],
+            h.frame_measured[1][k],
+            h.frame_numerical[0][k],
+            h.frame_numerical[1][k],
+            h.frame_reference[0][k],
+            h.frame_reference[1][k],
+        );
+    }
+    let path = dir.join("trace.csv");
+    std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
+}
+
+pub fn marths(args: &MarthsArgs) -> Result<()> {
+    let (input, _config) = input(args)?;
+    let t0 = std::time::Instant::now();
+    let reference = reference(&input)?;
+    let study = run_with(&input, &reference, args.trials, args.seed)?;
+    let elapsed = t0.elapsed().as_secs_f64();
+    let head = describe(args, &input);
+    let diverged = usize::from(study.nominal.diverged) + study.trials.iter().filter(|(_, r)| r.diverged).count();
+    let verdict = || -> Result<()> {
+        if diverged == 0 {
+            return Ok(());
+        }
+        let at = study
+            .nominal
+            .stopped_at
+            .or_else(|| study.trials.iter().find_map(|(_, r)| r.stopped_at))
+            .unwrap_or(0);
+        Err(substep::Error::Diverged {
+            step: at,
+            time: at as f64 * substep::benchmark::marths::SAMPLE_TIME,
+            reason: format!("benchmark marths: {diverged} run(s) diverged; no score"),
+        }
+        .into())
+    };
+    if args.json {
+        let reported = study.reported();
+        let mut obj = serde_json::Map::new();
+        obj.insert("benchmark".into(), json!("maRTHS"));
+        obj.insert("record".into(), json!(input.record.name));
+        obj.insert("intensity".into(), json!(input.intensity));
+        obj.insert("controller".into(), json!(input.controller.name()));
+        obj.insert("algorithm".into(), json!(args.algorithm));
+        obj.insert("ideal".into(), json!(args.ideal));
+        obj.insert("noise".into(), json!(!args.no_noise && !args.ideal));
+        obj.insert("seed".into(), json!(args.seed));
+        obj.insert("trials".into(), json!(args.trials));
+        if let Some(c) = reported {
+            for (name, v) in c.map(round1).lists() {
+                obj.insert(name.into(), json!(v));
+            }
+            obj.insert("J_raw".into(), criteria_json(&c));
+        }
+        obj.insert(
+            "nominal".into(),
+            study.nominal.criteria.as_ref().map_or(Value::Null, criteria_json),
+        );
+        obj.insert(
+            "per_trial".into(),
+            json!(
+                study
+                    .trials
+                    .iter()
+                    .map(|(_, r)| r.criteria.as_ref().map_or(Value::Null, criteria_json))
+                    .collect::<Vec<_>>()
+            ),
+        );
+        obj.insert("realizable".into(), json!(study.realizable()));
+        obj.insert(
+            "peak_volts".into(),
+            json!({
+                "nominal": study.nominal.peak_volts,
+                "trials": study.trials.iter().map(|(_, r)| r.peak_volts).collect::<Vec<_>>(),
+            }),
+        );
+        obj.insert("stable".into(), json!(diverged == 0));
+        obj.insert("diverged_runs".into(), json!(diverged));
+        obj.insert("wall_time_s".into(), json!(elapsed));
+        out(&format!("{}\n", serde_json::to_string_pretty(&Value::Object(obj))?));
+        return verdict();
+    }
+    let text = table(&head, &study, args.trials);
+    out(&text);
+    out(&format!("{} run(s) in {elapsed:.2} s\n", 1 + study.trials.len()));
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let trace = trace(&input, dir)?;
+        let command = std::iter::once("substep".to_string())
+            .chain(std::env::args().skip(1))
+            .collect::<Vec<_>>()
+            .join(" ");
+        let md = format!(
+            "# maRTHS benchmark\n\nCommand: `{command}`\n\n```text\n{text}```\n\nTraces of the nominal run: `trace.csv` (every sample).\n"
+        );
+        let path = dir.join("marths.md");
+        std::fs::write(&path, md).with_context(|| format!("cannot write {}", path.display()))?;
+        out(&format!("wrote {} and {}\n", path.display(), trace.display()));
+    }
+    verdict()
+}
