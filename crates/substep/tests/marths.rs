@@ -244,8 +244,8 @@ fn rodeac_first_update_matches_the_hand_computation() {
             68426.85709639003,
         ],
     ];
-    for i in 0..4 {
-        assert!(close(&c[0].p[i], &p1[i], 1e-9), "P row {i}: {:?}", c[0].p[i]);
+    for (got, want) in c[0].p.iter().zip(&p1) {
+        assert!(close(got, want, 1e-9), "P row: {got:?}");
     }
     let g = c[1].update(&phi, 1.2);
     assert!(close(
@@ -284,18 +284,18 @@ fn rodeac_adaptation_converges_from_the_initial_parameters() {
         assert!(w.len() >= 41, "{}", w.len());
         let init = InitialParameters::toolset();
         assert_eq!(w[0][0], init.theta[0]);
-        for a in 0..2 {
+        for (a, start) in w[0].iter().enumerate() {
             let norm = |v: &[f64; 4]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
             let diff = |p: &[f64; 4], q: &[f64; 4]| norm(&std::array::from_fn(|k| p[k] - q[k]));
             let end = w[w.len() - 1][a];
-            let moved = diff(&end, &w[0][a]);
+            let moved = diff(&end, start);
             let late = diff(&end, &w[w.len() - 11][a]);
             println!(
                 "noise {noise:?}, actuator {}: moved {moved:.1}, last 10 s {late:.2}, |θ| {:.1}",
                 a + 1,
                 norm(&end)
             );
-            assert!(moved > 10.0 * norm(&w[0][a]), "adapts");
+            assert!(moved > 10.0 * norm(start), "adapts");
             assert!(late < 0.05 * norm(&end), "settles");
         }
         let c = res.criteria.unwrap();
