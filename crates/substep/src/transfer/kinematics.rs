@@ -41,6 +41,9 @@ pub struct Coupler {
     toolset: bool,
 }
 
+/// `d_v` of the multi-axial benchmark's coupler \[m\]: `√(0.2667² + 0.127²)`.
+pub const MARTHS_RADIUS: f64 = 0.29539446508017037;
+
 /// Newton iterations of the general inverse.
 const MAX_NEWTON: usize = 50;
 
@@ -70,19 +73,16 @@ impl Coupler {
         Ok(c)
     }
 
-    /// The multi-axial benchmark's coupler: `d_v = 0.29539 m`, `α = ∓25.4633°`.
+    /// The multi-axial benchmark's coupler (`fcn_coupler_geometry.m`): attachment points at
+    /// `(0.2667, ∓0.127) m` from the node, `d_v = √(0.2667² + 0.127²) = 0.295394… m`, with the
+    /// angles as the toolset writes them, `α = ∓25.4633°`.
     pub fn marths() -> Self {
         let a = 25.4633f64.to_radians();
+        let d_v = MARTHS_RADIUS;
         Self {
             points: [
-                Attachment {
-                    radius: 0.29539,
-                    angle: -a,
-                },
-                Attachment {
-                    radius: 0.29539,
-                    angle: a,
-                },
+                Attachment { radius: d_v, angle: -a },
+                Attachment { radius: d_v, angle: a },
             ],
             toolset: false,
         }
@@ -229,7 +229,8 @@ mod tests {
         // The symmetric coupler: a pure translation moves both actuators alike; a rotation
         // pushes one and pulls the other by 2 d_v sin α sin θ in all.
         let s = symmetric.strokes([0.0, 0.01]);
-        let d_v = 0.29539;
+        let d_v = MARTHS_RADIUS;
+        assert_eq!(d_v, (0.2667f64.powi(2) + 0.127f64.powi(2)).sqrt());
         let a = 25.4633f64.to_radians();
         assert!((s[0] - s[1] - 2.0 * d_v * a.sin() * 0.01f64.sin()).abs() < 1e-15);
         assert_eq!(symmetric.strokes([0.02, 0.0]), [0.02, 0.02]);
@@ -244,7 +245,7 @@ mod tests {
         let (a, b) = (exact.dofs(s).unwrap(), toolset.dofs(s).unwrap());
         assert_eq!(a[1], b[1]);
         let d = (a[0] - b[0]).abs();
-        let expected = 0.29539 * 25.4633f64.to_radians().sin() * 0.01f64.powi(3) / 6.0;
+        let expected = MARTHS_RADIUS * 25.4633f64.to_radians().sin() * 0.01f64.powi(3) / 6.0;
         assert!((d / expected - 1.0).abs() < 0.05, "{d:e} {expected:e}");
     }
 

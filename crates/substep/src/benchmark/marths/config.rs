@@ -8,7 +8,7 @@
 //!      [{ … }, { … }]]
 //!
 //! [coupler]               # two horizontal actuators pinned to the coupler
-//! attachments = [[0.29539, -25.4633], [0.29539, 25.4633]]   # [radius m, angle °] each
+//! attachments = [[0.295394465, -25.4633], [0.295394465, 25.4633]]   # [radius m, angle °] each
 //! inverse = "toolset"     # or "exact" (symmetric couplers; others always invert by Newton)
 //!
 //! [controller.arx]        # the ARX compensator per actuator
