@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use substep::benchmark::marths::{
     Algorithm, COMMAND_LIMIT_V, ControllerKind, Criteria, MarthsConfig, MarthsInput, Record, Study, SubstepSpec,
-    Transfer, reference, round1, run, run_with,
+    Transfer, compare, compare_markdown, reference, round1, run, run_with,
 };
 use substep::benchmark::rths::GroundRecord;
 
@@ -52,6 +52,11 @@ pub struct MarthsArgs {
     /// Write the nominal run's traces (trace.csv, every sample) and marths.md here
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// RoDeAC, ARX (decentralised) and ARX over both channels side by side on the three
+    /// records, nominal and --trials uncertain plants (default 20): J2, J7, stability; prints a
+    /// Markdown table (with --json: the rows)
+    #[arg(long)]
+    pub compare: bool,
 }
 
 fn out(text: &str) {
@@ -241,7 +246,66 @@ fn trace(input: &MarthsInput, dir: &Path) -> Result<PathBuf> {
     Ok(path)
 }
 
+fn comparison(args: &MarthsArgs) -> Result<()> {
+    let trials = if args.trials == 0 { 20 } else { args.trials };
+    let controllers = ["rodeac", "arx", "arx_mimo"].map(|c| ControllerKind::parse(c).expect("a known controller"));
+    let t0 = std::time::Instant::now();
+    let rows = compare(&Record::all(), &controllers, trials, args.seed, !args.no_noise)?;
+    let elapsed = t0.elapsed().as_secs_f64();
+    let unstable: usize = rows
+        .iter()
+        .map(|r| r.trials - r.stable_trials + usize::from(r.nominal.is_none()))
+        .sum();
+    if args.json {
+        let rows: Vec<Value> = rows
+            .iter()
+            .map(|r| {
+                json!({
+                    "record": r.record,
+                    "controller": r.controller,
+                    "nominal": r.nominal.as_ref().map_or(Value::Null, criteria_json),
+                    "mean": r.mean.as_ref().map_or(Value::Null, criteria_json),
+                    "worst_J2": r.worst_j2,
+                    "worst_J7": r.worst_j7,
+                    "stable_trials": r.stable_trials,
+                    "trials": r.trials,
+                    "backed_off": r.backed_off,
+                    "realizable": r.realizable,
+                })
+            })
+            .collect();
+        out(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(&json!({ "rows": rows, "noise": !args.no_noise, "seed": args.seed }))?
+        ));
+    } else {
+        out(&format!(
+            "maRTHS: controllers side by side, intensity 0.4, {}, {trials} uncertain plants (seed {})\n\n{}\n{} runs in {elapsed:.1} s\n",
+            if args.no_noise {
+                "no sensor noise"
+            } else {
+                "sensor noise"
+            },
+            args.seed,
+            compare_markdown(&rows),
+            rows.len() * (trials + 1)
+        ));
+    }
+    if unstable > 0 {
+        return Err(substep::Error::Diverged {
+            step: 0,
+            time: 0.0,
+            reason: format!("benchmark marths --compare: {unstable} run(s) diverged"),
+        }
+        .into());
+    }
+    Ok(())
+}
+
 pub fn marths(args: &MarthsArgs) -> Result<()> {
+    if args.compare {
+        return comparison(args);
+    }
     let (input, _config) = input(args)?;
     let t0 = std::time::Instant::now();
     let reference = reference(&input)?;

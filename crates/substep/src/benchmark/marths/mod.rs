@@ -24,6 +24,7 @@
 
 mod config;
 pub mod data;
+mod mimo_arx;
 mod rodeac;
 mod run;
 pub mod structure;
@@ -31,10 +32,11 @@ mod study;
 
 pub use config::MarthsConfig;
 pub use data::{InitialParameters, PlantParameters, Record};
+pub use mimo_arx::{MimoArx, MimoArxSpec};
 pub use rodeac::{BUTTER_A, BUTTER_B, Butterworth, RlsAc, rodeac};
 pub use run::{
     Algorithm, COMMAND_LIMIT_V, ControllerKind, Criteria, DIVERGENCE_LIMIT, History, MAX_LAG, MarthsInput,
     MarthsResult, NOISE_STD_MM, Reference, SAMPLE_TIME, SubstepSpec, Transfer, arx_default, evaluate, find_delay,
     numerical_matrices, reference, round1, run, volts,
 };
-pub use study::{MAX_TRIALS, Study, run_study, run_with, uncertain_plant};
+pub use study::{CompareRow, MAX_TRIALS, Study, compare, compare_markdown, run_study, run_with, uncertain_plant};

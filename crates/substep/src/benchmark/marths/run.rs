@@ -5,6 +5,7 @@ use super::data::{
     DOF_R2, DOF_R3, DOF_THETA, DOF_X1, DOF_X2, DOF_X3, Frame, InitialParameters, PARTITION_DOFS, Partition,
     PlantParameters, VirtualFrame,
 };
+use super::mimo_arx::{MimoArx, MimoArxSpec};
 use super::rodeac::{RlsAc, rodeac};
 use super::structure::{FrameForce, NewmarkFrame, solve_ideal};
 use crate::benchmark::rths::GroundRecord;
@@ -50,6 +51,8 @@ pub enum ControllerKind {
     Rodeac,
     /// The project's ARX phase-lag compensator, per actuator after the kinematics.
     Arx(ArxPhaseLagSpec),
+    /// The ARX identification over both actuators ([`MimoArx`]).
+    ArxMimo(MimoArxSpec),
 }
 
 impl ControllerKind {
@@ -58,10 +61,11 @@ impl ControllerKind {
             "none" => Self::None,
             "rodeac" => Self::Rodeac,
             "arx" => Self::Arx(arx_default()),
+            "arx_mimo" => Self::ArxMimo(MimoArxSpec::default()),
             _ => {
                 return Err(Error::invalid(
                     "controller",
-                    format!("unknown controller `{s}` (none, rodeac, arx)"),
+                    format!("unknown controller `{s}` (none, rodeac, arx, arx_mimo)"),
                 ));
             }
         })
@@ -71,6 +75,7 @@ impl ControllerKind {
             Self::None => "none",
             Self::Rodeac => "rodeac",
             Self::Arx(_) => "arx",
+            Self::ArxMimo(_) => "arx_mimo",
         }
     }
 }
@@ -80,6 +85,7 @@ impl ControllerKind {
 pub fn arx_default() -> ArxPhaseLagSpec {
     ArxPhaseLagSpec {
         lambda: 0.999,
+        max_lead: Some(600.0),
         ..ArxPhaseLagSpec::new(16).with_span(8)
     }
 }
@@ -386,6 +392,9 @@ pub struct MarthsResult {
     pub peak_volts: [f64; 2],
     /// The toolset's flag: both actuators above [`COMMAND_LIMIT_V`].
     pub realizable: bool,
+    /// An ARX compensator's guard or supervisor backed off (the test went on uncompensated on
+    /// that actuator).
+    pub backed_off: bool,
     /// RoDeAC's weights `[θ₁, θ₂]` at the start and after every second (empty for the other
     /// controllers).
     pub rodeac_weights: Vec<[[f64; 4]; 2]>,
@@ -396,6 +405,7 @@ enum Drive {
     None,
     Rodeac(Box<[RlsAc; 2]>),
     Arx(Vec<Box<dyn PhaseLagCompensator>>, Ramp),
+    Mimo(Box<MimoArx>, Ramp),
 }
 
 /// The lab side of one sample: the plant (or nothing: ideal), sensors, the coupler, the virtual
@@ -430,6 +440,7 @@ impl Lab {
                     .collect::<Result<Vec<_>>>()?;
                 Drive::Arx(c, Ramp::new(0, 1024))
             }
+            ControllerKind::ArxMimo(spec) => Drive::Mimo(Box::new(MimoArx::new(*spec)?), Ramp::new(0, 1024)),
         };
         Ok(Self {
             plant,
@@ -478,12 +489,23 @@ impl Lab {
                     self.command[i] = target[i] + c[i].correction(target[i], measured[i], r);
                 }
             }
+            Drive::Mimo(c, ramp) => {
+                let du = c.corrections(target, measured, ramp.value(k));
+                self.command = [target[0] + du[0], target[1] + du[1]];
+            }
         }
         for i in 0..2 {
             self.peak_volts[i] = self.peak_volts[i].max(volts(i, self.command[i]).abs());
         }
         if let Some(p) = &mut self.plant {
             p.step(&self.command, &mut [0.0; 2]);
+        }
+    }
+
+    fn backed_off(&self) -> bool {
+        match &self.drive {
+            Drive::Arx(c, _) => c.iter().any(|c| c.trip().is_some()),
+            _ => false,
         }
     }
 
@@ -564,6 +586,7 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
         stopped_at,
         peak_volts,
         realizable: !(peak_volts[0] > COMMAND_LIMIT_V && peak_volts[1] > COMMAND_LIMIT_V),
+        backed_off: lab.backed_off(),
         rodeac_weights: std::mem::take(&mut lab.weights),
         history: input.keep_history.then(|| {
             let mut h = hist;

@@ -127,3 +127,99 @@ pub fn run_with(input: &MarthsInput, reference: &Reference, trials: usize, seed:
         trials: trials?,
     })
 }
+
+/// One row of [`compare`]: a controller on a record, nominal and over uncertain plants.
+#[derive(Debug, Clone)]
+pub struct CompareRow {
+    pub record: &'static str,
+    pub controller: &'static str,
+    /// The nominal plant's criteria (`None`: diverged).
+    pub nominal: Option<Criteria>,
+    /// The mean over the trials (`None`: a trial diverged or there were none).
+    pub mean: Option<Criteria>,
+    /// Worst (largest) J2 and J7 per component over the trials.
+    pub worst_j2: [f64; 2],
+    pub worst_j7: [f64; 2],
+    pub stable_trials: usize,
+    pub trials: usize,
+    /// Runs (nominal and trials) in which a compensator backed off.
+    pub backed_off: usize,
+    pub realizable: bool,
+}
+
+/// Every controller on every shipped record: the nominal plant and `trials` uncertain ones
+/// (seeded by `seed`, sensor noise when `noise`), in parallel.
+pub fn compare(
+    records: &[super::data::Record],
+    controllers: &[super::run::ControllerKind],
+    trials: usize,
+    seed: u64,
+    noise: bool,
+) -> Result<Vec<CompareRow>> {
+    let mut rows = Vec::new();
+    for &record in records {
+        let mut input = MarthsInput::new(std::sync::Arc::new(record.load()));
+        if let Transfer::Plant { noise_seed, .. } = &mut input.transfer {
+            *noise_seed = noise.then_some(seed);
+        }
+        let reference = reference(&input)?;
+        for controller in controllers {
+            input.controller = controller.clone();
+            let study = run_with(&input, &reference, trials, seed)?;
+            let worst = |f: &dyn Fn(&Criteria) -> [f64; 2]| -> [f64; 2] {
+                let mut w = [0.0f64; 2];
+                for (_, r) in &study.trials {
+                    let v = r.criteria.as_ref().map_or([f64::INFINITY; 2], f);
+                    w = [w[0].max(v[0]), w[1].max(v[1])];
+                }
+                w
+            };
+            rows.push(CompareRow {
+                record: record.name(),
+                controller: controller.name(),
+                nominal: study.nominal.criteria,
+                mean: if study.trials.is_empty() {
+                    None
+                } else {
+                    study.reported()
+                },
+                worst_j2: worst(&|c| c.j2),
+                worst_j7: worst(&|c| c.j7),
+                stable_trials: study.trials.iter().filter(|(_, r)| !r.diverged).count(),
+                trials: study.trials.len(),
+                backed_off: usize::from(study.nominal.backed_off)
+                    + study.trials.iter().filter(|(_, r)| r.backed_off).count(),
+                realizable: study.realizable(),
+            });
+        }
+    }
+    Ok(rows)
+}
+
+/// The rows of [`compare`] as a Markdown table (J2, J7 nominal and mean over the trials).
+pub fn compare_markdown(rows: &[CompareRow]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from(
+        "| record | controller | J2 act. 1 / 2 [%] nominal | mean | worst | J7 x / θ [%] nominal | mean | worst | stable | backed off | realizable |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let pair = |v: Option<[f64; 2]>| v.map_or("diverged".to_string(), |v| format!("{:.2} / {:.2}", v[0], v[1]));
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {}/{} | {} | {} |",
+            r.record,
+            r.controller,
+            pair(r.nominal.map(|c| c.j2)),
+            pair(r.mean.map(|c| c.j2)),
+            pair((r.trials > 0).then_some(r.worst_j2)),
+            pair(r.nominal.map(|c| c.j7)),
+            pair(r.mean.map(|c| c.j7)),
+            pair((r.trials > 0).then_some(r.worst_j7)),
+            r.stable_trials,
+            r.trials,
+            r.backed_off,
+            if r.realizable { "yes" } else { "no" }
+        );
+    }
+    s
+}
