@@ -193,10 +193,10 @@ impl MimoArx {
         self.scale_v = self.scale_v.max(lag[0].abs()).max(lag[1].abs());
         let sv = self.scale_v.max(f64::MIN_POSITIVE);
         if self.count > l.max(WARM_UP) && self.count.is_multiple_of(l) && self.scale_v > 0.0 {
-            for i in 0..2 {
+            for (i, lag_i) in lag.iter().enumerate() {
                 // The regressor of the correction sent at j − 1 − L (age L + 1 after the push).
                 self.regressor(i, l + 1);
-                let want = (self.ch[i].applied.get(l) + lag[i]) / sv;
+                let want = (self.ch[i].applied.get(l) + lag_i) / sv;
                 let e = want - self.rls[i].predict(&self.phi);
                 self.rls[i].update_with_error(&self.phi, e);
                 self.from[i].copy_from_slice(&self.theta[i]);
