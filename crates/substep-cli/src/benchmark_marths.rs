@@ -317,15 +317,15 @@ pub fn marths(args: &MarthsArgs) -> Result<()> {
         if diverged == 0 {
             return Ok(());
         }
-        let at = study
-            .nominal
-            .stopped_at
-            .or_else(|| study.trials.iter().find_map(|(_, r)| r.stopped_at))
-            .unwrap_or(0);
+        let first = std::iter::once(&study.nominal)
+            .chain(study.trials.iter().map(|(_, r)| r))
+            .find(|r| r.diverged);
+        let at = first.and_then(|r| r.stopped_at).unwrap_or(0);
+        let why = first.and_then(|r| r.stop_reason.clone()).unwrap_or_default();
         Err(substep::Error::Diverged {
             step: at,
             time: at as f64 * substep::benchmark::marths::SAMPLE_TIME,
-            reason: format!("benchmark marths: {diverged} run(s) diverged; no score"),
+            reason: format!("benchmark marths: {diverged} run(s) diverged, no score; the first: {why}"),
         }
         .into())
     };

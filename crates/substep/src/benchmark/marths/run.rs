@@ -386,8 +386,9 @@ pub struct MarthsResult {
     /// `None` if the run diverged.
     pub criteria: Option<Criteria>,
     pub diverged: bool,
-    /// Sample at which a diverged run stopped.
+    /// Sample at which a diverged run stopped, and why.
     pub stopped_at: Option<usize>,
+    pub stop_reason: Option<String>,
     /// Peak command per actuator \[V\].
     pub peak_volts: [f64; 2],
     /// The toolset's flag: both actuators above [`COMMAND_LIMIT_V`].
@@ -515,6 +516,22 @@ impl Lab {
     }
 }
 
+fn runaway(k: usize) -> String {
+    format!(
+        "the response ran away at t = {:.4} s (a displacement beyond ±{DIVERGENCE_LIMIT} m or a command beyond ±{} mm)",
+        k as f64 * SAMPLE_TIME,
+        1e3 * DIVERGENCE_LIMIT
+    )
+}
+
+/// Measured strokes no coupler position gives: the test has left the coupler's range.
+fn left_the_coupler(k: usize, e: &Error) -> String {
+    format!(
+        "the measured strokes left the coupler's range at t = {:.4} s ({e})",
+        k as f64 * SAMPLE_TIME
+    )
+}
+
 /// `Some(x)` if `x` is finite and inside ±[`DIVERGENCE_LIMIT`].
 fn within(x: f64) -> Option<f64> {
     (x.abs() < DIVERGENCE_LIMIT).then_some(x)
@@ -569,6 +586,10 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
             (stopped, Some(r))
         }
     };
+    let (stopped_at, stop_reason) = match stopped_at {
+        Some((k, why)) => (Some(k), Some(why)),
+        None => (None, None),
+    };
     let diverged = stopped_at.is_some();
     let criteria = if diverged {
         None
@@ -584,6 +605,7 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
         criteria,
         diverged,
         stopped_at,
+        stop_reason,
         peak_volts,
         realizable: !(peak_volts[0] > COMMAND_LIMIT_V && peak_volts[1] > COMMAND_LIMIT_V),
         backed_off: lab.backed_off(),
@@ -606,6 +628,25 @@ fn check_coupler(coupler: &Coupler, reference: &Reference) -> Result<()> {
         2.0 * peak(&reference.frame[0]) / 1000.0,
         2.0 * peak(&reference.frame[1]),
     );
+    // The actuators must control θ over the whole range: the Jacobian keeps its sign.
+    let det = |theta: f64| {
+        let j = coupler.jacobian([0.0, theta]);
+        j[0][0] * j[1][1] - j[0][1] * j[1][0]
+    };
+    let d0 = det(0.0);
+    for i in 0..=40 {
+        let theta = tp * (i as f64 / 20.0 - 1.0);
+        let d = det(theta);
+        if d * d0 <= 0.0 || d.abs() < 1e-3 * d0.abs() {
+            return Err(Error::invalid(
+                "coupler",
+                format!(
+                    "cannot reach the target: the actuators lose control of the rotation at θ = {theta:.4e} rad \
+                     (singular kinematics within twice the reference's peak rotation, {tp:.4e} rad)"
+                ),
+            ));
+        }
+    }
     for sx in [-1.0, 0.0, 1.0] {
         for st in [-1.0, 0.0, 1.0] {
             let q = [sx * xp, st * tp];
@@ -634,7 +675,7 @@ fn check_coupler(coupler: &Coupler, reference: &Reference) -> Result<()> {
 }
 
 /// The toolset's loop (module docs); returns the sample a diverging run stopped at.
-fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<usize>> {
+fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<(usize, String)>> {
     let numerical = numerical_matrices();
     let mut structure = NewmarkFrame::new(
         &numerical.k,
@@ -645,7 +686,10 @@ fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option
     )?;
     for (k, &a) in ag.iter().enumerate() {
         let (measured, q, target) = if lab.plant.is_some() {
-            let (measured, q, f) = lab.measure()?;
+            let (measured, q, f) = match lab.measure() {
+                Ok(m) => m,
+                Err(e) => return Ok(Some((k, left_the_coupler(k, &e)))),
+            };
             structure.step(a, f);
             let target = [structure.u[DOF_X1], -structure.u[DOF_THETA]];
             (measured, q, target)
@@ -666,7 +710,7 @@ fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option
             hist.storeys_numerical[j].push(structure.u[d]);
         }
         if within(structure.u[DOF_X1]).is_none() || lab.runaway() {
-            return Ok(Some(k));
+            return Ok(Some((k, runaway(k))));
         }
     }
     Ok(None)
@@ -676,7 +720,7 @@ fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option
 /// benchmark (docs/benchmark.md): the command signal is linear between the sub-step commands
 /// and sampled at `t_k` as the target; the force fed back at the end of sub-step `s` is the
 /// latest sample at or before `s Δτ`; a sub-step is computed when the target first needs it.
-fn run_substep(spec: &SubstepSpec, ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<usize>> {
+fn run_substep(spec: &SubstepSpec, ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<(usize, String)>> {
     let n = ag.len();
     let numerical = numerical_matrices();
     let influence = DVector::from_column_slice(&numerical.influence);
@@ -723,7 +767,7 @@ fn run_substep(spec: &SubstepSpec, ag: &[f64], lab: &mut Lab, hist: &mut History
                         hist.storeys_numerical[j].push(u[d]);
                     }
                     if !u.iter().all(|v| v.is_finite() && v.abs() <= DIVERGENCE_LIMIT) {
-                        return Ok(Some(k));
+                        return Ok(Some((k, runaway(k))));
                     }
                 }
             } else {
@@ -752,12 +796,15 @@ fn run_substep(spec: &SubstepSpec, ag: &[f64], lab: &mut Lab, hist: &mut History
         };
         let s = lab.coupler.strokes(q_target);
         let target_mm = [1000.0 * s[0], 1000.0 * s[1]];
-        let (measured, q, f) = lab.measure()?;
+        let (measured, q, f) = match lab.measure() {
+            Ok(m) => m,
+            Err(e) => return Ok(Some((k, left_the_coupler(k, &e)))),
+        };
         forces[k] = f;
         lab.drive(k, target_mm, measured);
         record_sample(hist, target_mm, measured, lab.command, q, q_target);
         if within(q_target[0]).is_none() || lab.runaway() {
-            return Ok(Some(k));
+            return Ok(Some((k, runaway(k))));
         }
     }
     // Steps whose end lies beyond the last sample are not complete.

@@ -86,15 +86,15 @@ impl Study {
 /// The nominal run of `input` (its transfer system as given) and `trials` uncertain plants
 /// (noise seeded per trial from `seed` when the nominal run has noise), in parallel.
 pub fn run_study(input: &MarthsInput, trials: usize, seed: u64) -> Result<Study> {
-    if trials > MAX_TRIALS {
-        return Err(Error::invalid("trials", format!("at most {MAX_TRIALS}, got {trials}")));
-    }
     let reference = reference(input)?;
     run_with(input, &reference, trials, seed)
 }
 
 /// [`run_study`] against a reference computed once.
 pub fn run_with(input: &MarthsInput, reference: &Reference, trials: usize, seed: u64) -> Result<Study> {
+    if trials > MAX_TRIALS {
+        return Err(Error::invalid("trials", format!("at most {MAX_TRIALS}, got {trials}")));
+    }
     let noisy = matches!(
         input.transfer,
         Transfer::Plant {
