@@ -43,6 +43,10 @@ pub struct MarthsArgs {
     /// algorithm)
     #[arg(long, default_value = "benchmark")]
     pub algorithm: String,
+    /// Density of the partition taken out of the frame [kg/m³]: the toolset codes 785e3 (100 ×
+    /// steel, 902.5 kg off floor 1); 7850 is steel
+    #[arg(long, value_name = "KG_PER_M3")]
+    pub partition_density: Option<f64>,
     /// Plant, coupler, ARX and sub-step settings (TOML, docs/benchmark.md)
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
@@ -86,6 +90,9 @@ fn record(name: &str) -> Result<GroundRecord> {
 fn input(args: &MarthsArgs) -> Result<(MarthsInput, Option<MarthsConfig>)> {
     let mut input = MarthsInput::new(Arc::new(record(&args.record)?));
     input.intensity = args.intensity;
+    if let Some(rho) = args.partition_density {
+        input.partition_density = rho;
+    }
     input.controller = ControllerKind::parse(&args.controller)?;
     input.algorithm = match args.algorithm.as_str() {
         "benchmark" => Algorithm::Benchmark,

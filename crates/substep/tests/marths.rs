@@ -63,7 +63,7 @@ fn the_frame_and_the_plant_match_the_toolset_data() {
     for (got, want) in f.iter().zip([2.2912588753, 12.7480123616, 26.2803289099]) {
         assert!((got / want - 1.0).abs() < 1e-9, "{got} vs {want}");
     }
-    let num = numerical_matrices();
+    let num = numerical_matrices(substep::benchmark::marths::data::TOOLSET_DENSITY);
     let f = frequencies(&num.k, &num.m);
     for (got, want) in f.iter().zip([2.2257, 12.7531, 26.2803]) {
         assert!((got / want - 1.0).abs() < 5e-5, "{got} vs {want}");

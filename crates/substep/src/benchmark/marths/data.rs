@@ -121,14 +121,24 @@ pub struct Partition {
 /// DOFs of the partition, in its order.
 pub const PARTITION_DOFS: [usize; 3] = [DOF_X1, DOF_THETA29, DOF_THETA];
 
+/// The partition's density as `build_physical_ideal.m` codes it \[kg/m³\] (100 × steel).
+pub const TOOLSET_DENSITY: f64 = 785e3;
+/// Steel \[kg/m³\] (what the virtual frame uses).
+pub const STEEL_DENSITY: f64 = 7.85e3;
+
 impl Partition {
+    /// As the toolset codes it ([`TOOLSET_DENSITY`]).
     pub fn toolset() -> Self {
+        Self::with_density(TOOLSET_DENSITY)
+    }
+
+    /// The same members with density `rho` \[kg/m³\].
+    pub fn with_density(rho: f64) -> Self {
         let inch: f64 = 25.4 / 1000.0;
         let (lb, lc): (f64, f64) = (0.762, 0.635);
         let (ic, ib) = (2.520 * inch.powi(4), 0.6132 * inch.powi(4));
         let (ac, ab) = (1.670 * inch * inch, 0.947 * inch * inch);
         let e = 200e9;
-        let rho = 785e3;
         let (mass_b, mass_c) = (rho * ab * lb, rho * ac * lc);
         let m1 = mass_b + mass_c;
         let m2 = (mass_b / 2.0) * lb * lb / 12.0 + (mass_c / 2.0) * lc * lc / 12.0;

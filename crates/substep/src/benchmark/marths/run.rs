@@ -3,7 +3,7 @@
 
 use super::data::{
     DOF_R2, DOF_R3, DOF_THETA, DOF_X1, DOF_X2, DOF_X3, Frame, InitialParameters, PARTITION_DOFS, Partition,
-    PlantParameters, VirtualFrame,
+    PlantParameters, TOOLSET_DENSITY, VirtualFrame,
 };
 use super::mimo_arx::{MimoArx, MimoArxSpec};
 use super::rodeac::{RlsAc, rodeac};
@@ -161,6 +161,9 @@ pub struct MarthsInput {
     pub controller: ControllerKind,
     /// The coupler (default: the benchmark's, with the inverse as the toolset codes it).
     pub coupler: Coupler,
+    /// Density of the partition removed from the frame \[kg/m³\] (default: the toolset's
+    /// 785e3, which removes 902.5 kg from `x₂₇`; steel is 7850).
+    pub partition_density: f64,
     pub algorithm: Algorithm,
     pub keep_history: bool,
 }
@@ -180,6 +183,7 @@ impl MarthsInput {
             coupler: Coupler::marths()
                 .toolset_inverse()
                 .expect("the benchmark's coupler is symmetric"),
+            partition_density: TOOLSET_DENSITY,
             algorithm: Algorithm::Benchmark,
             keep_history: false,
         }
@@ -193,6 +197,18 @@ impl MarthsInput {
             return Err(Error::invalid(
                 "intensity",
                 format!("must be in (0, 10] (a scale of the record), got {}", self.intensity),
+            ));
+        }
+        if !(self.partition_density.is_finite()
+            && self.partition_density > 0.0
+            && self.partition_density <= TOOLSET_DENSITY)
+        {
+            return Err(Error::invalid(
+                "partition_density",
+                format!(
+                    "must be in (0, {TOOLSET_DENSITY}] kg/m³, got {}",
+                    self.partition_density
+                ),
             ));
         }
         if let Transfer::Plant { plant, .. } = &self.transfer
@@ -366,10 +382,11 @@ pub fn reference(input: &MarthsInput) -> Result<Reference> {
 }
 
 /// The numerical substructure of `build_numerical.m`: the frame less the ideal partition (mass
-/// only at `x₂₇`).
-pub fn numerical_matrices() -> Frame {
+/// only at `x₂₇`), the partition's members of density `density` \[kg/m³\] (the toolset's
+/// [`TOOLSET_DENSITY`]).
+pub fn numerical_matrices(density: f64) -> Frame {
     let mut f = Frame::reference();
-    let p = Partition::toolset();
+    let p = Partition::with_density(density);
     for (i, &di) in PARTITION_DOFS.iter().enumerate() {
         for (j, &dj) in PARTITION_DOFS.iter().enumerate() {
             f.k[(di, dj)] -= p.k[i][j];
@@ -575,9 +592,9 @@ pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
     let mut lab = Lab::new(input)?;
     let mut hist = History::with_capacity(n);
     let (stopped_at, storey_reference) = match &input.algorithm {
-        Algorithm::Benchmark => (run_benchmark(&ag, &mut lab, &mut hist)?, None),
+        Algorithm::Benchmark => (run_benchmark(input.partition_density, &ag, &mut lab, &mut hist)?, None),
         Algorithm::Substep(spec) => {
-            let stopped = run_substep(spec, &ag, &mut lab, &mut hist)?;
+            let stopped = run_substep(input.partition_density, spec, &ag, &mut lab, &mut hist)?;
             // The storeys exist at the step ends: the reference there.
             let every = spec.samples_per_step;
             let steps = hist.storeys_numerical[0].len();
@@ -675,8 +692,8 @@ fn check_coupler(coupler: &Coupler, reference: &Reference) -> Result<()> {
 }
 
 /// The toolset's loop (module docs); returns the sample a diverging run stopped at.
-fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<(usize, String)>> {
-    let numerical = numerical_matrices();
+fn run_benchmark(density: f64, ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<(usize, String)>> {
+    let numerical = numerical_matrices(density);
     let mut structure = NewmarkFrame::new(
         &numerical.k,
         &numerical.m,
@@ -720,9 +737,15 @@ fn run_benchmark(ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option
 /// benchmark (docs/benchmark.md): the command signal is linear between the sub-step commands
 /// and sampled at `t_k` as the target; the force fed back at the end of sub-step `s` is the
 /// latest sample at or before `s Δτ`; a sub-step is computed when the target first needs it.
-fn run_substep(spec: &SubstepSpec, ag: &[f64], lab: &mut Lab, hist: &mut History) -> Result<Option<(usize, String)>> {
+fn run_substep(
+    density: f64,
+    spec: &SubstepSpec,
+    ag: &[f64],
+    lab: &mut Lab,
+    hist: &mut History,
+) -> Result<Option<(usize, String)>> {
     let n = ag.len();
-    let numerical = numerical_matrices();
+    let numerical = numerical_matrices(density);
     let influence = DVector::from_column_slice(&numerical.influence);
     let mass_iota = &numerical.m * &influence;
     let model = StructuralModel::with_massless_dofs(
