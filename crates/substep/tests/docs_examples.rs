@@ -31,6 +31,8 @@
 //!      an array of tables (`[[substructure.specimen]]`) replaces the base's array; a fragment
 //!      with a model form (`mass`/`stiffness`, `shear_building`, `storeys`, `frame`, `sdof`, `tmd`)
 //!      replaces the base's whole `[structure]` (the forms exclude each other);
+//!    * a maRTHS settings file (`[coupler]`, or `[plant]` with its matrix `h`; besides them only
+//!      `[controller]` and `[substep]`): read by `MarthsConfig::from_toml`;
 //!    * only the tables of a benchmark settings file (`[controller]`, `[plant]`, `[noise]`,
 //!      `[substep]`): read by `BenchmarkConfig::parse`;
 //!    * anything else fails unless it is listed in [`UNCLASSIFIED`] with a reason.
@@ -253,6 +255,7 @@ enum Kind {
     SiteFragment,
     Study,
     Benchmark,
+    Marths,
     LabEmulator,
     Skipped,
     Listed,
@@ -365,6 +368,12 @@ impl Checker {
             } else {
                 Kind::Fragment
             }
+        } else if !keys.is_empty()
+            && keys.iter().all(|k| ["plant", "coupler", "controller", "substep"].contains(k))
+            && (keys.contains(&"coupler")
+                || table.get("plant").and_then(Value::as_table).is_some_and(|p| p.contains_key("h")))
+        {
+            Kind::Marths
         } else if !keys.is_empty() && keys.iter().all(|k| BENCHMARK_KEYS.contains(k)) {
             Kind::Benchmark
         } else if keys.contains(&"test") && keys.iter().all(|k| ["test", "bind", "idle", "faults"].contains(k)) {
@@ -409,6 +418,9 @@ impl Checker {
             Kind::Benchmark => BenchmarkConfig::parse(&text, name)
                 .map(drop)
                 .map_err(|e| format!("benchmark settings: {e}"))?,
+            Kind::Marths => substep::benchmark::marths::MarthsConfig::from_toml(&text, name)
+                .map(drop)
+                .map_err(|e| format!("maRTHS settings: {e}"))?,
             Kind::LabEmulator => self
                 .in_some_dir(None, |dir| {
                     substep::io::config::emulator_from_toml(&text, name, dir)
