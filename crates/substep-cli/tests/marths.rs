@@ -60,7 +60,7 @@ fn json_gives_j1_to_j10_as_the_toolset_orders_them() {
     assert_eq!(list(&v, "J1"), list(&v, "J4"));
     let mut input = MarthsInput::new(Arc::new(Record::ElCentro.load()));
     input.transfer = Transfer::Plant {
-        plant: PlantParameters::nominal().transfer_matrix().unwrap(),
+        plant: PlantParameters::nominal().transfer_matrix().unwrap().to_state_space(),
         noise_seed: None,
     };
     input.controller = ControllerKind::Rodeac;
@@ -189,5 +189,70 @@ fn bad_input_exits_2_and_a_diverging_run_exits_1() {
         1,
         "diverged",
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `[plant]` as a state space: the toolset's stored realisation (`plantFRAME_SS`) in `--config`
+/// gives the criteria of the built-in plant (a similarity transform apart: to round-off); a
+/// state space of the wrong shape is refused with its shapes.
+#[test]
+fn a_state_space_plant_from_the_config() {
+    #[derive(serde::Deserialize)]
+    struct Ss {
+        a: Vec<Vec<f64>>,
+        b: Vec<Vec<f64>>,
+        c: Vec<Vec<f64>>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Nominal {
+        ss: Ss,
+    }
+    #[derive(serde::Deserialize)]
+    struct File {
+        nominal: Nominal,
+    }
+    let f: File = toml::from_str(substep::benchmark::marths::data::PLANT_TOML).unwrap();
+    let m = |v: &Vec<Vec<f64>>| {
+        let rows: Vec<String> = v
+            .iter()
+            .map(|r| {
+                format!(
+                    "[{}]",
+                    r.iter().map(|x| format!("{x:e}")).collect::<Vec<_>>().join(", ")
+                )
+            })
+            .collect();
+        format!("[{}]", rows.join(", "))
+    };
+    let text = format!(
+        "[plant]\na = {}\nb = {}\nc = {}\n",
+        m(&f.nominal.ss.a),
+        m(&f.nominal.ss.b),
+        m(&f.nominal.ss.c)
+    );
+    let dir = std::env::temp_dir().join(format!("substep-marths-ss-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("ss.toml");
+    std::fs::write(&path, &text).unwrap();
+    let ours = json(&["--no-noise"]);
+    let stored = json(&["--no-noise", "--config", path.to_str().unwrap()]);
+    for (key, _) in LENGTHS {
+        for (a, b) in list(&ours["J_raw"], key).iter().zip(list(&stored["J_raw"], key)) {
+            assert!((a - b).abs() < 1e-6, "{key}: {a} {b}");
+        }
+    }
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[plant]\na = [[-1.0]]\nb = [[1.0, 0.0, 0.0]]\nc = [[1.0], [1.0]]\n",
+    )
+    .unwrap();
+    fails_with(&["--config", bad.to_str().unwrap()], 2, "got 2 outputs × 3 inputs");
+    std::fs::write(
+        &bad,
+        "[plant]\na = [[-1.0]]\nb = [[1.0, 0.0], [0.0, 1.0]]\nc = [[1.0], [1.0]]\n",
+    )
+    .unwrap();
+    fails_with(&["--config", bad.to_str().unwrap()], 2, "inconsistent shapes");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -369,9 +369,14 @@ impl Checker {
                 Kind::Fragment
             }
         } else if !keys.is_empty()
-            && keys.iter().all(|k| ["plant", "coupler", "controller", "substep"].contains(k))
+            && keys
+                .iter()
+                .all(|k| ["plant", "coupler", "controller", "substep"].contains(k))
             && (keys.contains(&"coupler")
-                || table.get("plant").and_then(Value::as_table).is_some_and(|p| p.contains_key("h")))
+                || table
+                    .get("plant")
+                    .and_then(Value::as_table)
+                    .is_some_and(|p| p.contains_key("h")))
         {
             Kind::Marths
         } else if !keys.is_empty() && keys.iter().all(|k| BENCHMARK_KEYS.contains(k)) {

@@ -17,7 +17,7 @@ fn input(record: Record) -> MarthsInput {
 
 fn nominal(noise: Option<u64>) -> Transfer {
     Transfer::Plant {
-        plant: PlantParameters::nominal().transfer_matrix().unwrap(),
+        plant: PlantParameters::nominal().transfer_matrix().unwrap().to_state_space(),
         noise_seed: noise,
     }
 }

@@ -6,6 +6,7 @@
 //! # row i = actuator i's stroke, column j = command j; zeros and poles [rad/s] as [re, im]
 //! h = [[{ zeros = [[-754.0, 0.0]], poles = [[-100.0, 0.0], [-300.0, 0.0]], gain = 40.0 }, { … }],
 //!      [{ … }, { … }]]
+//! # or a state space: a (n×n), b (n×2), c (2×n), d (2×2, default 0)
 //!
 //! [coupler]               # two horizontal actuators pinned to the coupler
 //! attachments = [[0.295394465, -25.4633], [0.295394465, 25.4633]]   # [radius m, angle °] each
@@ -29,8 +30,9 @@ use crate::error::{Error, Result};
 use crate::substructure::ErrorForceSpec;
 use crate::transfer::kinematics::{Attachment, Coupler};
 use crate::transfer::lti::TransferFunction;
-use crate::transfer::mimo::TransferMatrix;
+use crate::transfer::mimo::{MimoStateSpace, TransferMatrix};
 use nalgebra::Complex;
+use nalgebra::DMatrix;
 use serde::Deserialize;
 
 #[derive(Debug, Deserialize)]
@@ -45,7 +47,11 @@ struct Raw {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPlant {
-    h: Vec<Vec<RawChannel>>,
+    h: Option<Vec<Vec<RawChannel>>>,
+    a: Option<Vec<Vec<f64>>>,
+    b: Option<Vec<Vec<f64>>>,
+    c: Option<Vec<Vec<f64>>>,
+    d: Option<Vec<Vec<f64>>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -92,7 +98,7 @@ struct RawSubstep {
 /// A parsed `--config` file.
 #[derive(Debug, Clone, Default)]
 pub struct MarthsConfig {
-    pub plant: Option<TransferMatrix>,
+    pub plant: Option<MimoStateSpace>,
     pub coupler: Option<Coupler>,
     pub arx: Option<crate::compensate::ArxPhaseLagSpec>,
     pub substep: Option<SubstepSpec>,
@@ -108,29 +114,7 @@ impl MarthsConfig {
         let raw: Raw = toml::from_str(text).map_err(|e| Error::file(name, e.message().to_string()))?;
         let mut c = Self::default();
         if let Some(p) = raw.plant {
-            let rows = p.h.len();
-            let cols = p.h.first().map_or(0, Vec::len);
-            if rows != 2 || p.h.iter().any(|r| r.len() != 2) {
-                return Err(Error::invalid(
-                    "plant.h",
-                    format!(
-                        "must be a 2×2 matrix (two actuators, two commands), got {rows} row(s) of {}",
-                        p.h.iter().map(|r| r.len().to_string()).collect::<Vec<_>>().join(", ")
-                    ),
-                ));
-            }
-            let mut entries = Vec::with_capacity(rows * cols);
-            for (i, row) in p.h.iter().enumerate() {
-                for (j, ch) in row.iter().enumerate() {
-                    entries.push(TransferFunction::from_zpk(
-                        &format!("plant.h[{}][{}]", i + 1, j + 1),
-                        &complex(&ch.zeros),
-                        &complex(&ch.poles),
-                        ch.gain,
-                    )?);
-                }
-            }
-            c.plant = Some(TransferMatrix::new("plant.h", rows, cols, entries)?);
+            c.plant = Some(plant(p)?);
         }
         if let Some(k) = raw.coupler {
             if k.attachments.len() != 2 {
@@ -213,6 +197,74 @@ impl MarthsConfig {
         if let (Some(spec), Algorithm::Substep(s)) = (&self.substep, &mut input.algorithm) {
             *s = spec.clone();
         }
+    }
+}
+
+/// The plant of `[plant]`: the 2×2 matrix `h` of zeros, poles and gains, or a state space
+/// `a` (n×n), `b` (n×2), `c` (2×n), `d` (2×2, default 0).
+fn plant(p: RawPlant) -> Result<MimoStateSpace> {
+    match (p.h, p.a, p.b, p.c) {
+        (Some(h), None, None, None) => {
+            let rows = h.len();
+            if rows != 2 || h.iter().any(|r| r.len() != 2) {
+                return Err(Error::invalid(
+                    "plant.h",
+                    format!(
+                        "must be a 2×2 matrix (two actuators, two commands), got {rows} row(s) of {}",
+                        h.iter().map(|r| r.len().to_string()).collect::<Vec<_>>().join(", ")
+                    ),
+                ));
+            }
+            let mut entries = Vec::with_capacity(4);
+            for (i, row) in h.iter().enumerate() {
+                for (j, ch) in row.iter().enumerate() {
+                    entries.push(TransferFunction::from_zpk(
+                        &format!("plant.h[{}][{}]", i + 1, j + 1),
+                        &complex(&ch.zeros),
+                        &complex(&ch.poles),
+                        ch.gain,
+                    )?);
+                }
+            }
+            Ok(TransferMatrix::new("plant.h", 2, 2, entries)?.to_state_space())
+        }
+        (None, Some(a), Some(b), Some(c)) => {
+            let matrix = |name: &str, rows: Vec<Vec<f64>>| -> Result<DMatrix<f64>> {
+                let n = rows.len();
+                let m = rows.first().map_or(0, Vec::len);
+                if n == 0 || m == 0 || rows.iter().any(|r| r.len() != m) {
+                    return Err(Error::invalid(
+                        format!("plant.{name}"),
+                        "must be a non-empty matrix with rows of equal length",
+                    ));
+                }
+                if n * m > 1 << 20 {
+                    return Err(Error::invalid(format!("plant.{name}"), format!("{n}×{m} is too large")));
+                }
+                Ok(DMatrix::from_fn(n, m, |i, j| rows[i][j]))
+            };
+            let (a, b, c) = (matrix("a", a)?, matrix("b", b)?, matrix("c", c)?);
+            let d = match p.d {
+                Some(d) => matrix("d", d)?,
+                None => DMatrix::zeros(c.nrows(), b.ncols()),
+            };
+            let ss = MimoStateSpace::new("plant", a, b, c, d)?;
+            if ss.outputs() != 2 || ss.inputs() != 2 {
+                return Err(Error::invalid(
+                    "plant",
+                    format!(
+                        "must be 2×2 (two actuators, two commands), got {} outputs × {} inputs",
+                        ss.outputs(),
+                        ss.inputs()
+                    ),
+                ));
+            }
+            Ok(ss)
+        }
+        _ => Err(Error::invalid(
+            "plant",
+            "give either `h` (the 2×2 matrix of zeros, poles and gains) or the state space `a`, `b`, `c` (and `d`)",
+        )),
     }
 }
 

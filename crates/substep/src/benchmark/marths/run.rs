@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::model::StructuralModel;
 use crate::substructure::{ErrorForceSpec, SubstepController, SubstepSettings};
 use crate::transfer::kinematics::Coupler;
-use crate::transfer::mimo::{MimoRk4, TransferMatrix};
+use crate::transfer::mimo::{MimoRk4, MimoStateSpace};
 use nalgebra::DVector;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -93,10 +93,11 @@ pub fn arx_default() -> ArxPhaseLagSpec {
 /// What sits between the commands and the specimen.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Transfer {
-    /// A 2×2 plant (commands \[mm\] → strokes \[mm\], RK4 at `h`) with sensor noise
+    /// A 2×2 plant (commands \[mm\] → strokes \[mm\], RK4 at `h`; a transfer-function matrix
+    /// through [`crate::transfer::mimo::TransferMatrix::to_state_space`]) with sensor noise
     /// (`Some(seed)`) or without.
     Plant {
-        plant: TransferMatrix,
+        plant: MimoStateSpace,
         noise_seed: Option<u64>,
     },
     /// Measured = target in the same sample, no noise: the coupled step solved implicitly.
@@ -176,7 +177,8 @@ impl MarthsInput {
             transfer: Transfer::Plant {
                 plant: PlantParameters::nominal()
                     .transfer_matrix()
-                    .expect("the nominal plant is valid"),
+                    .expect("the nominal plant is valid")
+                    .to_state_space(),
                 noise_seed: Some(123),
             },
             controller: ControllerKind::Rodeac,
@@ -443,10 +445,7 @@ impl Lab {
     fn new(input: &MarthsInput) -> Result<Self> {
         let h = SAMPLE_TIME;
         let (plant, noise) = match &input.transfer {
-            Transfer::Plant { plant, noise_seed } => (
-                Some(plant.to_state_space().rk4(h)?),
-                noise_seed.map(ChaCha8Rng::seed_from_u64),
-            ),
+            Transfer::Plant { plant, noise_seed } => (Some(plant.rk4(h)?), noise_seed.map(ChaCha8Rng::seed_from_u64)),
             Transfer::Ideal => (None, None),
         };
         let drive = match &input.controller {

@@ -107,7 +107,7 @@ pub fn run_with(input: &MarthsInput, reference: &Reference, trials: usize, seed:
             let mut one = input.clone();
             let params = uncertain_plant(seed, i)?;
             one.transfer = Transfer::Plant {
-                plant: params.transfer_matrix()?,
+                plant: params.transfer_matrix()?.to_state_space(),
                 noise_seed: noisy.then(|| seed.wrapping_add(1 + i).wrapping_mul(0x9E37_79B9_7F4A_7C15)),
             };
             Ok((params, one))
