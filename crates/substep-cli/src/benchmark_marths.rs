@@ -21,8 +21,8 @@ pub struct MarthsArgs {
     /// Scale of the record (the toolset's EQ_intensity)
     #[arg(long, default_value_t = 0.4)]
     pub intensity: f64,
-    /// Tracking controller per actuator: none, rodeac (the toolset's) or arx (substep's phase-lag
-    /// compensation after the kinematics)
+    /// Tracking controller: none, rodeac (the toolset's), arx (substep's phase-lag compensation
+    /// per actuator after the kinematics) or arx_mimo (the ARX identification over both actuators)
     #[arg(long, default_value = "rodeac")]
     pub controller: String,
     /// Uncertain plants: with 0 the J are the nominal plant's, otherwise the mean over the N
