@@ -15,7 +15,7 @@
 //! 4. the numerical substructure's Newmark step with that force and `a_g(t_k)`
 //!    ([`structure::NewmarkFrame`]) → target `(U₂₇, −U₂₁)` → the coupler → target strokes;
 //! 5. the controller per actuator → commands; the plant's RK4 step with them held;
-//! 6. the reference frame's step (computed once per record and intensity, [`reference`]).
+//! 6. the reference frame's step (computed once per record and intensity, [`reference()`]).
 //!
 //! The ideal transfer system ([`Transfer::Ideal`]) measures the target of the same sample: the
 //! numerical step and the virtual frame are then solved together ([`structure::solve_ideal`]),

@@ -572,7 +572,7 @@ fn record_sample(
     hist.frame_numerical[1].push(numerical[1]);
 }
 
-/// Run `input` against `reference` (from [`reference`] with the same record and intensity).
+/// Run `input` against `reference` (from [`reference()`] with the same record and intensity).
 pub fn run(input: &MarthsInput, reference: &Reference) -> Result<MarthsResult> {
     input.validate()?;
     let n = input.samples();
