@@ -466,7 +466,10 @@ pub fn verify<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     out.set_item("Omega", rows.iter().map(|r| r.omega_dt).collect::<Vec<_>>())?;
     out.set_item("eta_p", rows.iter().map(|r| r.eta_p).collect::<Vec<_>>())?;
     out.set_item("quantity", rows.iter().map(|r| r.quantity.clone()).collect::<Vec<_>>())?;
-    out.set_item("frequency_domain", rows.iter().map(|r| r.frequency_domain).collect::<Vec<_>>())?;
+    out.set_item(
+        "frequency_domain",
+        rows.iter().map(|r| r.frequency_domain).collect::<Vec<_>>(),
+    )?;
     out.set_item("time_domain", rows.iter().map(|r| r.time_domain).collect::<Vec<_>>())?;
     out.set_item("agrees", rows.iter().map(|r| r.agrees).collect::<Vec<_>>())?;
     out.set_item("all_agree", v.all_agree)?;

@@ -75,5 +75,70 @@ pub fn rths_compare(
     };
     let setup = options.setup(|name| name.to_string()).map_err(|e| to_py(&e))?;
     let rows = py.detach(|| setup.compare()).map_err(|e| to_py(&e))?;
-    serde_json::to_string(&setup.comparison_json(&rows)).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
+    serde_json::to_string(&setup.comparison_json(&rows))
+        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
+}
+
+/// `substep benchmark marths --json` for the same options (`substep.benchmark.marths`): the
+/// library's [`MarthsOptions`], files read here; Python parses the JSON text. A run that diverged
+/// raises `RunError` with the CLI's message.
+#[pyfunction]
+#[pyo3(signature = (record, intensity, controller, trials, seed, noise, ideal, algorithm, partition_density, config))]
+#[allow(clippy::too_many_arguments)] // the keyword arguments of `substep.benchmark.marths`
+pub fn marths(
+    py: Python<'_>,
+    record: &str,
+    intensity: f64,
+    controller: &str,
+    trials: usize,
+    seed: u64,
+    noise: bool,
+    ideal: bool,
+    algorithm: &str,
+    partition_density: Option<f64>,
+    config: Option<&str>,
+) -> PyResult<String> {
+    use substep::benchmark::marths::{MarthsOptions, RecordChoice, reference, run_with, shipped_record};
+    let path = std::path::Path::new(record);
+    // Neither a shipped record nor a file: the library refuses the name with the list.
+    let record_file = if shipped_record(record).is_some() || (!path.exists() && path.extension().is_none()) {
+        None
+    } else {
+        read(Some(record)).map_err(|e| to_py(&e))?
+    };
+    let config = read(config).map_err(|e| to_py(&e))?;
+    let options = MarthsOptions {
+        record: match &record_file {
+            Some((name, text)) => RecordChoice::File { name, text },
+            None => RecordChoice::Shipped(record),
+        },
+        intensity,
+        controller,
+        trials,
+        seed,
+        noise,
+        ideal,
+        algorithm,
+        partition_density,
+        config: config.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
+    };
+    let input = options.input(|name| name.to_string()).map_err(|e| to_py(&e))?;
+    let t0 = std::time::Instant::now();
+    let study = py
+        .detach(|| reference(&input).and_then(|r| run_with(&input, &r, trials, seed)))
+        .map_err(|e| to_py(&e))?;
+    if let Some(first) = study.first_diverged() {
+        let at = first.stopped_at.unwrap_or(0);
+        return Err(to_py(&substep::Error::Diverged {
+            step: at,
+            time: at as f64 * substep::benchmark::marths::SAMPLE_TIME,
+            reason: format!(
+                "benchmark marths: {} run(s) diverged, no score; the first: {}",
+                study.diverged_runs(),
+                first.stop_reason.clone().unwrap_or_default()
+            ),
+        }));
+    }
+    let json = options.json(&input, &study, t0.elapsed().as_secs_f64());
+    serde_json::to_string(&json).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
 }

@@ -194,6 +194,7 @@ fn _substep(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(analyze::verify, m)?)?;
     m.add_function(wrap_pyfunction!(benchmark::rths, m)?)?;
     m.add_function(wrap_pyfunction!(benchmark::rths_compare, m)?)?;
+    m.add_function(wrap_pyfunction!(benchmark::marths, m)?)?;
     m.add_function(wrap_pyfunction!(study::study_plan, m)?)?;
     m.add_function(wrap_pyfunction!(study::study_run, m)?)?;
     m.add_function(wrap_pyfunction!(study::write_container, m)?)?;

@@ -8,7 +8,7 @@ from typing import Any, Dict, Optional, Sequence
 
 from . import _substep
 
-__all__ = ["rths", "compare"]
+__all__ = ["rths", "compare", "marths"]
 
 
 def _count(what: str, x, top: int = 2**63 - 1) -> int:
@@ -85,4 +85,48 @@ def compare(
         rec = None
     c = None if case is None else _count("case", case, 255)
     text = _substep.rths_compare(c, float(intensity), rec, _count("perturbed", perturbed), _count("seed", seed, 2**64 - 1))
+    return json.loads(text)
+
+
+def marths(
+    *,
+    record: "os.PathLike[str] | str" = "elcentro",
+    intensity: float = 0.4,
+    controller: str = "rodeac",
+    trials: int = 0,
+    seed: int = 123,
+    noise: bool = True,
+    ideal: bool = False,
+    algorithm: str = "benchmark",
+    partition_density: Optional[float] = None,
+    config: Optional["os.PathLike[str] | str"] = None,
+) -> Dict[str, Any]:
+    """The multi-axial RTHS benchmark (Condori Uribe et al. 2023; ``substep benchmark marths``,
+    docs/benchmark.md "maRTHS"): two actuators on a coupler drive x and θ of a frame node.
+
+    ``record``: elcentro, kobe, morgan (shipped) or a two-column ``t,a_g`` CSV in m/s²;
+    ``intensity``: scale of the record; ``controller``: none, rodeac, arx or arx_mimo;
+    ``trials``: uncertain plants (0: the nominal plant's J, else the mean over the trials, as the
+    toolset reports); ``seed``: of the plants and the sensor noise; ``noise``: sensor noise on;
+    ``ideal``: an ideal transfer system (measured = target); ``algorithm``: ``benchmark`` or
+    ``substep``; ``partition_density``: kg/m³ (the toolset's 785e3 by default); ``config``: a
+    settings file (TOML: ``[plant]``, ``[coupler]``, ``[controller.arx]``, ``[substep]``).
+
+    Returns the dict of ``substep benchmark marths --json``: ``J1`` ... ``J10`` (lists in the
+    toolset's order, rounded to 0.1), ``J_raw`` (unrounded), ``nominal``, ``per_trial``,
+    ``realizable``, ``peak_volts``, ``stable``. Raises ``ConfigError`` on bad input and
+    ``RunError`` when a run diverged.
+    """
+    text = _substep.marths(
+        os.fspath(record),
+        float(intensity),
+        controller,
+        _count("trials", trials),
+        _count("seed", seed, 2**64 - 1),
+        bool(noise),
+        bool(ideal),
+        algorithm,
+        None if partition_density is None else float(partition_density),
+        None if config is None else os.fspath(config),
+    )
     return json.loads(text)

@@ -189,3 +189,22 @@ def test_compare_equals_the_cli_json(cli):
     assert got["comparison"][0]["J2"] is None  # none diverges
     with pytest.raises(substep.ConfigError, match="^perturbed: must be a whole number"):
         substep.benchmark.compare(perturbed=-1)
+
+
+def test_marths_equals_the_cli_json(cli):
+    """`substep.benchmark.marths` is `substep benchmark marths --json`: the same J lists (the
+    toolset's order and lengths), the trial mean; bad input and a diverged run raise."""
+    p = run_cli(cli, "benchmark", "marths", "--record", "kobe", "--trials", "2", "--seed", "5", "--json")
+    assert p.returncode == 0, p.stderr
+    expected = json.loads(p.stdout)
+    got = substep.benchmark.marths(record="kobe", trials=2, seed=5)
+    for key in ["J%d" % i for i in range(1, 11)] + ["J_raw", "nominal", "per_trial", "realizable", "peak_volts"]:
+        assert got[key] == expected[key], key
+    assert [len(got["J%d" % i]) for i in range(1, 11)] == [2, 2, 2, 2, 2, 2, 2, 4, 2, 4]
+    ideal = substep.benchmark.marths(ideal=True, controller="none")
+    assert all(v == 0.0 for k in ("J1", "J2", "J3", "J4", "J5", "J6") for v in ideal[k])
+    assert ideal["J7"][0] > 5
+    with pytest.raises(substep.ConfigError, match="^record: unknown record `nosuch`"):
+        substep.benchmark.marths(record="nosuch")
+    with pytest.raises(substep.ConfigError, match="^controller: unknown controller `pid`"):
+        substep.benchmark.marths(controller="pid")

@@ -6,12 +6,10 @@ use anyhow::{Context, Result};
 use serde_json::{Value, json};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use substep::benchmark::marths::{
-    Algorithm, COMMAND_LIMIT_V, ControllerKind, Criteria, MarthsConfig, MarthsInput, Record, Study, SubstepSpec,
-    Transfer, compare, compare_markdown, reference, round1, run, run_with,
+    COMMAND_LIMIT_V, ControllerKind, MarthsInput, MarthsOptions, Record, RecordChoice, Study, Transfer, compare,
+    compare_markdown, criteria_json, reference, round1, run, run_with, shipped_record,
 };
-use substep::benchmark::rths::GroundRecord;
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct MarthsArgs {
@@ -68,76 +66,53 @@ fn out(text: &str) {
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }
 
-fn record(name: &str) -> Result<GroundRecord> {
-    match Record::all().into_iter().find(|r| r.name() == name) {
-        Some(r) => Ok(r.load()),
-        None => {
-            let path = Path::new(name);
-            if !path.exists() && path.extension().is_none() {
-                return Err(substep::Error::invalid(
-                    "--record",
-                    format!("unknown record `{name}` (elcentro, kobe, morgan, or a t,a_g CSV file in m/s²)"),
-                )
-                .into());
-            }
-            let text = substep::io::limits::read_record_text(path, &substep::io::limits::Limits::default())?;
-            Ok(GroundRecord::parse_csv(name, &text)?)
-        }
+/// The flags as the library's options (files read here, through the bounded readers).
+fn options<'a>(
+    args: &'a MarthsArgs,
+    record_text: &'a Option<String>,
+    config_text: &'a Option<(String, String)>,
+) -> MarthsOptions<'a> {
+    MarthsOptions {
+        record: match record_text {
+            Some(text) => RecordChoice::File {
+                name: &args.record,
+                text,
+            },
+            None => RecordChoice::Shipped(&args.record),
+        },
+        intensity: args.intensity,
+        controller: &args.controller,
+        trials: args.trials,
+        seed: args.seed,
+        noise: !args.no_noise,
+        ideal: args.ideal,
+        algorithm: &args.algorithm,
+        partition_density: args.partition_density,
+        config: config_text.as_ref().map(|(n, t)| (n.as_str(), t.as_str())),
     }
 }
 
-/// The input the flags describe.
-fn input(args: &MarthsArgs) -> Result<(MarthsInput, Option<MarthsConfig>)> {
-    let mut input = MarthsInput::new(Arc::new(record(&args.record)?));
-    input.intensity = args.intensity;
-    if let Some(rho) = args.partition_density {
-        input.partition_density = rho;
+/// The record's text when `--record` names a file (not a shipped record); a name that is
+/// neither is refused by the library with the list.
+fn record_text(name: &str) -> Result<Option<String>> {
+    let path = Path::new(name);
+    if shipped_record(name).is_some() || (!path.exists() && path.extension().is_none()) {
+        return Ok(None);
     }
-    input.controller = ControllerKind::parse(&args.controller)?;
-    input.algorithm = match args.algorithm.as_str() {
-        "benchmark" => Algorithm::Benchmark,
-        "substep" => Algorithm::Substep(SubstepSpec::default()),
-        other => {
-            return Err(substep::Error::invalid(
-                "--algorithm",
-                format!("unknown algorithm `{other}` (benchmark, substep)"),
-            )
-            .into());
-        }
-    };
-    if args.ideal {
-        if args.trials > 0 {
-            return Err(substep::Error::invalid("--trials", "uncertain plants need the plant, not --ideal").into());
-        }
-        input.transfer = Transfer::Ideal;
-    } else if let Transfer::Plant { noise_seed, .. } = &mut input.transfer {
-        *noise_seed = (!args.no_noise).then_some(args.seed);
-    }
-    let config = match &args.config {
-        Some(path) => {
-            let text = substep::io::limits::read_text(path, substep::io::limits::CONFIG_MAX_BYTES)?;
-            let c = MarthsConfig::from_toml(&text, &path.display().to_string())?;
-            if c.plant.is_some() && args.trials > 0 {
-                return Err(substep::Error::invalid(
-                    "--trials",
-                    "the uncertain plants perturb the toolset's plant: with [plant] in --config use --trials 0",
-                )
-                .into());
-            }
-            c.apply(&mut input);
-            Some(c)
-        }
+    Ok(Some(substep::io::limits::read_record_text(
+        path,
+        &substep::io::limits::Limits::default(),
+    )?))
+}
+
+fn config_text(args: &MarthsArgs) -> Result<Option<(String, String)>> {
+    Ok(match &args.config {
+        Some(path) => Some((
+            path.display().to_string(),
+            substep::io::limits::read_text(path, substep::io::limits::CONFIG_MAX_BYTES)?,
+        )),
         None => None,
-    };
-    Ok((input, config))
-}
-
-fn criteria_json(c: &Criteria) -> Value {
-    let mut m = serde_json::Map::new();
-    for (name, v) in c.lists() {
-        m.insert(name.into(), json!(v));
-    }
-    Value::Object(m)
+    })
 }
 
 const LABELS: [(&str, &str, &[&str]); 10] = [
@@ -204,7 +179,7 @@ fn table(head: &str, study: &Study, trials: usize) -> String {
         v[0],
         v[1]
     );
-    let diverged = usize::from(study.nominal.diverged) + study.trials.iter().filter(|(_, r)| r.diverged).count();
+    let diverged = study.diverged_runs();
     let _ = writeln!(
         s,
         "runs: 1 nominal + {} uncertain, {}",
@@ -313,73 +288,35 @@ pub fn marths(args: &MarthsArgs) -> Result<()> {
     if args.compare {
         return comparison(args);
     }
-    let (input, _config) = input(args)?;
+    let (record, config) = (record_text(&args.record)?, config_text(args)?);
+    let options = options(args, &record, &config);
+    let input = options.input(|name| format!("--{}", name.replace('_', "-")))?;
     let t0 = std::time::Instant::now();
     let reference = reference(&input)?;
     let study = run_with(&input, &reference, args.trials, args.seed)?;
     let elapsed = t0.elapsed().as_secs_f64();
     let head = describe(args, &input);
-    let diverged = usize::from(study.nominal.diverged) + study.trials.iter().filter(|(_, r)| r.diverged).count();
+    let diverged = study.diverged_runs();
     let verdict = || -> Result<()> {
-        if diverged == 0 {
+        let Some(first) = study.first_diverged() else {
             return Ok(());
-        }
-        let first = std::iter::once(&study.nominal)
-            .chain(study.trials.iter().map(|(_, r)| r))
-            .find(|r| r.diverged);
-        let at = first.and_then(|r| r.stopped_at).unwrap_or(0);
-        let why = first.and_then(|r| r.stop_reason.clone()).unwrap_or_default();
+        };
+        let at = first.stopped_at.unwrap_or(0);
         Err(substep::Error::Diverged {
             step: at,
             time: at as f64 * substep::benchmark::marths::SAMPLE_TIME,
-            reason: format!("benchmark marths: {diverged} run(s) diverged, no score; the first: {why}"),
+            reason: format!(
+                "benchmark marths: {diverged} run(s) diverged, no score; the first: {}",
+                first.stop_reason.clone().unwrap_or_default()
+            ),
         }
         .into())
     };
     if args.json {
-        let reported = study.reported();
-        let mut obj = serde_json::Map::new();
-        obj.insert("benchmark".into(), json!("maRTHS"));
-        obj.insert("record".into(), json!(input.record.name));
-        obj.insert("intensity".into(), json!(input.intensity));
-        obj.insert("controller".into(), json!(input.controller.name()));
-        obj.insert("algorithm".into(), json!(args.algorithm));
-        obj.insert("ideal".into(), json!(args.ideal));
-        obj.insert("noise".into(), json!(!args.no_noise && !args.ideal));
-        obj.insert("seed".into(), json!(args.seed));
-        obj.insert("trials".into(), json!(args.trials));
-        if let Some(c) = reported {
-            for (name, v) in c.map(round1).lists() {
-                obj.insert(name.into(), json!(v));
-            }
-            obj.insert("J_raw".into(), criteria_json(&c));
-        }
-        obj.insert(
-            "nominal".into(),
-            study.nominal.criteria.as_ref().map_or(Value::Null, criteria_json),
-        );
-        obj.insert(
-            "per_trial".into(),
-            json!(
-                study
-                    .trials
-                    .iter()
-                    .map(|(_, r)| r.criteria.as_ref().map_or(Value::Null, criteria_json))
-                    .collect::<Vec<_>>()
-            ),
-        );
-        obj.insert("realizable".into(), json!(study.realizable()));
-        obj.insert(
-            "peak_volts".into(),
-            json!({
-                "nominal": study.nominal.peak_volts,
-                "trials": study.trials.iter().map(|(_, r)| r.peak_volts).collect::<Vec<_>>(),
-            }),
-        );
-        obj.insert("stable".into(), json!(diverged == 0));
-        obj.insert("diverged_runs".into(), json!(diverged));
-        obj.insert("wall_time_s".into(), json!(elapsed));
-        out(&format!("{}\n", serde_json::to_string_pretty(&Value::Object(obj))?));
+        out(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(&options.json(&input, &study, elapsed))?
+        ));
         return verdict();
     }
     let text = table(&head, &study, args.trials);

@@ -25,6 +25,7 @@
 mod config;
 pub mod data;
 mod mimo_arx;
+mod options;
 mod rodeac;
 mod run;
 pub mod structure;
@@ -33,6 +34,7 @@ mod study;
 pub use config::MarthsConfig;
 pub use data::{InitialParameters, PlantParameters, Record};
 pub use mimo_arx::{MimoArx, MimoArxSpec};
+pub use options::{MarthsOptions, RecordChoice, criteria_json, shipped_record};
 pub use rodeac::{BUTTER_A, BUTTER_B, Butterworth, RlsAc, rodeac};
 pub use run::{
     Algorithm, COMMAND_LIMIT_V, ControllerKind, Criteria, DIVERGENCE_LIMIT, History, MAX_LAG, MarthsInput,

@@ -68,6 +68,16 @@ impl Study {
         let all: Option<Vec<Criteria>> = self.trials.iter().map(|(_, r)| r.criteria).collect();
         Criteria::mean(&all?)
     }
+    /// Runs (nominal and trials) that diverged.
+    pub fn diverged_runs(&self) -> usize {
+        usize::from(self.nominal.diverged) + self.trials.iter().filter(|(_, r)| r.diverged).count()
+    }
+    /// The first run that diverged (nominal first).
+    pub fn first_diverged(&self) -> Option<&MarthsResult> {
+        std::iter::once(&self.nominal)
+            .chain(self.trials.iter().map(|(_, r)| r))
+            .find(|r| r.diverged)
+    }
     /// Every run stable.
     pub fn stable(&self) -> bool {
         !self.nominal.diverged && self.trials.iter().all(|(_, r)| !r.diverged)
