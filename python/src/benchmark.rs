@@ -98,13 +98,11 @@ pub fn marths(
     partition_density: Option<f64>,
     config: Option<&str>,
 ) -> PyResult<String> {
-    use substep::benchmark::marths::{MarthsOptions, RecordChoice, reference, run_with, shipped_record};
-    let path = std::path::Path::new(record);
-    // Neither a shipped record nor a file: the library refuses the name with the list.
-    let record_file = if shipped_record(record).is_some() || (!path.exists() && path.extension().is_none()) {
-        None
-    } else {
+    use substep::benchmark::marths::{MarthsOptions, RecordChoice, names_a_record_file, reference, run_with};
+    let record_file = if names_a_record_file(record) {
         read(Some(record)).map_err(|e| to_py(&e))?
+    } else {
+        None
     };
     let config = read(config).map_err(|e| to_py(&e))?;
     let options = MarthsOptions {
@@ -127,17 +125,8 @@ pub fn marths(
     let study = py
         .detach(|| reference(&input).and_then(|r| run_with(&input, &r, trials, seed)))
         .map_err(|e| to_py(&e))?;
-    if let Some(first) = study.first_diverged() {
-        let at = first.stopped_at.unwrap_or(0);
-        return Err(to_py(&substep::Error::Diverged {
-            step: at,
-            time: at as f64 * substep::benchmark::marths::SAMPLE_TIME,
-            reason: format!(
-                "benchmark marths: {} run(s) diverged, no score; the first: {}",
-                study.diverged_runs(),
-                first.stop_reason.clone().unwrap_or_default()
-            ),
-        }));
+    if let Some(e) = study.divergence() {
+        return Err(to_py(&e));
     }
     let json = options.json(&input, &study, t0.elapsed().as_secs_f64());
     serde_json::to_string(&json).map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))

@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use substep::benchmark::marths::{
     COMMAND_LIMIT_V, ControllerKind, MarthsInput, MarthsOptions, Record, RecordChoice, Study, Transfer, compare,
-    compare_markdown, criteria_json, reference, round1, run, run_with, shipped_record,
+    compare_markdown, criteria_json, names_a_record_file, reference, round1, run, run_with,
 };
 
 #[derive(Debug, Clone, clap::Args)]
@@ -95,12 +95,11 @@ fn options<'a>(
 /// The record's text when `--record` names a file (not a shipped record); a name that is
 /// neither is refused by the library with the list.
 fn record_text(name: &str) -> Result<Option<String>> {
-    let path = Path::new(name);
-    if shipped_record(name).is_some() || (!path.exists() && path.extension().is_none()) {
+    if !names_a_record_file(name) {
         return Ok(None);
     }
     Ok(Some(substep::io::limits::read_record_text(
-        path,
+        Path::new(name),
         &substep::io::limits::Limits::default(),
     )?))
 }
@@ -296,21 +295,11 @@ pub fn marths(args: &MarthsArgs) -> Result<()> {
     let study = run_with(&input, &reference, args.trials, args.seed)?;
     let elapsed = t0.elapsed().as_secs_f64();
     let head = describe(args, &input);
-    let diverged = study.diverged_runs();
     let verdict = || -> Result<()> {
-        let Some(first) = study.first_diverged() else {
-            return Ok(());
-        };
-        let at = first.stopped_at.unwrap_or(0);
-        Err(substep::Error::Diverged {
-            step: at,
-            time: at as f64 * substep::benchmark::marths::SAMPLE_TIME,
-            reason: format!(
-                "benchmark marths: {diverged} run(s) diverged, no score; the first: {}",
-                first.stop_reason.clone().unwrap_or_default()
-            ),
+        match study.divergence() {
+            Some(e) => Err(e.into()),
+            None => Ok(()),
         }
-        .into())
     };
     if args.json {
         out(&format!(

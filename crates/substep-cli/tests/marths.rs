@@ -197,24 +197,10 @@ fn bad_input_exits_2_and_a_diverging_run_exits_1() {
 /// state space of the wrong shape is refused with its shapes.
 #[test]
 fn a_state_space_plant_from_the_config() {
-    #[derive(serde::Deserialize)]
-    struct Ss {
-        a: Vec<Vec<f64>>,
-        b: Vec<Vec<f64>>,
-        c: Vec<Vec<f64>>,
-    }
-    #[derive(serde::Deserialize)]
-    struct Nominal {
-        ss: Ss,
-    }
-    #[derive(serde::Deserialize)]
-    struct File {
-        nominal: Nominal,
-    }
-    let f: File = toml::from_str(substep::benchmark::marths::data::PLANT_TOML).unwrap();
-    let m = |v: &Vec<Vec<f64>>| {
+    let stored = substep::benchmark::marths::data::stored_plant();
+    let m = |v: &nalgebra::DMatrix<f64>| {
         let rows: Vec<String> = v
-            .iter()
+            .row_iter()
             .map(|r| {
                 format!(
                     "[{}]",
@@ -226,9 +212,9 @@ fn a_state_space_plant_from_the_config() {
     };
     let text = format!(
         "[plant]\na = {}\nb = {}\nc = {}\n",
-        m(&f.nominal.ss.a),
-        m(&f.nominal.ss.b),
-        m(&f.nominal.ss.c)
+        m(&stored.a),
+        m(&stored.b),
+        m(&stored.c)
     );
     let dir = std::env::temp_dir().join(format!("substep-marths-ss-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

@@ -72,14 +72,7 @@ fn the_frame_and_the_plant_match_the_toolset_data() {
     assert!((frame.m[(26, 26)] - num.m[(26, 26)] - 902.5273820384).abs() < 1e-6);
 
     #[derive(serde::Deserialize)]
-    struct Ss {
-        a: Vec<Vec<f64>>,
-        b: Vec<Vec<f64>>,
-        c: Vec<Vec<f64>>,
-    }
-    #[derive(serde::Deserialize)]
     struct Nominal {
-        ss: Ss,
         dc_gain: Vec<Vec<f64>>,
     }
     #[derive(serde::Deserialize)]
@@ -87,9 +80,9 @@ fn the_frame_and_the_plant_match_the_toolset_data() {
         nominal: Nominal,
     }
     let file: PlantFile = toml::from_str(PLANT_TOML).unwrap();
-    let m = |v: &Vec<Vec<f64>>| DMatrix::from_fn(v.len(), v[0].len(), |i, j| v[i][j]);
-    let (a, b, c) = (m(&file.nominal.ss.a), m(&file.nominal.ss.b), m(&file.nominal.ss.c));
-    let stored_dc = -&c * a.clone().lu().solve(&b).unwrap();
+    let stored = substep::benchmark::marths::data::stored_plant();
+    let (a, b, c) = (&stored.a, &stored.b, &stored.c);
+    let stored_dc = stored.dc_gain().unwrap();
     let plant = PlantParameters::nominal().transfer_matrix().unwrap();
     let dc = plant.dc_gain();
     for i in 0..2 {
@@ -107,11 +100,11 @@ fn the_frame_and_the_plant_match_the_toolset_data() {
             .lu()
             .solve(&b.map(|v| Complex::new(v, 0.0)))
             .unwrap();
-        let stored = c.map(|v| Complex::new(v, 0.0)) * resolvent;
+        let stored_h = c.map(|v| Complex::new(v, 0.0)) * resolvent;
         let ours = plant.frequency_response(f_hz);
         for i in 0..2 {
             for j in 0..2 {
-                let rel = (ours[(i, j)] - stored[(i, j)]).norm() / stored[(i, j)].norm();
+                let rel = (ours[(i, j)] - stored_h[(i, j)]).norm() / stored_h[(i, j)].norm();
                 assert!(rel < 1e-10, "{f_hz} Hz H{}{}: {rel:e}", i + 1, j + 1);
             }
         }

@@ -49,6 +49,44 @@ impl StructuralModel {
         stiffness: DMatrix<f64>,
         influence: Option<DVector<f64>>,
     ) -> Result<Self> {
+        let model = Self::checked(mass, damping, stiffness, influence)?;
+        if model.mass.clone().cholesky().is_none() {
+            return Err(Error::invalid("structure.mass", "is not positive definite"));
+        }
+        Ok(model)
+    }
+
+    /// Like [`Self::new`], for a finite-element model whose mass matrix is singular (massless
+    /// rotational DOFs): the mass need only have a non-negative diagonal, and `K + M` be positive
+    /// definite (so the Newmark effective stiffness is regular and the massless DOFs follow
+    /// statically). Such a model starts at rest with zero load.
+    pub fn with_massless_dofs(
+        mass: DMatrix<f64>,
+        damping: DMatrix<f64>,
+        stiffness: DMatrix<f64>,
+        influence: Option<DVector<f64>>,
+    ) -> Result<Self> {
+        let model = Self::checked(mass, damping, stiffness, influence)?;
+        if model.mass.diagonal().iter().any(|&d| d < 0.0) {
+            return Err(Error::invalid("structure.mass", "has a negative diagonal entry"));
+        }
+        if (&model.stiffness + &model.mass).cholesky().is_none() {
+            return Err(Error::invalid(
+                "structure",
+                "K + M is not positive definite: a DOF has neither mass nor stiffness",
+            ));
+        }
+        Ok(model)
+    }
+
+    /// The checks both constructors share: square matrices of one size, finite and symmetric
+    /// entries, an influence vector of the model's size.
+    fn checked(
+        mass: DMatrix<f64>,
+        damping: DMatrix<f64>,
+        stiffness: DMatrix<f64>,
+        influence: Option<DVector<f64>>,
+    ) -> Result<Self> {
         let n = mass.nrows();
         if n == 0 {
             return Err(Error::invalid("structure.mass", "matrix is empty"));
@@ -70,42 +108,12 @@ impl StructuralModel {
         if influence.iter().any(|x| !x.is_finite()) {
             return Err(Error::invalid("structure.influence", "contains a non-finite value"));
         }
-        if mass.clone().cholesky().is_none() {
-            return Err(Error::invalid("structure.mass", "is not positive definite"));
-        }
         Ok(Self {
             mass,
             damping,
             stiffness,
             influence,
         })
-    }
-
-    /// Like [`Self::new`], for a finite-element model whose mass matrix is singular (massless
-    /// rotational DOFs): the mass need only be positive semi-definite with a non-negative
-    /// diagonal, and `K + M` positive definite (so the Newmark effective stiffness is regular
-    /// and the massless DOFs follow statically). Such a model starts at rest with zero load.
-    pub fn with_massless_dofs(
-        mass: DMatrix<f64>,
-        damping: DMatrix<f64>,
-        stiffness: DMatrix<f64>,
-        influence: Option<DVector<f64>>,
-    ) -> Result<Self> {
-        let n = mass.nrows();
-        let regular = (&mass + DMatrix::identity(n, n) * mass.diagonal().max().max(1.0)).clone();
-        let mut m = Self::new(regular, damping, stiffness, influence)?;
-        if mass.diagonal().iter().any(|&d| d < 0.0) {
-            return Err(Error::invalid("structure.mass", "has a negative diagonal entry"));
-        }
-        check_square_symmetric("structure.mass", &mass, n)?;
-        if (&m.stiffness + &mass).cholesky().is_none() {
-            return Err(Error::invalid(
-                "structure",
-                "K + M is not positive definite: a DOF has neither mass nor stiffness",
-            ));
-        }
-        m.mass = mass;
-        Ok(m)
     }
 
     pub fn n_dofs(&self) -> usize {

@@ -184,10 +184,9 @@ fn unreachable(s: [f64; 2], why: &str) -> Error {
 mod tests {
     use super::*;
 
-    #[test]
-    fn forward_and_inverse_agree_and_forces_follow_virtual_work() {
-        let symmetric = Coupler::marths();
-        let general = Coupler::new([
+    /// An asymmetric coupler (inverted by Newton).
+    fn general() -> Coupler {
+        Coupler::new([
             Attachment {
                 radius: 0.3,
                 angle: -0.4,
@@ -197,7 +196,13 @@ mod tests {
                 angle: 0.7,
             },
         ])
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn forward_and_inverse_agree_and_forces_follow_virtual_work() {
+        let symmetric = Coupler::marths();
+        let general = general();
         for c in [&symmetric, &general] {
             for q in [[0.0, 0.0], [0.01, 0.002], [-0.03, -0.05], [0.1, 0.3]] {
                 let s = c.strokes(q);
@@ -267,17 +272,7 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("same height"), "{e}");
-        let general = Coupler::new([
-            Attachment {
-                radius: 0.3,
-                angle: -0.4,
-            },
-            Attachment {
-                radius: 0.5,
-                angle: 0.7,
-            },
-        ])
-        .unwrap();
+        let general = general();
         assert!(general.dofs([5.0, -5.0]).is_err());
     }
 }

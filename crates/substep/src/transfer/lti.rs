@@ -264,6 +264,34 @@ impl ZohLti {
     }
 }
 
+/// One classical RK4 step of `ẋ = A x + s f` over `h` with the forcing `s f` held (`k`, `tmp`:
+/// work space of `x`'s size). Shared by the SISO and the MIMO integrators.
+pub(crate) fn rk4_held(
+    a: &DMatrix<f64>,
+    forcing: &DVector<f64>,
+    scale: f64,
+    h: f64,
+    x: &mut DVector<f64>,
+    k: &mut [DVector<f64>; 4],
+    tmp: &mut DVector<f64>,
+) {
+    let stages = [0.0, 0.5 * h, 0.5 * h, h];
+    for i in 0..4 {
+        tmp.copy_from(x);
+        if i > 0 {
+            let (prev, _) = k.split_at_mut(i);
+            tmp.axpy(stages[i], &prev[i - 1], 1.0);
+        }
+        let ki = &mut k[i];
+        ki.gemv(1.0, a, tmp, 0.0);
+        ki.axpy(scale, forcing, 1.0);
+    }
+    for (i, ki) in k.iter().enumerate() {
+        let w = if i == 1 || i == 2 { h / 3.0 } else { h / 6.0 };
+        x.axpy(w, ki, 1.0);
+    }
+}
+
 /// Fixed-step RK4 of a [`StateSpace`] with the input held over the step.
 #[derive(Debug, Clone)]
 pub struct Rk4Lti {
@@ -278,23 +306,15 @@ impl Rk4Lti {
     /// Output now for input `u`, then advance one RK4 step with `u` held.
     pub fn step(&mut self, u: f64) -> f64 {
         let y = self.output(u);
-        let h = self.h;
-        let s = &self.sys;
-        let stages = [0.0, 0.5 * h, 0.5 * h, h];
-        for i in 0..4 {
-            self.tmp.copy_from(&self.x);
-            if i > 0 {
-                let (prev, _) = self.k.split_at_mut(i);
-                self.tmp.axpy(stages[i], &prev[i - 1], 1.0);
-            }
-            let ki = &mut self.k[i];
-            ki.gemv(1.0, &s.a, &self.tmp, 0.0);
-            ki.axpy(u, &s.b, 1.0);
-        }
-        for i in 0..4 {
-            let w = if i == 1 || i == 2 { h / 3.0 } else { h / 6.0 };
-            self.x.axpy(w, &self.k[i], 1.0);
-        }
+        rk4_held(
+            &self.sys.a,
+            &self.sys.b,
+            u,
+            self.h,
+            &mut self.x,
+            &mut self.k,
+            &mut self.tmp,
+        );
         y
     }
     pub fn output(&self, u: f64) -> f64 {

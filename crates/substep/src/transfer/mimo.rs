@@ -15,7 +15,7 @@
 //! over the step (a D/A's zero-order hold) — what Simulink's fixed-step `ode4` does for a
 //! continuous block fed by a sampled signal. No allocation per step.
 
-use super::lti::{TransferFunction, poly_mul};
+use super::lti::{TransferFunction, poly_mul, rk4_held};
 use crate::error::{Error, Result};
 use nalgebra::{Complex, DMatrix, DVector};
 
@@ -253,22 +253,7 @@ impl MimoRk4 {
         let s = &self.sys;
         let u = nalgebra::DVectorView::from_slice(u, s.inputs());
         self.bu.gemv(1.0, &s.b, &u, 0.0);
-        let h = self.h;
-        let stages = [0.0, 0.5 * h, 0.5 * h, h];
-        for i in 0..4 {
-            self.tmp.copy_from(&self.x);
-            if i > 0 {
-                let (prev, _) = self.k.split_at_mut(i);
-                self.tmp.axpy(stages[i], &prev[i - 1], 1.0);
-            }
-            let ki = &mut self.k[i];
-            ki.gemv(1.0, &s.a, &self.tmp, 0.0);
-            *ki += &self.bu;
-        }
-        for i in 0..4 {
-            let w = if i == 1 || i == 2 { h / 3.0 } else { h / 6.0 };
-            self.x.axpy(w, &self.k[i], 1.0);
-        }
+        rk4_held(&s.a, &self.bu, 1.0, self.h, &mut self.x, &mut self.k, &mut self.tmp);
     }
     /// `y = C x + D u` without advancing.
     pub fn output(&self, u: &[f64], y: &mut [f64]) {

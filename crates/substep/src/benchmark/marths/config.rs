@@ -144,14 +144,14 @@ impl MarthsConfig {
         }
         if let Some(arx) = raw.controller.and_then(|c| c.arx) {
             let mut spec = arx_default();
+            // `with_span` resets the lead bound and the smoothing; the preset's bound stays.
+            let preset_lead = spec.max_lead;
             if let Some(k) = arx.k_lag {
                 spec.k_lag = k;
-                spec = spec.with_span(spec.span);
                 spec.lead = k as f64;
             }
-            if let Some(s) = arx.span {
-                spec = spec.with_span(s);
-            }
+            spec = spec.with_span(arx.span.unwrap_or(spec.span));
+            spec.max_lead = preset_lead;
             if let Some(n) = arx.n_u {
                 spec.n_u = n;
             }

@@ -258,6 +258,30 @@ impl PlantParameters {
     }
 }
 
+/// The toolset's stored realisation of the nominal plant (`plantFRAME_SS` in
+/// [`PLANT_TOML`]: 8 states, `D = 0`), for comparisons with [`PlantParameters::transfer_matrix`].
+pub fn stored_plant() -> crate::transfer::mimo::MimoStateSpace {
+    #[derive(serde::Deserialize)]
+    struct Ss {
+        a: Vec<Vec<f64>>,
+        b: Vec<Vec<f64>>,
+        c: Vec<Vec<f64>>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Nominal {
+        ss: Ss,
+    }
+    #[derive(serde::Deserialize)]
+    struct File {
+        nominal: Nominal,
+    }
+    let f: File = toml::from_str(PLANT_TOML).expect("the shipped plant is valid");
+    let m = |v: &Vec<Vec<f64>>| DMatrix::from_fn(v.len(), v[0].len(), |i, j| v[i][j]);
+    let (a, b, c) = (m(&f.nominal.ss.a), m(&f.nominal.ss.b), m(&f.nominal.ss.c));
+    let d = DMatrix::zeros(c.nrows(), b.ncols());
+    crate::transfer::mimo::MimoStateSpace::new("marths/plant.toml", a, b, c, d).expect("the shipped plant is valid")
+}
+
 /// RoDeAC's initial FIR weights (newest tap first) and RLS covariances per actuator.
 #[derive(Debug, Clone, PartialEq)]
 pub struct InitialParameters {

@@ -34,7 +34,7 @@ mod study;
 pub use config::MarthsConfig;
 pub use data::{InitialParameters, PlantParameters, Record};
 pub use mimo_arx::{MimoArx, MimoArxSpec};
-pub use options::{MarthsOptions, RecordChoice, criteria_json, shipped_record};
+pub use options::{MarthsOptions, RecordChoice, criteria_json, names_a_record_file, shipped_record};
 pub use rodeac::{BUTTER_A, BUTTER_B, Butterworth, RlsAc, rodeac};
 pub use run::{
     Algorithm, COMMAND_LIMIT_V, ControllerKind, Criteria, DIVERGENCE_LIMIT, History, MAX_LAG, MarthsInput,

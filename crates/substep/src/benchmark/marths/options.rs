@@ -57,6 +57,14 @@ pub fn shipped_record(name: &str) -> Option<Record> {
     Record::all().into_iter().find(|r| r.name() == name)
 }
 
+/// Whether `--record NAME` names a file for the front end to read: not a shipped record, and a
+/// path that exists or has an extension (anything else is refused by [`MarthsOptions::input`]
+/// with the list of records).
+pub fn names_a_record_file(name: &str) -> bool {
+    let path = std::path::Path::new(name);
+    shipped_record(name).is_none() && (path.exists() || path.extension().is_some())
+}
+
 impl MarthsOptions<'_> {
     /// The input these options describe (checked; `what(name)` spells an option as the front
     /// end does, e.g. `--trials`).

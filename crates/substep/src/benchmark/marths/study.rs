@@ -78,6 +78,21 @@ impl Study {
             .chain(self.trials.iter().map(|(_, r)| r))
             .find(|r| r.diverged)
     }
+    /// The error a front end ends with when a run diverged (exit 1 in the CLI, `RunError` in
+    /// Python): how many, and the first one's time and reason.
+    pub fn divergence(&self) -> Option<Error> {
+        let first = self.first_diverged()?;
+        let at = first.stopped_at.unwrap_or(0);
+        Some(Error::Diverged {
+            step: at,
+            time: at as f64 * super::run::SAMPLE_TIME,
+            reason: format!(
+                "benchmark marths: {} run(s) diverged, no score; the first: {}",
+                self.diverged_runs(),
+                first.stop_reason.clone().unwrap_or_default()
+            ),
+        })
+    }
     /// Every run stable.
     pub fn stable(&self) -> bool {
         !self.nominal.diverged && self.trials.iter().all(|(_, r)| !r.diverged)
