@@ -6,16 +6,21 @@
 use substep::study::vst::grid::{GridActuator, GridRow, GridSettings, counts, damper_grid};
 
 fn table(name: &str, rows: &[GridRow]) {
-    println!("{name}: damper [MN·s/m], delay [ms], k_sub: error without / with ARX (ratio)");
+    println!(
+        "{name}: damper [MN·s/m], delay [ms], k_sub: error without / with ARX (ratio); against the same integrator"
+    );
     for r in rows {
         println!(
-            "  {:>4.1} {:>4.0} {:>3}: {:>10.3e} / {:>10.3e} ({:.3}){}{}",
+            "  {:>4.1} {:>4.0} {:>3}: {:>10.3e} / {:>10.3e} ({:.3}); {:>10.3e} / {:>10.3e} ({:.3}){}{}",
             r.damper / 1e6,
             r.delay * 1e3,
             r.k_sub,
             r.error_none,
             r.error_arx,
             r.ratio(),
+            r.integrator_error_none,
+            r.integrator_error_arx,
+            r.integrator_ratio(),
             if r.stable_without() {
                 ""
             } else {
@@ -69,7 +74,15 @@ fn check(rows: &[GridRow]) {
         } else {
             assert!(r.ratio() <= 1.2, "{r:?}");
         }
+        // Against the assembled structure integrated with the test's own Newmark scheme — the
+        // solution the test would give with a delay-free actuator moving smoothly, without the
+        // integrator's own error, which a lag partly cancels — the compensator is never worse
+        // than 1.2 × the uncompensated test, at half a step of delay too.
+        assert!(r.integrator_ratio() <= 1.2, "against the same integrator: {r:?}");
     }
+    // … and at most 0.7 × in every setting with a delay of a step or more.
+    assert_eq!(c.step_delays_better_vs_integrator, c.step_delays, "{c:?}");
+    assert_eq!(c.worse_vs_integrator, 0, "{c:?}");
 }
 
 #[test]
@@ -168,4 +181,72 @@ fn at_half_a_step_the_compensator_removes_what_the_damper_feels_of_the_actuator(
             assert!(arx < 0.9 * none, "{damper} {k_sub}: {none:e} {arx:e}");
         }
     }
+}
+
+/// The grid's second reference is Newmark (average acceleration, the test's Δt) of the
+/// assembled structure: the same as a monolithic run of the frame with the damper written into
+/// its damping matrix (Rayleigh coefficients computed here from the eigenvalues), and apart from
+/// the exact solution by the integrator's own error.
+#[test]
+fn the_same_integrator_reference_is_newmark_of_the_assembled_structure() {
+    use nalgebra::{DMatrix, SymmetricEigen};
+    let damper = 2.5e6;
+    let def = substep::study::vst::grid::definition(damper, 0.01, 3, GridActuator::PureDelay, false).unwrap();
+    let accel = def.ground_motion.accel.clone();
+    let mut same = substep::io::Reference::same_integrator(&def).unwrap().unwrap();
+    let mut exact = substep::io::Reference::new(&def).unwrap().unwrap();
+    assert_eq!((same.scheme(), exact.scheme()), ("newmark", "exact"));
+
+    let m = DMatrix::from_diagonal_element(3, 3, 2.0e5);
+    let k = DMatrix::from_row_slice(3, 3, &[4e8, -2e8, 0.0, -2e8, 4e8, -2e8, 0.0, -2e8, 2e8]);
+    let mut w: Vec<f64> = SymmetricEigen::new(&k / 2.0e5f64)
+        .eigenvalues
+        .iter()
+        .map(|x: &f64| x.sqrt())
+        .collect();
+    w.sort_by(f64::total_cmp);
+    let (a0, a1) = (2.0 * 0.02 * w[0] * w[1] / (w[0] + w[1]), 2.0 * 0.02 / (w[0] + w[1]));
+    let mut c = &m * a0 + &k * a1;
+    c[(0, 0)] += damper;
+    let rows = |x: &DMatrix<f64>| {
+        let r: Vec<String> = (0..3)
+            .map(|i| format!("[{:e}, {:e}, {:e}]", x[(i, 0)], x[(i, 1)], x[(i, 2)]))
+            .collect();
+        format!("[{}]", r.join(", "))
+    };
+    let text = format!(
+        "[structure]\nmass = {}\nstiffness = {}\ndamping = {}\n[ground_motion]\ngenerator = \"harmonic\"\n\
+         amplitude = 1.0\nfrequency = 1.0\nduration = 30.0\n[integrator]\nscheme = \"average_acceleration\"\ndt = 0.01\n",
+        rows(&m),
+        rows(&k),
+        rows(&c)
+    );
+    let mut mono = substep::io::TestDefinition::from_toml(&text, "monolithic", std::path::Path::new(".")).unwrap();
+    mono.ground_motion.accel = accel.clone();
+    let mut out = Displacements(Vec::new());
+    let s = substep::run::execute(&mono, &mut out, &std::sync::atomic::AtomicBool::new(false)).unwrap();
+    assert!(s.completed);
+
+    let (mut peak, mut diff, mut integrator_error) = (0.0f64, 0.0f64, 0.0f64);
+    for (i, u) in out.0.iter().enumerate() {
+        if i > 0 {
+            same.step(accel[i]).unwrap();
+            exact.step(accel[i]).unwrap();
+        }
+        for ((&u, &s), &e) in u.iter().zip(same.u()).zip(exact.u()) {
+            peak = peak.max(u.abs());
+            diff = diff.max((u - s).abs());
+            integrator_error = integrator_error.max((e - s).abs());
+        }
+    }
+    println!(
+        "same integrator vs monolithic Newmark: {:.2e}; vs exact: {:.3e}",
+        diff / peak,
+        integrator_error / peak
+    );
+    assert!(diff < 1e-9 * peak, "{diff:e} of {peak:e}");
+    assert!(
+        integrator_error > 5e-3 * peak && integrator_error < 3e-2 * peak,
+        "{integrator_error:e}"
+    );
 }

@@ -287,7 +287,16 @@ impl Reference {
     /// forces, rate-dependent friction). Hysteretic specimens (Bouc–Wen, stick–slip friction)
     /// and a nonlinear numerical model give a Newmark + Newton reference. Errors name the config.
     pub fn new(def: &TestDefinition) -> Result<Option<Self>> {
-        Self::build(def).map_err(|e| in_config(e, &def.source))
+        Self::build(def, false).map_err(|e| in_config(e, &def.source))
+    }
+
+    /// The same assembled model integrated with the test's own Newmark scheme (its `β`, `γ`
+    /// and `Δt`) whatever its size: the monolithic solution the test would give with an ideal
+    /// actuator and converged sub-stepping if the specimen were part of the model. Its distance
+    /// from the test is the error the substructuring and the transfer system add, without the
+    /// time integration's own error, which the exact reference includes.
+    pub fn same_integrator(def: &TestDefinition) -> Result<Option<Self>> {
+        Self::build(def, true).map_err(|e| in_config(e, &def.source))
     }
 
     /// Why a substructure test has no reference (`None`: it has one, or it is monolithic).
@@ -308,7 +317,7 @@ impl Reference {
         })
     }
 
-    fn build(def: &TestDefinition) -> Result<Option<Self>> {
+    fn build(def: &TestDefinition, same_integrator: bool) -> Result<Option<Self>> {
         let Some(s) = &def.substructure else {
             return Ok(None);
         };
@@ -391,7 +400,8 @@ impl Reference {
             })
             .collect::<Result<Vec<_>>>()?;
         let nonlinear = !springs.springs.is_empty();
-        if n_assembled <= EXACT_REFERENCE_MAX_DOFS && assembled.is_sparse() {
+        let exact = n_assembled <= EXACT_REFERENCE_MAX_DOFS && !same_integrator;
+        if exact && assembled.is_sparse() {
             assembled = Model::Dense(assembled.dense("the exact reference")?.into_owned());
         }
         let (scheme, name) = if nonlinear {
@@ -403,7 +413,7 @@ impl Reference {
                 },
                 "newmark_newton",
             )
-        } else if n_assembled <= EXACT_REFERENCE_MAX_DOFS {
+        } else if exact {
             (Scheme::Exact, "exact")
         } else {
             (

@@ -13,9 +13,10 @@
 
 use crate::Result;
 use crate::benchmark::rths::GroundRecord;
-use crate::io::TestDefinition;
-use crate::run::exceeds;
+use crate::io::{Reference, TestDefinition};
+use crate::run::{ErrorTracker, exceeds};
 use rayon::prelude::*;
+use std::ops::ControlFlow;
 use std::path::Path;
 
 /// Time step of every run \[s\].
@@ -68,8 +69,9 @@ impl GridSettings {
 }
 
 /// One setting: the error of both runs against the exact reference (largest displacement
-/// error over the run and the floors, relative to the peak; NaN without a reference) and how
-/// each ended.
+/// error over the run and the floors, relative to the peak; NaN without a reference), the same
+/// against the assembled structure integrated with the test's own Newmark scheme
+/// ([`Reference::same_integrator`]), and how each ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridRow {
     pub damper: f64,
@@ -77,6 +79,9 @@ pub struct GridRow {
     pub k_sub: usize,
     pub error_none: f64,
     pub error_arx: f64,
+    /// The errors against the same-integrator reference (NaN for a run that ended early).
+    pub integrator_error_none: f64,
+    pub integrator_error_arx: f64,
     /// `completed` of each run's summary (false: diverged or stopped).
     pub completed_none: bool,
     pub completed_arx: bool,
@@ -90,6 +95,10 @@ impl GridRow {
     /// `error_arx / error_none`.
     pub fn ratio(&self) -> f64 {
         self.error_arx / self.error_none
+    }
+    /// `integrator_error_arx / integrator_error_none`.
+    pub fn integrator_ratio(&self) -> f64 {
+        self.integrator_error_arx / self.integrator_error_none
     }
     /// The uncompensated test is stable (completed, error ≤ 100 %).
     pub fn stable_without(&self) -> bool {
@@ -173,16 +182,72 @@ pub fn definition(
     Ok(def)
 }
 
-/// What one run gives: error, completed, diverged, supervisor backed off.
-fn run_one(def: &TestDefinition) -> Result<(f64, bool, bool, bool)> {
-    let s = crate::run::execute(
-        def,
-        &mut super::super::SummaryOnly,
-        &std::sync::atomic::AtomicBool::new(false),
-    )?;
+/// Steps the same-integrator reference along a run and tracks the run's displacement error
+/// against it (the summary's statistic: the largest over the DOFs of each DOF's largest error
+/// relative to its reference peak).
+struct AgainstIntegrator<'a> {
+    reference: Reference,
+    accel: &'a [f64],
+    tracker: ErrorTracker,
+    steps: usize,
+    failed: bool,
+}
+
+impl crate::substructure::SubstepObserver for AgainstIntegrator<'_> {}
+
+impl crate::run::RunObserver for AgainstIntegrator<'_> {
+    fn step(&mut self, row: &crate::run::StepRow<'_>) -> ControlFlow<()> {
+        while self.steps < row.step && !self.failed {
+            self.steps += 1;
+            self.failed = self.reference.step(self.accel[self.steps]).is_err();
+        }
+        if !self.failed {
+            self.tracker.update(row.u, self.reference.u());
+        }
+        ControlFlow::Continue(())
+    }
+}
+
+/// What one run gives: error against the exact and the same-integrator reference, completed,
+/// diverged, supervisor backed off.
+struct RunResult {
+    error: f64,
+    integrator_error: f64,
+    completed: bool,
+    diverged: bool,
+    backed_off: bool,
+}
+
+fn run_one(def: &TestDefinition) -> Result<RunResult> {
+    let Some(reference) = Reference::same_integrator(def)? else {
+        return Err(crate::Error::invalid(
+            "damper grid",
+            "the test has no monolithic reference",
+        ));
+    };
+    let mut observer = AgainstIntegrator {
+        reference,
+        accel: &def.ground_motion.accel,
+        tracker: ErrorTracker::new(def.model.n_dofs()),
+        steps: 0,
+        failed: false,
+    };
+    let s = crate::run::execute(def, &mut observer, &std::sync::atomic::AtomicBool::new(false))?;
     let error = s.reference.as_ref().map_or(f64::NAN, |r| r.max_displacement_error);
-    let backed_off = s.warnings.iter().any(|w| w.contains("backed off"));
-    Ok((error, s.completed, s.diverged, backed_off))
+    let integrator_error = if s.completed && !observer.failed {
+        (0..def.model.n_dofs())
+            .map(|k| observer.tracker.stats(k).peak_error)
+            .fold(0.0, f64::max)
+    } else {
+        f64::NAN
+    };
+    Ok(RunResult {
+        error,
+        integrator_error,
+        completed: s.completed,
+        diverged: s.diverged,
+        backed_off: s.warnings.iter().any(|w| w.contains("backed off")),
+    })
 }
 
 /// Run every setting of `settings` (in parallel; rows in the order dampers × delays × `k_sub`).
@@ -204,13 +269,15 @@ pub fn damper_grid(settings: &GridSettings) -> Result<Vec<GridRow>> {
                 damper,
                 delay,
                 k_sub,
-                error_none: none.0,
-                error_arx: arx.0,
-                completed_none: none.1,
-                completed_arx: arx.1,
-                diverged_none: none.2,
-                diverged_arx: arx.2,
-                backed_off: arx.3,
+                error_none: none.error,
+                error_arx: arx.error,
+                integrator_error_none: none.integrator_error,
+                integrator_error_arx: arx.integrator_error,
+                completed_none: none.completed,
+                completed_arx: arx.completed,
+                diverged_none: none.diverged,
+                diverged_arx: arx.diverged,
+                backed_off: arx.backed_off,
             })
         })
         .collect()
@@ -229,6 +296,10 @@ pub struct GridCounts {
     /// Delays ≥ one step, uncompensated stable: how many, and how many at ≤ 0.7 ×.
     pub step_delays: usize,
     pub step_delays_better: usize,
+    /// The same two lines against the same-integrator reference: compensated > 1.2 ×
+    /// uncompensated (among the settings stable without), and at ≤ 0.7 × among the step delays.
+    pub worse_vs_integrator: usize,
+    pub step_delays_better_vs_integrator: usize,
     /// The supervisor backed off.
     pub backed_off: usize,
 }
@@ -246,6 +317,14 @@ pub fn counts(rows: &[GridRow]) -> GridCounts {
             .count(),
         step_delays: step.len(),
         step_delays_better: step.iter().filter(|r| r.error_arx <= 0.7 * r.error_none).count(),
+        worse_vs_integrator: stable
+            .iter()
+            .filter(|r| exceeds(r.integrator_error_arx, 1.2 * r.integrator_error_none))
+            .count(),
+        step_delays_better_vs_integrator: step
+            .iter()
+            .filter(|r| r.integrator_error_arx <= 0.7 * r.integrator_error_none)
+            .count(),
         backed_off: rows.iter().filter(|r| r.backed_off).count(),
     }
 }
