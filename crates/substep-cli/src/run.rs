@@ -763,6 +763,15 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
         }
         if let Some(r) = &summary.reference {
             print_reference_error(r.scheme, r.max_displacement_error, r.max_force_error);
+            if let Some(s) = &r.same_integrator {
+                println!(
+                    "    the time step alone: {} (the assembled structure integrated with this test's {} scheme \
+                     and Δt vs exact); the substructure test vs that solution: {}",
+                    percent(s.integration_error),
+                    summary.scheme,
+                    percent(s.max_displacement_error)
+                );
+            }
         } else if let Some(why) = substep::io::Reference::unavailable(&def) {
             println!("  no reference solution: {why}");
         }

@@ -186,7 +186,9 @@ fn at_half_a_step_the_compensator_removes_what_the_damper_feels_of_the_actuator(
 /// The grid's second reference is Newmark (average acceleration, the test's Δt) of the
 /// assembled structure: the same as a monolithic run of the frame with the damper written into
 /// its damping matrix (Rayleigh coefficients computed here from the eigenvalues), and apart from
-/// the exact solution by the integrator's own error.
+/// the exact solution by the integrator's own error. The summary's `same_integrator` errors are
+/// those recomputed here from the test's, the monolithic run's and the exact reference's
+/// displacement histories.
 #[test]
 fn the_same_integrator_reference_is_newmark_of_the_assembled_structure() {
     use nalgebra::{DMatrix, SymmetricEigen};
@@ -194,8 +196,7 @@ fn the_same_integrator_reference_is_newmark_of_the_assembled_structure() {
     let def = substep::study::vst::grid::definition(damper, 0.01, 3, GridActuator::PureDelay, false).unwrap();
     let accel = def.ground_motion.accel.clone();
     let mut same = substep::io::Reference::same_integrator(&def).unwrap().unwrap();
-    let mut exact = substep::io::Reference::new(&def).unwrap().unwrap();
-    assert_eq!((same.scheme(), exact.scheme()), ("newmark", "exact"));
+    assert_eq!(same.scheme(), "newmark");
 
     let m = DMatrix::from_diagonal_element(3, 3, 2.0e5);
     let k = DMatrix::from_row_slice(3, 3, &[4e8, -2e8, 0.0, -2e8, 4e8, -2e8, 0.0, -2e8, 2e8]);
@@ -223,30 +224,72 @@ fn the_same_integrator_reference_is_newmark_of_the_assembled_structure() {
     );
     let mut mono = substep::io::TestDefinition::from_toml(&text, "monolithic", std::path::Path::new(".")).unwrap();
     mono.ground_motion.accel = accel.clone();
-    let mut out = Displacements(Vec::new());
-    let s = substep::run::execute(&mono, &mut out, &std::sync::atomic::AtomicBool::new(false)).unwrap();
+    let mut newmark = Displacements(Vec::new());
+    let s = substep::run::execute(&mono, &mut newmark, &std::sync::atomic::AtomicBool::new(false)).unwrap();
     assert!(s.completed);
-
-    let (mut peak, mut diff, mut integrator_error) = (0.0f64, 0.0f64, 0.0f64);
-    for (i, u) in out.0.iter().enumerate() {
+    for (i, u) in newmark.0.iter().enumerate() {
         if i > 0 {
             same.step(accel[i]).unwrap();
-            exact.step(accel[i]).unwrap();
         }
-        for ((&u, &s), &e) in u.iter().zip(same.u()).zip(exact.u()) {
-            peak = peak.max(u.abs());
-            diff = diff.max((u - s).abs());
-            integrator_error = integrator_error.max((e - s).abs());
+        for (&u, &s) in u.iter().zip(same.u()) {
+            assert!((u - s).abs() <= 1e-9 * 0.05, "step {i}: {u} {s}");
         }
     }
+
+    // The test and its exact reference, step by step.
+    let mut test = Displacements(Vec::new());
+    let mut exact = References(Vec::new());
+    let summary = substep::run::execute(&def, &mut Both(&mut test, &mut exact), &Default::default()).unwrap();
+    let r = summary.reference.as_ref().unwrap();
+    assert_eq!(r.scheme, "exact");
+    let split = r.same_integrator.as_ref().unwrap();
+    let test_error = largest_dof_error(&test.0, &newmark.0);
+    let integration_error = largest_dof_error(&newmark.0, &exact.0);
     println!(
-        "same integrator vs monolithic Newmark: {:.2e}; vs exact: {:.3e}",
-        diff / peak,
-        integrator_error / peak
+        "test vs Newmark {test_error:.4e} (summary {:.4e}); Newmark vs exact {integration_error:.4e} (summary {:.4e}); test vs exact {:.4e}",
+        split.max_displacement_error, split.integration_error, r.max_displacement_error
     );
-    assert!(diff < 1e-9 * peak, "{diff:e} of {peak:e}");
+    assert!((split.max_displacement_error - test_error).abs() < 1e-9 * test_error);
+    assert!((split.integration_error - integration_error).abs() < 1e-9 * integration_error);
+    // Newmark at Δt = 10 ms is 1.4 % off the exact solution here; the delayed test 9 % off Newmark.
     assert!(
-        integrator_error > 5e-3 * peak && integrator_error < 3e-2 * peak,
-        "{integrator_error:e}"
+        integration_error > 5e-3 && integration_error < 3e-2,
+        "{integration_error:e}"
     );
+    assert!(test_error > 5e-2, "{test_error:e}");
+}
+
+/// The reference's displacements of a run, step by step.
+struct References(Vec<Vec<f64>>);
+
+impl substep::substructure::SubstepObserver for References {}
+
+impl substep::run::RunObserver for References {
+    fn step(&mut self, row: &substep::run::StepRow<'_>) -> std::ops::ControlFlow<()> {
+        self.0.push(row.reference.unwrap().to_vec());
+        std::ops::ControlFlow::Continue(())
+    }
+}
+
+/// Two observers fed the same rows.
+struct Both<'a>(&'a mut Displacements, &'a mut References);
+
+impl substep::substructure::SubstepObserver for Both<'_> {}
+
+impl substep::run::RunObserver for Both<'_> {
+    fn step(&mut self, row: &substep::run::StepRow<'_>) -> std::ops::ControlFlow<()> {
+        let _ = self.0.step(row);
+        self.1.step(row)
+    }
+}
+
+/// The summary's statistic: over the DOFs, the largest |a − b| relative to that DOF's peak |b|.
+fn largest_dof_error(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
+    (0..b[0].len())
+        .map(|k| {
+            let err = a.iter().zip(b).map(|(x, y)| (x[k] - y[k]).abs()).fold(0.0, f64::max);
+            let peak = b.iter().map(|y| y[k].abs()).fold(0.0, f64::max);
+            err / peak
+        })
+        .fold(0.0, f64::max)
 }

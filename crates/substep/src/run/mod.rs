@@ -30,7 +30,10 @@ pub use engineering::{
     MAX_DOFS as ENGINEERING_MAX_DOFS, PeakAt, SPECTRUM_ZETA, SpectrumPeak, StoreyPeak,
 };
 pub use stats::{ErrorStats, ErrorTracker, Peak, PeakTracker, largest};
-pub use summary::{CouplingError, CouplingPeaks, DofError, DofPeaks, ReferenceSummary, RunSummary, TrackingSummary};
+pub use summary::{
+    CouplingError, CouplingPeaks, DofError, DofPeaks, ReferenceSummary, RunSummary, SameIntegratorSummary,
+    TrackingSummary,
+};
 pub use table::{HistoryTable, Table, push_number};
 
 use crate::analysis::tracking::{ErrorAccumulator, TrackingMetrics};
@@ -280,6 +283,9 @@ struct SummaryRecorder {
     err_u: ErrorTracker,
     err_f: ErrorTracker,
     nrms_u: Vec<ErrorAccumulator>,
+    /// The test against the same-integrator solution, and that solution against the exact one.
+    err_same: ErrorTracker,
+    err_integration: ErrorTracker,
 }
 
 impl SummaryRecorder {
@@ -296,10 +302,12 @@ impl SummaryRecorder {
             err_u: ErrorTracker::new(n),
             err_f: ErrorTracker::new(n_c),
             nrms_u: vec![ErrorAccumulator::new(); n],
+            err_same: ErrorTracker::new(n),
+            err_integration: ErrorTracker::new(n),
         }
     }
 
-    fn record(&mut self, sim: &Simulation, reference: Option<&Reference>) {
+    fn record(&mut self, sim: &Simulation, reference: Option<&Reference>, same_integrator: Option<&Reference>) {
         let t = sim.time();
         let s = sim.state();
         self.peak_u.update(s.u.as_slice(), t);
@@ -316,10 +324,14 @@ impl SummaryRecorder {
                 acc.push(u, u_ref);
             }
             self.err_f.update(&self.force, r.coupling_force());
+            if let Some(same) = same_integrator {
+                self.err_same.update(s.u.as_slice(), same.u());
+                self.err_integration.update(same.u(), r.u());
+            }
         }
     }
 
-    fn reference_summary(&self, r: &Reference) -> ReferenceSummary {
+    fn reference_summary(&self, r: &Reference, same_integrator: bool) -> ReferenceSummary {
         let dofs: Vec<DofError> = (0..self.peak_u.0.len())
             .map(|k| DofError {
                 dof: k + 1,
@@ -346,6 +358,13 @@ impl SummaryRecorder {
             max_force_error: max(&mut coupling.iter().map(|c| c.force.peak_error)),
             dofs,
             coupling,
+            same_integrator: same_integrator.then(|| {
+                let n = self.peak_u.0.len();
+                SameIntegratorSummary {
+                    max_displacement_error: max(&mut (0..n).map(|k| self.err_same.stats(k).peak_error)),
+                    integration_error: max(&mut (0..n).map(|k| self.err_integration.stats(k).peak_error)),
+                }
+            }),
         }
     }
 }
@@ -384,6 +403,8 @@ pub struct Run<'d> {
     def: &'d TestDefinition,
     sim: Simulation,
     reference: Option<Reference>,
+    /// Beside an exact reference: the same structure with the test's own integrator.
+    same_integrator: Option<Reference>,
     engineering: Option<EngineeringRecorder>,
     /// Computed after the loop (a long record's Fourier amplitude takes a while; a remote site
     /// should not wait for it between connecting and the first step).
@@ -406,6 +427,10 @@ impl<'d> Run<'d> {
     pub fn new(def: &'d TestDefinition) -> Result<Self> {
         let sim = Simulation::new(def)?;
         let reference = Reference::new(def)?;
+        let same_integrator = match &reference {
+            Some(r) if r.scheme() == "exact" => Reference::same_integrator(def)?,
+            _ => None,
+        };
         let engineering = EngineeringRecorder::new(def);
         let sub = def.substructure.as_ref();
         let stability = stability_monitor(def, sub.and_then(SubstructureDefinition::stability_settings))?;
@@ -426,6 +451,7 @@ impl<'d> Run<'d> {
             def,
             sim,
             reference,
+            same_integrator,
             engineering,
             input_motion: None,
             stability,
@@ -464,6 +490,7 @@ impl<'d> Run<'d> {
             def,
             sim,
             reference,
+            same_integrator,
             engineering,
             input_motion,
             stability,
@@ -537,7 +564,7 @@ impl<'d> Run<'d> {
                 engineering: engineering.as_ref().map(|e| e.row(sim.time())),
                 indicator: stability.as_ref(),
             });
-            recorder.record(sim, reference.as_ref());
+            recorder.record(sim, reference.as_ref(), same_integrator.as_ref());
             if !diverging && let Some(reason) = runaway(s.u.as_slice()) {
                 // A runaway response: ramp the actuators down where the run can, else end here.
                 diverging = true;
@@ -596,6 +623,12 @@ impl<'d> Run<'d> {
                 failure = Some(e);
                 break;
             }
+            if let Some(r) = same_integrator
+                && let Err(e) = r.step(sim.ground_acceleration(i + 1))
+            {
+                failure = Some(e);
+                break;
+            }
         }
         let wall = started.elapsed().as_secs_f64();
         // A cancelled run returns at once: the input motion's spectrum of a long record takes
@@ -624,7 +657,9 @@ impl<'d> Run<'d> {
             }
         };
         let done = sim.steps_done();
-        let reference_summary = reference.as_ref().map(|r| recorder.reference_summary(r));
+        let reference_summary = reference
+            .as_ref()
+            .map(|r| recorder.reference_summary(r, same_integrator.is_some()));
         let overall = recorder.err_u.overall_peak_error();
         // NaN (a reference at rest throughout): nothing to judge against; a runaway is caught above.
         if failure.is_none() && overall > DIVERGED_ERROR {

@@ -72,6 +72,25 @@ pub struct ReferenceSummary {
     pub max_force_error: f64,
     pub dofs: Vec<DofError>,
     pub coupling: Vec<CouplingError>,
+    /// With the exact reference: the split of the displacement error into the time step's
+    /// share and the test's (see [`SameIntegratorSummary`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub same_integrator: Option<SameIntegratorSummary>,
+}
+
+/// The assembled structure integrated with the test's own scheme (its `β`, `γ` and `Δt`:
+/// [`Reference::same_integrator`](crate::io::Reference::same_integrator)) beside the exact
+/// reference. Both errors are the largest over the numerical DOFs of the peak displacement
+/// error relative to that DOF's peak, like
+/// [`ReferenceSummary::max_displacement_error`].
+#[derive(Debug, Clone, Serialize)]
+pub struct SameIntegratorSummary {
+    /// The test against that solution: what the substructuring, the sub-stepping and the
+    /// transfer system add to the time integration.
+    pub max_displacement_error: f64,
+    /// That solution against the exact one: the error of the time step alone, which no
+    /// compensation can remove (a smaller `Δt` does).
+    pub integration_error: f64,
 }
 
 /// The summary of a run, serialised as `summary.json`. `wall_time_s` and `us_per_step` are

@@ -13,10 +13,9 @@
 
 use crate::Result;
 use crate::benchmark::rths::GroundRecord;
-use crate::io::{Reference, TestDefinition};
-use crate::run::{ErrorTracker, exceeds};
+use crate::io::TestDefinition;
+use crate::run::exceeds;
 use rayon::prelude::*;
-use std::ops::ControlFlow;
 use std::path::Path;
 
 /// Time step of every run \[s\].
@@ -70,8 +69,8 @@ impl GridSettings {
 
 /// One setting: the error of both runs against the exact reference (largest displacement
 /// error over the run and the floors, relative to the peak; NaN without a reference), the same
-/// against the assembled structure integrated with the test's own Newmark scheme
-/// ([`Reference::same_integrator`]), and how each ended.
+/// against the assembled structure integrated with the test's own Newmark scheme (the summary's
+/// [`crate::run::SameIntegratorSummary`]), and how each ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridRow {
     pub damper: f64,
@@ -182,35 +181,9 @@ pub fn definition(
     Ok(def)
 }
 
-/// Steps the same-integrator reference along a run and tracks the run's displacement error
-/// against it (the summary's statistic: the largest over the DOFs of each DOF's largest error
-/// relative to its reference peak).
-struct AgainstIntegrator<'a> {
-    reference: Reference,
-    accel: &'a [f64],
-    tracker: ErrorTracker,
-    steps: usize,
-    failed: bool,
-}
-
-impl crate::substructure::SubstepObserver for AgainstIntegrator<'_> {}
-
-impl crate::run::RunObserver for AgainstIntegrator<'_> {
-    fn step(&mut self, row: &crate::run::StepRow<'_>) -> ControlFlow<()> {
-        while self.steps < row.step && !self.failed {
-            self.steps += 1;
-            self.failed = self.reference.step(self.accel[self.steps]).is_err();
-        }
-        if !self.failed {
-            self.tracker.update(row.u, self.reference.u());
-        }
-        ControlFlow::Continue(())
-    }
-}
-
-/// What one run gives: error against the exact and the same-integrator reference, completed,
-/// diverged, supervisor backed off.
+/// What one run gives.
 struct RunResult {
+    /// Against the exact reference and against the same-integrator one.
     error: f64,
     integrator_error: f64,
     completed: bool,
@@ -219,27 +192,18 @@ struct RunResult {
 }
 
 fn run_one(def: &TestDefinition) -> Result<RunResult> {
-    let Some(reference) = Reference::same_integrator(def)? else {
-        return Err(crate::Error::invalid(
-            "damper grid",
-            "the test has no monolithic reference",
-        ));
-    };
-    let mut observer = AgainstIntegrator {
-        reference,
-        accel: &def.ground_motion.accel,
-        tracker: ErrorTracker::new(def.model.n_dofs()),
-        steps: 0,
-        failed: false,
-    };
-    let s = crate::run::execute(def, &mut observer, &std::sync::atomic::AtomicBool::new(false))?;
+    let s = crate::run::execute(
+        def,
+        &mut super::super::SummaryOnly,
+        &std::sync::atomic::AtomicBool::new(false),
+    )?;
     let error = s.reference.as_ref().map_or(f64::NAN, |r| r.max_displacement_error);
-    let integrator_error = if s.completed && !observer.failed {
-        (0..def.model.n_dofs())
-            .map(|k| observer.tracker.stats(k).peak_error)
-            .fold(0.0, f64::max)
-    } else {
-        f64::NAN
+    let integrator_error = match (&s.reference, s.completed) {
+        (Some(r), true) => r
+            .same_integrator
+            .as_ref()
+            .map_or(f64::NAN, |x| x.max_displacement_error),
+        _ => f64::NAN,
     };
     Ok(RunResult {
         error,
