@@ -145,3 +145,49 @@ fn input_errors_come_before_the_first_row() {
     };
     assert!(err.to_string().starts_with("bad.toml"), "{err}");
 }
+
+/// The summary's `same_integrator` split: its `integration_error` is Newmark of the assembled
+/// system against the exact solution, so it shrinks with the scheme's order of accuracy — four
+/// times per halved Δt for the second-order average-acceleration scheme, twice for the
+/// first-order backward-difference one (γ = 3/2) — and, being a property of the structure alone,
+/// it does not change with the actuator.
+#[test]
+fn the_time_steps_share_shrinks_with_the_order_of_the_scheme() {
+    let share = |scheme: &str, dt: f64, ideal_actuator: bool| {
+        let mut text = include_str!("../../../examples/default.toml")
+            .replace("duration = 20.0", "duration = 5.0")
+            .replace("scheme = \"average_acceleration\"", &format!("scheme = \"{scheme}\""))
+            .replace("dt = 0.01 ", &format!("dt = {dt} "));
+        if ideal_actuator {
+            let a = text.find("kind = \"second_order\"").unwrap();
+            let b = text[a..].find("\n\n").unwrap();
+            text.replace_range(a..a + b, "kind = \"ideal\"");
+        }
+        let def = TestDefinition::from_toml(&text, "order.toml", Path::new(".")).unwrap();
+        assert_eq!(def.integrator.dt, dt);
+        let s = execute(&def, &mut HistoryTable::default(), &AtomicBool::new(false)).unwrap();
+        assert!(s.completed);
+        let r = s.reference.unwrap();
+        assert_eq!(r.scheme, "exact");
+        r.same_integrator.unwrap().integration_error
+    };
+    for (scheme, order) in [("average_acceleration", 2), ("backward_difference", 1)] {
+        let e: Vec<f64> = [0.0025, 0.005, 0.01]
+            .iter()
+            .map(|&dt| share(scheme, dt, false))
+            .collect();
+        let expected = 2f64.powi(order);
+        println!("{scheme}: {e:?}, ratios {:.3} {:.3}", e[1] / e[0], e[2] / e[1]);
+        for pair in e.windows(2) {
+            let ratio = pair[1] / pair[0];
+            assert!(
+                (ratio / expected - 1.0).abs() < 0.1,
+                "{scheme}: {ratio} for order {order}"
+            );
+        }
+    }
+    assert_eq!(
+        share("average_acceleration", 0.01, true),
+        share("average_acceleration", 0.01, false)
+    );
+}
