@@ -71,6 +71,12 @@ fn check(rows: &[GridRow]) {
         let half_step = r.delay < 0.75 * 0.01;
         if half_step && r.damper <= 2.5e6 {
             assert!(r.ratio() <= 3.0 && r.error_arx <= 0.03, "{r:?}");
+            // Where it is over 1.2 ×, even a perfect compensator would be: the time step's own
+            // error (the test with an actuator that follows its commands) exceeds 1.2 × the
+            // uncompensated test's, whose lag cancels part of it.
+            if r.ratio() > 1.2 {
+                assert!(r.time_step_error > 1.2 * r.error_none, "{r:?}");
+            }
         } else {
             assert!(r.ratio() <= 1.2, "{r:?}");
         }

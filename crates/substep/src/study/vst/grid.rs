@@ -81,6 +81,9 @@ pub struct GridRow {
     /// The errors against the same-integrator reference (NaN for a run that ended early).
     pub integrator_error_none: f64,
     pub integrator_error_arx: f64,
+    /// That Newmark solution against the exact one: the time step's own error, the error of a
+    /// test whose actuator followed its commands perfectly.
+    pub time_step_error: f64,
     /// `completed` of each run's summary (false: diverged or stopped).
     pub completed_none: bool,
     pub completed_arx: bool,
@@ -186,6 +189,7 @@ struct RunResult {
     /// Against the exact reference and against the same-integrator one.
     error: f64,
     integrator_error: f64,
+    time_step_error: f64,
     completed: bool,
     diverged: bool,
     backed_off: bool,
@@ -198,16 +202,15 @@ fn run_one(def: &TestDefinition) -> Result<RunResult> {
         &std::sync::atomic::AtomicBool::new(false),
     )?;
     let error = s.reference.as_ref().map_or(f64::NAN, |r| r.max_displacement_error);
-    let integrator_error = match (&s.reference, s.completed) {
-        (Some(r), true) => r
-            .same_integrator
-            .as_ref()
-            .map_or(f64::NAN, |x| x.max_displacement_error),
-        _ => f64::NAN,
+    let same = s.reference.as_ref().and_then(|r| r.same_integrator.as_ref());
+    let (integrator_error, time_step_error) = match (same, s.completed) {
+        (Some(x), true) => (x.max_displacement_error, x.integration_error),
+        _ => (f64::NAN, f64::NAN),
     };
     Ok(RunResult {
         error,
         integrator_error,
+        time_step_error,
         completed: s.completed,
         diverged: s.diverged,
         backed_off: s.warnings.iter().any(|w| w.contains("backed off")),
@@ -237,6 +240,7 @@ pub fn damper_grid(settings: &GridSettings) -> Result<Vec<GridRow>> {
                 error_arx: arx.error,
                 integrator_error_none: none.integrator_error,
                 integrator_error_arx: arx.integrator_error,
+                time_step_error: none.time_step_error,
                 completed_none: none.completed,
                 completed_arx: arx.completed,
                 diverged_none: none.diverged,
