@@ -1,30 +1,12 @@
 //! The benchmark loop allocates nothing per sample: the number of allocations of a whole run
 //! does not depend on the number of samples (its own test binary, for the counting allocator).
 
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use substep::benchmark::rths::*;
 
-struct Counting;
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+#[path = "common/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::allocations as allocations_so_far;
 
 fn allocations(seconds: f64, kind: ControllerKind, algorithm: Algorithm) -> usize {
     let rows: String = (0..=(seconds * 100.0) as usize)
@@ -38,9 +20,9 @@ fn allocations(seconds: f64, kind: ControllerKind, algorithm: Algorithm) -> usiz
     input.record = Arc::new(record);
     input.intensity = 1.0;
     input.algorithm = algorithm;
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = allocations_so_far();
     let r = run(&input).unwrap();
-    let n = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let n = allocations_so_far() - before;
     assert!(r.stable);
     n
 }
