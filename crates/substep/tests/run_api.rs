@@ -191,3 +191,48 @@ fn the_time_steps_share_shrinks_with_the_order_of_the_scheme() {
         share("average_acceleration", 0.01, false)
     );
 }
+
+/// Benchmark (docs/performance.md, "The same-integrator reference"; run with `--ignored
+/// --nocapture`): what the second reference costs beside the exact one, on shear buildings of
+/// 3 to 199 storeys with a damper specimen at floor 1 (20 s, Δt = 10 ms, k_sub = 4). Prints
+/// numbers, asserts none.
+#[test]
+#[ignore]
+fn same_integrator_cost() {
+    use std::time::Instant;
+    use substep::io::Reference;
+    struct Nothing;
+    impl SubstepObserver for Nothing {}
+    impl RunObserver for Nothing {
+        fn step(&mut self, _row: &StepRow<'_>) -> ControlFlow<()> {
+            ControlFlow::Continue(())
+        }
+    }
+    println!("storeys | whole run [s] | exact reference [s] | same-integrator reference [s] | its share of the run");
+    for n in [3usize, 20, 60, 150, 199] {
+        let text = format!(
+            "[structure.shear_building]\nstories = {n}\nstory_mass = 1.0e5\nfirst_period = 1.0\n\
+             [structure.modal]\nzeta = 0.05\n[ground_motion]\ngenerator = \"harmonic\"\namplitude = 1.0\n\
+             frequency = 1.0\nduration = 20.0\n[integrator]\nscheme = \"average_acceleration\"\ndt = 0.01\n\
+             [substructure]\ncoupling_dofs = [1]\nsubsteps = 4\n[[substructure.specimen]]\nkind = \"linear_sdof\"\n\
+             dof = 1\nstiffness = 0.0\ndamping = 1.0e6\n[substructure.actuator]\nkind = \"ideal\"\n\
+             [substructure.error_force]\nkind = \"pid\"\np = 1.0\n"
+        );
+        let mut def = TestDefinition::from_toml(&text, "cost", Path::new(".")).unwrap();
+        def.substructure.as_mut().unwrap().stability_off = true;
+        let t = Instant::now();
+        assert!(execute(&def, &mut Nothing, &AtomicBool::new(false)).unwrap().completed);
+        let run = t.elapsed().as_secs_f64();
+        let accel = &def.ground_motion.accel;
+        let time = |mut r: Reference| {
+            let t = Instant::now();
+            for &a in &accel[1..] {
+                r.step(a).unwrap();
+            }
+            t.elapsed().as_secs_f64()
+        };
+        let exact = time(Reference::new(&def).unwrap().unwrap());
+        let same = time(Reference::same_integrator(&def).unwrap().unwrap());
+        println!("{n} | {run:.3} | {exact:.3} | {same:.3} | {:.0} %", 100.0 * same / run);
+    }
+}
