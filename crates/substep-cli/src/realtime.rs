@@ -88,11 +88,19 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     // thread on the same cores; those runs record no reference (run offline for it).
     let mut reference =
         substep::io::Reference::new(def)?.filter(|r| r.n_dofs() <= substep::io::run::EXACT_REFERENCE_MAX_DOFS);
+    // Beside the exact reference, as offline, the same model with the test's own integrator
+    // (`reference.same_integrator`: the time step's share of the error).
+    let mut same_integrator = match &reference {
+        Some(r) if r.scheme() == "exact" => substep::io::Reference::same_integrator(def)?,
+        _ => None,
+    };
     let mut reference_step = 0usize;
     // Errors against it, as offline: per DOF, peak |test − reference| over the peak |reference|.
     let n_c = sub.coupling_dofs.len();
     let mut err_u = substep::run::ErrorTracker::new(def.model.n_dofs());
     let mut err_f = substep::run::ErrorTracker::new(n_c);
+    let mut err_same = substep::run::ErrorTracker::new(def.model.n_dofs());
+    let mut err_integration = substep::run::ErrorTracker::new(def.model.n_dofs());
     // Everything above is validation; no output of an earlier run survives into this one.
     prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
@@ -200,7 +208,11 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             while reference_step < r.step {
                 reference_step += 1;
                 // Only a nonlinear reference can fail, and --realtime refuses nonlinear models.
-                let _ = reference.step(accel.get(reference_step).copied().unwrap_or(0.0));
+                let ag = accel.get(reference_step).copied().unwrap_or(0.0);
+                let _ = reference.step(ag);
+                if let Some(same) = same_integrator.as_mut() {
+                    let _ = same.step(ag);
+                }
             }
             for &x in reference.u() {
                 line.push(',');
@@ -209,6 +221,10 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             // The records hold every DOF (no `record_dofs` here), as the reference does.
             err_u.update(&r.u, reference.u());
             err_f.update(&r.coupling_force, reference.coupling_force());
+            if let Some(same) = same_integrator.as_ref() {
+                err_same.update(&r.u, same.u());
+                err_integration.update(same.u(), reference.u());
+            }
         }
         if indicator_columns && let Some(m) = live.indicator() {
             for x in m.history_values() {
@@ -267,6 +283,13 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             r.n_dofs(),
             max(&err_u, def.model.n_dofs()),
             max(&err_f, n_c),
+        )
+    });
+    // (integration_error, the test against the same-integrator solution)
+    let time_step_share = same_integrator.as_ref().map(|_| {
+        (
+            max(&err_integration, def.model.n_dofs()),
+            max(&err_same, def.model.n_dofs()),
         )
     });
     // As offline: an error against the reference beyond 100 % is a diverged run.
@@ -348,11 +371,15 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         obj.insert("lab".into(), l.json());
     }
     if let (Some((scheme, n_dofs, u, f)), Some(obj)) = (reference_errors, summary.as_object_mut()) {
-        obj.insert(
-            "reference".into(),
-            serde_json::json!({ "scheme": scheme, "n_dofs": n_dofs,
-                "max_displacement_error": u, "max_force_error": f }),
-        );
+        let mut r = serde_json::json!({ "scheme": scheme, "n_dofs": n_dofs,
+            "max_displacement_error": u, "max_force_error": f });
+        if let (Some((integration, against)), Some(o)) = (time_step_share, r.as_object_mut()) {
+            o.insert(
+                "same_integrator".into(),
+                serde_json::json!({ "max_displacement_error": against, "integration_error": integration }),
+            );
+        }
+        obj.insert("reference".into(), r);
     }
     write_json(&summary_path, &summary)?;
     // The full report with the latency histogram goes to a file; stdout gets the statistics.
@@ -385,6 +412,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         );
         if let Some((scheme, _, u, f)) = reference_errors {
             crate::run::print_reference_error(scheme, u, f);
+            if let Some((integration, against)) = time_step_share {
+                crate::run::print_time_step_share(&def.integrator.name, integration, against);
+            }
         }
         if let Some(l) = &lab {
             println!("  {}", substep::lab::LabStats::summary_line(&l.json()));

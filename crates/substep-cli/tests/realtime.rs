@@ -108,6 +108,17 @@ fn realtime_run_equals_offline_and_reports_latency() {
         );
     }
     assert_eq!(summary["reference"]["scheme"], offline["reference"]["scheme"]);
+    // … and the time step's share of them (the same-integrator reference).
+    for key in ["integration_error", "max_displacement_error"] {
+        let (a, b) = (
+            offline["reference"]["same_integrator"][key].as_f64().unwrap(),
+            summary["reference"]["same_integrator"][key].as_f64().unwrap(),
+        );
+        assert!(
+            a > 1e-5 && (a - b).abs() <= 1e-6 * a,
+            "same_integrator.{key}: offline {a}, real time {b}"
+        );
+    }
 }
 
 /// `stability = "stop"` in a real-time run: the indicator on the writer thread raises the same
