@@ -90,17 +90,14 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         substep::io::Reference::new(def)?.filter(|r| r.n_dofs() <= substep::io::run::EXACT_REFERENCE_MAX_DOFS);
     // Beside the exact reference, as offline, the same model with the test's own integrator
     // (`reference.same_integrator`: the time step's share of the error).
-    let mut same_integrator = match &reference {
-        Some(r) if r.scheme() == "exact" => substep::io::Reference::same_integrator(def).ok().flatten(),
-        _ => None,
-    };
+    let mut same_integrator = reference
+        .as_ref()
+        .and_then(|r| substep::run::SameIntegrator::beside(def, r));
     let mut reference_step = 0usize;
     // Errors against it, as offline: per DOF, peak |test − reference| over the peak |reference|.
     let n_c = sub.coupling_dofs.len();
     let mut err_u = substep::run::ErrorTracker::new(def.model.n_dofs());
     let mut err_f = substep::run::ErrorTracker::new(n_c);
-    let mut err_same = substep::run::ErrorTracker::new(def.model.n_dofs());
-    let mut err_integration = substep::run::ErrorTracker::new(def.model.n_dofs());
     // Everything above is validation; no output of an earlier run survives into this one.
     prepare_dir(&out_dir)?;
     let summary_path = out_dir.join("summary.json");
@@ -210,8 +207,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
                 // Only a nonlinear reference can fail, and --realtime refuses nonlinear models.
                 let ag = accel.get(reference_step).copied().unwrap_or(0.0);
                 let _ = reference.step(ag);
-                if let Some(same) = same_integrator.as_mut() {
-                    let _ = same.step(ag);
+                if same_integrator.as_mut().is_some_and(|s| !s.step(ag)) {
+                    same_integrator = None;
                 }
             }
             for &x in reference.u() {
@@ -221,9 +218,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             // The records hold every DOF (no `record_dofs` here), as the reference does.
             err_u.update(&r.u, reference.u());
             err_f.update(&r.coupling_force, reference.coupling_force());
-            if let Some(same) = same_integrator.as_ref() {
-                err_same.update(&r.u, same.u());
-                err_integration.update(same.u(), reference.u());
+            if let Some(same) = same_integrator.as_mut() {
+                same.record(&r.u, reference.u());
             }
         }
         if indicator_columns && let Some(m) = live.indicator() {
@@ -271,27 +267,10 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     write_json(&realtime_path, &rt)?;
     // The largest errors against the reference (the offline summary's keys; its per-DOF
     // details are in the offline run's summary).
-    let max = |t: &substep::run::ErrorTracker, n: usize| {
-        (0..n)
-            .map(|k| t.stats(k).peak_error)
-            .filter(|x| x.is_finite())
-            .fold(0.0, f64::max)
-    };
-    let reference_errors = reference.as_ref().map(|r| {
-        (
-            r.scheme(),
-            r.n_dofs(),
-            max(&err_u, def.model.n_dofs()),
-            max(&err_f, n_c),
-        )
-    });
-    // (integration_error, the test against the same-integrator solution)
-    let time_step_share = same_integrator.as_ref().map(|_| {
-        (
-            max(&err_integration, def.model.n_dofs()),
-            max(&err_same, def.model.n_dofs()),
-        )
-    });
+    let reference_errors = reference
+        .as_ref()
+        .map(|r| (r.scheme(), r.n_dofs(), err_u.max_peak_error(), err_f.max_peak_error()));
+    let time_step_share = same_integrator.as_ref().map(substep::run::SameIntegrator::summary);
     // As offline: an error against the reference beyond 100 % is a diverged run.
     let mut failure = failure;
     let overall = err_u.overall_peak_error();
@@ -373,11 +352,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     if let (Some((scheme, n_dofs, u, f)), Some(obj)) = (reference_errors, summary.as_object_mut()) {
         let mut r = serde_json::json!({ "scheme": scheme, "n_dofs": n_dofs,
             "max_displacement_error": u, "max_force_error": f });
-        if let (Some((integration, against)), Some(o)) = (time_step_share, r.as_object_mut()) {
-            o.insert(
-                "same_integrator".into(),
-                serde_json::json!({ "max_displacement_error": against, "integration_error": integration }),
-            );
+        if let (Some(split), Some(o)) = (&time_step_share, r.as_object_mut()) {
+            o.insert("same_integrator".into(), serde_json::json!(split));
         }
         obj.insert("reference".into(), r);
     }
@@ -412,8 +388,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         );
         if let Some((scheme, _, u, f)) = reference_errors {
             crate::run::print_reference_error(scheme, u, f);
-            if let Some((integration, against)) = time_step_share {
-                crate::run::print_time_step_share(&def.integrator.name, integration, against);
+            if let Some(split) = &time_step_share {
+                crate::run::print_time_step_share(&def.integrator.name, split);
             }
         }
         if let Some(l) = &lab {

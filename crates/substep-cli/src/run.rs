@@ -103,12 +103,12 @@ pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, m
 }
 
 /// The summary's line on the time step's share of the error (with the exact reference).
-pub(crate) fn print_time_step_share(scheme: &str, integration_error: f64, against_it: f64) {
+pub(crate) fn print_time_step_share(scheme: &str, split: &substep::run::SameIntegratorSummary) {
     println!(
         "    the time step alone: {} (the assembled structure integrated with this test's {scheme} scheme and Δt \
          vs exact); the substructure test vs that solution: {}",
-        percent(integration_error),
-        percent(against_it)
+        percent(split.integration_error),
+        percent(split.max_displacement_error)
     );
 }
 
@@ -774,7 +774,7 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
         if let Some(r) = &summary.reference {
             print_reference_error(r.scheme, r.max_displacement_error, r.max_force_error);
             if let Some(s) = &r.same_integrator {
-                print_time_step_share(&summary.scheme, s.integration_error, s.max_displacement_error);
+                print_time_step_share(&summary.scheme, s);
             }
         } else if let Some(why) = substep::io::Reference::unavailable(&def) {
             println!("  no reference solution: {why}");

@@ -270,6 +270,53 @@ fn extra_values(sim: &Simulation, groups: &[&str], out: &mut [f64]) {
     }
 }
 
+/// The assembled structure integrated with the test's own scheme beside the exact reference
+/// ([`Reference::same_integrator`]), and the two errors of [`SameIntegratorSummary`]: the test
+/// against it, it against the exact solution. Stepped between the test's steps (offline in the
+/// run loop, in a real-time run on the writer thread); allocates nothing after
+/// [`SameIntegrator::beside`].
+pub struct SameIntegrator {
+    reference: Reference,
+    test_error: ErrorTracker,
+    integration_error: ErrorTracker,
+}
+
+impl SameIntegrator {
+    /// Beside `exact` when it is the exact reference; `None` otherwise, and when the
+    /// same-integrator reference cannot be built — an extra, never a reason to refuse a test.
+    pub fn beside(def: &TestDefinition, exact: &Reference) -> Option<Self> {
+        if exact.scheme() != "exact" {
+            return None;
+        }
+        let reference = Reference::same_integrator(def).ok().flatten()?;
+        let n = def.model.n_dofs();
+        Some(Self {
+            reference,
+            test_error: ErrorTracker::new(n),
+            integration_error: ErrorTracker::new(n),
+        })
+    }
+
+    /// Advance with the ground acceleration at the end of the step; `false` if the step failed
+    /// (a linear Newmark step does not; the caller then drops the split).
+    pub fn step(&mut self, ag_next: f64) -> bool {
+        self.reference.step(ag_next).is_ok()
+    }
+
+    /// The test's displacements `u` and the exact reference's `exact_u` at the current step.
+    pub fn record(&mut self, u: &[f64], exact_u: &[f64]) {
+        self.test_error.update(u, self.reference.u());
+        self.integration_error.update(self.reference.u(), exact_u);
+    }
+
+    pub fn summary(&self) -> SameIntegratorSummary {
+        SameIntegratorSummary {
+            max_displacement_error: self.test_error.max_peak_error(),
+            integration_error: self.integration_error.max_peak_error(),
+        }
+    }
+}
+
 /// Peaks and errors against the reference, gathered between steps for the summary.
 struct SummaryRecorder {
     coupling: Vec<usize>,
@@ -283,9 +330,6 @@ struct SummaryRecorder {
     err_u: ErrorTracker,
     err_f: ErrorTracker,
     nrms_u: Vec<ErrorAccumulator>,
-    /// The test against the same-integrator solution, and that solution against the exact one.
-    err_same: ErrorTracker,
-    err_integration: ErrorTracker,
 }
 
 impl SummaryRecorder {
@@ -302,12 +346,10 @@ impl SummaryRecorder {
             err_u: ErrorTracker::new(n),
             err_f: ErrorTracker::new(n_c),
             nrms_u: vec![ErrorAccumulator::new(); n],
-            err_same: ErrorTracker::new(n),
-            err_integration: ErrorTracker::new(n),
         }
     }
 
-    fn record(&mut self, sim: &Simulation, reference: Option<&Reference>, same_integrator: Option<&Reference>) {
+    fn record(&mut self, sim: &Simulation, reference: Option<&Reference>) {
         let t = sim.time();
         let s = sim.state();
         self.peak_u.update(s.u.as_slice(), t);
@@ -324,14 +366,10 @@ impl SummaryRecorder {
                 acc.push(u, u_ref);
             }
             self.err_f.update(&self.force, r.coupling_force());
-            if let Some(same) = same_integrator {
-                self.err_same.update(s.u.as_slice(), same.u());
-                self.err_integration.update(same.u(), r.u());
-            }
         }
     }
 
-    fn reference_summary(&self, r: &Reference, same_integrator: bool) -> ReferenceSummary {
+    fn reference_summary(&self, r: &Reference, same_integrator: Option<&SameIntegrator>) -> ReferenceSummary {
         let dofs: Vec<DofError> = (0..self.peak_u.0.len())
             .map(|k| DofError {
                 dof: k + 1,
@@ -358,13 +396,7 @@ impl SummaryRecorder {
             max_force_error: max(&mut coupling.iter().map(|c| c.force.peak_error)),
             dofs,
             coupling,
-            same_integrator: same_integrator.then(|| {
-                let n = self.peak_u.0.len();
-                SameIntegratorSummary {
-                    max_displacement_error: max(&mut (0..n).map(|k| self.err_same.stats(k).peak_error)),
-                    integration_error: max(&mut (0..n).map(|k| self.err_integration.stats(k).peak_error)),
-                }
-            }),
+            same_integrator: same_integrator.map(SameIntegrator::summary),
         }
     }
 }
@@ -404,7 +436,7 @@ pub struct Run<'d> {
     sim: Simulation,
     reference: Option<Reference>,
     /// Beside an exact reference: the same structure with the test's own integrator.
-    same_integrator: Option<Reference>,
+    same_integrator: Option<SameIntegrator>,
     engineering: Option<EngineeringRecorder>,
     /// Computed after the loop (a long record's Fourier amplitude takes a while; a remote site
     /// should not wait for it between connecting and the first step).
@@ -427,11 +459,7 @@ impl<'d> Run<'d> {
     pub fn new(def: &'d TestDefinition) -> Result<Self> {
         let sim = Simulation::new(def)?;
         let reference = Reference::new(def)?;
-        // An extra, never a reason to refuse a test: without it the summary has no split.
-        let same_integrator = match &reference {
-            Some(r) if r.scheme() == "exact" => Reference::same_integrator(def).ok().flatten(),
-            _ => None,
-        };
+        let same_integrator = reference.as_ref().and_then(|r| SameIntegrator::beside(def, r));
         let engineering = EngineeringRecorder::new(def);
         let sub = def.substructure.as_ref();
         let stability = stability_monitor(def, sub.and_then(SubstructureDefinition::stability_settings))?;
@@ -565,7 +593,10 @@ impl<'d> Run<'d> {
                 engineering: engineering.as_ref().map(|e| e.row(sim.time())),
                 indicator: stability.as_ref(),
             });
-            recorder.record(sim, reference.as_ref(), same_integrator.as_ref());
+            recorder.record(sim, reference.as_ref());
+            if let (Some(same), Some(r)) = (same_integrator.as_mut(), reference.as_ref()) {
+                same.record(s.u.as_slice(), r.u());
+            }
             if !diverging && let Some(reason) = runaway(s.u.as_slice()) {
                 // A runaway response: ramp the actuators down where the run can, else end here.
                 diverging = true;
@@ -624,9 +655,8 @@ impl<'d> Run<'d> {
                 failure = Some(e);
                 break;
             }
-            // (A linear Newmark step cannot fail; if it did, the summary would only lose the split.)
-            if let Some(r) = same_integrator.as_mut()
-                && r.step(sim.ground_acceleration(i + 1)).is_err()
+            if let Some(same) = same_integrator.as_mut()
+                && !same.step(sim.ground_acceleration(i + 1))
             {
                 *same_integrator = None;
             }
@@ -660,7 +690,7 @@ impl<'d> Run<'d> {
         let done = sim.steps_done();
         let reference_summary = reference
             .as_ref()
-            .map(|r| recorder.reference_summary(r, same_integrator.is_some()));
+            .map(|r| recorder.reference_summary(r, same_integrator.as_ref()));
         let overall = recorder.err_u.overall_peak_error();
         // NaN (a reference at rest throughout): nothing to judge against; a runaway is caught above.
         if failure.is_none() && overall > DIVERGED_ERROR {

@@ -84,6 +84,16 @@ impl ErrorTracker {
         if peak > 0.0 { err / peak } else { f64::NAN }
     }
 
+    /// The largest over the components of each one's peak error relative to its own reference
+    /// peak (components whose reference stays at zero left out; 0 if none): the summary's
+    /// `max_displacement_error` statistic.
+    pub fn max_peak_error(&self) -> f64 {
+        (0..self.max_err.len())
+            .map(|k| self.stats(k).peak_error)
+            .filter(|x| x.is_finite())
+            .fold(0.0, f64::max)
+    }
+
     /// Normalised errors of component `k` (NaN if the reference is identically zero).
     pub fn stats(&self, k: usize) -> ErrorStats {
         let peak = self.max_ref[k];
