@@ -3,7 +3,7 @@
 //! benchmark call the library functions the CLI calls. The Python layer (`substep/__init__.py`)
 //! wraps the arrays in a `Result`.
 //!
-//! Long calls release the GIL; a run looks at Python's signals every [`SIGNAL_CHECK`] so that
+//! Long calls release the GIL; a run looks at Python's signals every `SIGNAL_CHECK` (100 ms) so that
 //! Ctrl-C interrupts it (it stops between two steps and raises `KeyboardInterrupt`).
 
 mod analyze;
