@@ -56,21 +56,17 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         )
         .into());
     };
-    if def.hysteresis.is_some() {
-        return Err(substep::Error::invalid(
-            format!("{config_name}: structure.storeys.hysteresis"),
-            "--realtime overlaps each step's solve with the sub-steps of the step before, which needs a \
-             linear numerical substructure; run the nonlinear test without --realtime",
-        )
-        .into());
-    }
     let mut def = def.clone();
     let mut live = crate::monitor::live::Live::start(args, &mut def, &config_name, true)?;
     let def = &def;
     let sub = def.substructure.as_ref().expect("checked above");
     let accel = def.ground_motion.accel.clone();
     let load0 = -def.model.effective_mass_vector() * accel[0];
-    let test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
+    let mut test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
+    // Hysteretic springs: the runner's one-sub-step pipeline (docs/realtime.md).
+    if let Some(h) = &def.hysteresis {
+        test.controller.set_springs(h.build(def.model.n_dofs())?);
+    }
     let max_missed = match args.max_missed {
         Some(x) => substep::io::config::check_max_missed("--max-missed", x)?,
         None => def.realtime.max_missed,
@@ -143,6 +139,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let coupling = sub.coupling_dofs.clone();
     let mut warnings: Vec<String> = Vec::new();
     let mut runaway: Option<String> = None;
+    // A nonlinear reference whose Newton iteration fails ends the test (as offline), with the
+    // controlled ramp-down.
+    let mut reference_failure: Option<substep::Error> = None;
     let sink = |r: &substep::realtime::StepRecordOwned| {
         let ag = accel.get(r.step).copied().unwrap_or(0.0);
         if let Some(w) = live.record_realtime(r, ag, &coupling) {
@@ -204,9 +203,13 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             // Records can be sparser than the steps (dropped when the writer falls behind).
             while reference_step < r.step {
                 reference_step += 1;
-                // Only a nonlinear reference can fail, and --realtime refuses nonlinear models.
                 let ag = accel.get(reference_step).copied().unwrap_or(0.0);
-                let _ = reference.step(ag);
+                if reference_failure.is_none()
+                    && let Err(e) = reference.step(ag)
+                {
+                    stop.request(format!("the reference solution failed at step {reference_step}: {e}"));
+                    reference_failure = Some(e);
+                }
                 if same_integrator.as_mut().is_some_and(|s| !s.step(ag)) {
                     same_integrator = None;
                 }
@@ -271,8 +274,12 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         .as_ref()
         .map(|r| (r.scheme(), r.n_dofs(), err_u.max_peak_error(), err_f.max_peak_error()));
     let time_step_share = same_integrator.as_ref().map(substep::run::SameIntegrator::summary);
-    // As offline: an error against the reference beyond 100 % is a diverged run.
-    let mut failure = failure;
+    // As offline: an error against the reference beyond 100 % is a diverged run; a failed
+    // reference is the run's failure (the stop it asked for names it too).
+    let mut failure = match (reference_failure, failure) {
+        (Some(e), Some(substep::Error::Stopped { .. }) | None) => Some(e),
+        (_, f) => f,
+    };
     let overall = err_u.overall_peak_error();
     if failure.is_none() && overall > substep::run::DIVERGED_ERROR {
         failure = Some(substep::Error::Diverged {

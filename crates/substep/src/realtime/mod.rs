@@ -276,6 +276,10 @@ pub struct RealtimeReport {
     pub completion: LatencyHistogram,
     /// Numerical thread per step: from the step's last forces to the next `W` posted.
     pub numerical: LatencyHistogram,
+    /// A nonlinear substructure's one-sub-step pipeline: from `f^{(k−1)}` posted (the last
+    /// sub-step begins) to the next predictor's coupling rows posted; it has to stay below one
+    /// sub-step `Δτ`. Empty for a linear substructure.
+    pub pipeline: LatencyHistogram,
     pub records_written: u64,
     pub records_dropped: u64,
     pub memory_lock: RtSetting,
@@ -293,6 +297,9 @@ impl RealtimeReport {
     }
     pub fn numerical_summary(&self) -> LatencySummary {
         (&self.numerical).into()
+    }
+    pub fn pipeline_summary(&self) -> LatencySummary {
+        (&self.pipeline).into()
     }
 }
 
@@ -322,6 +329,9 @@ impl fmt::Display for RealtimeReport {
         )?;
         writeln!(f, "completion:       {}", self.completion_summary())?;
         writeln!(f, "numerical step:   {}", self.numerical_summary())?;
+        if self.pipeline.count() > 0 {
+            writeln!(f, "springs pipeline: {} (budget: one sub-step)", self.pipeline_summary())?;
+        }
         writeln!(
             f,
             "records: {} written, {} dropped; mlockall: {}; SCHED_FIFO: {} (numerical thread: {})",

@@ -43,6 +43,10 @@ pub struct OverlapPredictor {
     h: DMatrix<f64>,
     w: DVector<f64>,
     x: DVector<f64>,
+    /// Nonlinear substructure: `K̂⁻¹ d(ũ)` and the coupling rows `W_c − G_{:,c}ᵀ d` posted to the
+    /// real-time thread.
+    deviation: DVector<f64>,
+    w_c: Vec<f64>,
 }
 
 impl OverlapPredictor {
@@ -52,6 +56,8 @@ impl OverlapPredictor {
             h: controller.overlap_gain(),
             w: DVector::zeros(n),
             x: DVector::zeros(n),
+            deviation: DVector::zeros(if controller.is_nonlinear() { n } else { 0 }),
+            w_c: vec![0.0; controller.n_coupling()],
         }
     }
 
@@ -69,6 +75,31 @@ impl OverlapPredictor {
     /// `W` of the last [`OverlapPredictor::precompute`].
     pub fn known(&self) -> &DVector<f64> {
         &self.w
+    }
+
+    /// Nonlinear substructure, once the springs are at the next step's `ũ`
+    /// ([`SubstepController::close_kinematics_with`]): the coupling rows of the known part with
+    /// the springs' share, `W_c − [K̂⁻¹ d]_c`, for the real-time thread. `K̂` is symmetric, so the
+    /// coupling rows of `K̂⁻¹` are the columns of `G_{:,c}`: `[K̂⁻¹ d]_c = G_{:,c}ᵀ d`, `n · n_c`
+    /// work instead of a solve — the part that has to fit one sub-step.
+    pub fn deviation_coupling(&mut self, controller: &SubstepController) -> &[f64] {
+        let g = controller.gain_columns();
+        let d = controller.deviation().expect("a nonlinear substructure");
+        for (i, &c) in controller.coupling_dofs().iter().enumerate() {
+            self.w_c[i] = self.w[c] - g.column(i).dot(d);
+        }
+        &self.w_c
+    }
+
+    /// Then, off the critical path: `W ← W − K̂⁻¹ d` (one solve), its coupling rows set to the
+    /// values [`deviation_coupling`](Self::deviation_coupling) posted, so that both threads
+    /// assemble the next predictor from the same numbers.
+    pub fn subtract_deviation(&mut self, controller: &mut SubstepController) {
+        controller.deviation_response(&mut self.deviation);
+        self.w -= &self.deviation;
+        for (i, &c) in controller.coupling_dofs().iter().enumerate() {
+            self.w[c] = self.w_c[i];
+        }
     }
 
     /// Step 2, after `finish_step`: the next predictor `W + H f^{(k−1)} + G_{:,c} f_u` with

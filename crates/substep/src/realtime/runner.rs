@@ -13,7 +13,7 @@ use crate::substructure::{
 };
 use nalgebra::DVector;
 use std::fmt;
-use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::thread::{self, Thread};
 use std::time::{Duration, Instant};
 
@@ -205,9 +205,19 @@ impl RealtimeRunner {
             true_seen: false,
             holds: 0,
         });
+        // A nonlinear substructure's pipeline: f^{(k−1)} and d^{(k)} of each step, as soon as
+        // sub-step k − 1 has been measured.
+        let mut to_numerical_mid = SpscRing::new(2, || MidMsg {
+            step: 0,
+            posted: Instant::now(),
+            before: vec![0.0; n_c],
+            command: vec![0.0; n_c],
+        });
+        let nonlinear = self.test.controller.is_nonlinear();
         let (mut record_tx, mut record_rx) = records.split();
         let (w_tx, w_rx) = to_rt.split();
         let (end_tx, end_rx) = to_numerical.split();
+        let (mid_tx, mid_rx) = to_numerical_mid.split();
 
         if opts.record_every > 0 {
             let initial = self.test.record();
@@ -231,8 +241,8 @@ impl RealtimeRunner {
         } else {
             RtSetting::NotRequested
         };
-        let shared = Shared::default();
         let started = Instant::now();
+        let shared = Shared::new(started);
         let t0 = started
             + opts
                 .start_delay
@@ -252,6 +262,9 @@ impl RealtimeRunner {
             command: vec![0.0; n_c],
             w_tx,
             end_rx,
+            mid_rx,
+            nonlinear,
+            pipeline: hist(),
             record_tx,
             record_every: opts.record_every,
             delays: &opts.numerical_delay,
@@ -279,6 +292,8 @@ impl RealtimeRunner {
                 t0,
                 w_rx,
                 end_tx,
+                mid_tx,
+                nonlinear,
                 worker: numerical.thread().clone(),
                 shared: &shared,
                 stop,
@@ -331,7 +346,7 @@ impl RealtimeRunner {
             // The returned test runs offline again.
             self.test.site.pace_ramp(None);
         }
-        let (numerical_hist, numerical_fifo, numerical_result) = numerical_out;
+        let (numerical_hist, pipeline, numerical_fifo, numerical_result) = numerical_out;
         let (stats, rt_result) = rt_out;
         let wall_time = started.elapsed();
         let report = RealtimeReport {
@@ -350,6 +365,7 @@ impl RealtimeRunner {
             histogram: stats.wake,
             completion: stats.completion,
             numerical: numerical_hist,
+            pipeline,
             records_written,
             records_dropped: records.overflows(),
             memory_lock,
@@ -382,7 +398,6 @@ fn join<T>(r: thread::Result<T>) -> T {
 const FROM_RT: u8 = 1;
 const FROM_NUMERICAL: u8 = 2;
 
-#[derive(Default)]
 struct Shared {
     /// A thread failed; the other stops.
     stop: AtomicBool,
@@ -390,9 +405,45 @@ struct Shared {
     first_error: AtomicU8,
     rt_done: AtomicBool,
     numerical_done: AtomicBool,
+    /// When the current step's last sub-step is due, in ns after `epoch` (set by the real-time
+    /// thread at each step's start): the numerical thread of a nonlinear substructure sleeps
+    /// until just before it and then polls, instead of waiting to be woken (a futex wake-up
+    /// takes up to milliseconds on a busy machine; the pipeline has one sub-step).
+    epoch: Instant,
+    last_substep_due: AtomicU64,
 }
 
 impl Shared {
+    fn new(epoch: Instant) -> Self {
+        Self {
+            stop: AtomicBool::new(false),
+            first_error: AtomicU8::new(0),
+            rt_done: AtomicBool::new(false),
+            numerical_done: AtomicBool::new(false),
+            epoch,
+            last_substep_due: AtomicU64::new(0),
+        }
+    }
+
+    fn set_last_substep_due(&self, at: Instant) {
+        let ns = at.saturating_duration_since(self.epoch).as_nanos() as u64;
+        self.last_substep_due.store(ns, Ordering::Release);
+    }
+
+    /// Wait for the next message of a nonlinear substructure's pipeline: sleep until `window`
+    /// before the last sub-step is due, then poll; after it, poll with short parks.
+    fn pace_until_last_substep(&self, window: Duration) {
+        let due = self.epoch + Duration::from_nanos(self.last_substep_due.load(Ordering::Acquire));
+        let now = Instant::now();
+        if due > now + window {
+            thread::park_timeout((due - now - window).min(Duration::from_millis(5)));
+        } else if now < due + window {
+            std::hint::spin_loop();
+        } else {
+            thread::park_timeout(Duration::from_micros(100));
+        }
+    }
+
     fn fail(&self, who: u8) {
         let _ = self
             .first_error
@@ -417,6 +468,19 @@ impl Drop for SetOnDrop<'_> {
 struct PredictorMsg {
     step: usize,
     w_c: Vec<f64>,
+}
+
+/// How long before the last sub-step is due the numerical thread of a nonlinear substructure
+/// starts polling for `f^{(k−1)}` (covers the sleep's overshoot).
+const PIPELINE_POLL_WINDOW: Duration = Duration::from_micros(200);
+
+/// Real-time → numerical (nonlinear substructure): `f^{(k−1)}` and `d^{(k)}` of step `step`,
+/// posted when sub-step `k` starts.
+struct MidMsg {
+    step: usize,
+    posted: Instant,
+    before: Vec<f64>,
+    command: Vec<f64>,
 }
 
 /// Real-time → numerical: the end of step `step`.
@@ -457,6 +521,11 @@ struct Numerical<'a> {
     command: Vec<f64>,
     w_tx: Producer<'a, PredictorMsg>,
     end_rx: Consumer<'a, EndMsg>,
+    mid_rx: Consumer<'a, MidMsg>,
+    /// Hysteretic springs: the one-sub-step pipeline (docs/realtime.md).
+    nonlinear: bool,
+    /// From `f^{(k−1)}` posted to the next predictor's coupling rows posted (nonlinear only).
+    pipeline: LatencyHistogram,
     record_tx: Producer<'a, StepRecordOwned>,
     record_every: usize,
     delays: &'a [(usize, Duration)],
@@ -466,7 +535,7 @@ struct Numerical<'a> {
 }
 
 impl Numerical<'_> {
-    fn run(mut self) -> (LatencyHistogram, RtSetting, Result<()>) {
+    fn run(mut self) -> (LatencyHistogram, LatencyHistogram, RtSetting, Result<()>) {
         let shared = self.shared;
         let _done = SetOnDrop(&shared.numerical_done, None);
         let fifo = self.fifo_priority.map_or(RtSetting::NotRequested, os::set_fifo);
@@ -474,7 +543,43 @@ impl Numerical<'_> {
         if result.is_err() {
             self.shared.fail(FROM_NUMERICAL);
         }
-        (self.hist, fifo, result)
+        (self.hist, self.pipeline, fifo, result)
+    }
+
+    /// Nonlinear substructure, step `n`: once `f^{(k−1)}` and `d^{(k)}` are in, the state of the
+    /// step's end, the springs at the next predictor, the next predictor's coupling rows to the
+    /// real-time thread (within the last sub-step), then the rest of `W`. Returns the time it
+    /// took, or `None` if the run ended.
+    fn pipeline_step(&mut self, n: usize) -> Option<Duration> {
+        let more = n + 1 < self.n_steps;
+        let (controller, shared) = (&mut *self.controller, self.shared);
+        let posted = loop {
+            let finished = shared.stop.load(Ordering::Acquire) || shared.rt_done.load(Ordering::Acquire);
+            let got = self.mid_rx.try_pop_with(|m| {
+                debug_assert_eq!(m.step, n);
+                controller.close_kinematics_with(&m.before, &m.command, more);
+                m.posted
+            });
+            if let Some(p) = got {
+                break p;
+            }
+            if finished {
+                return None;
+            }
+            shared.pace_until_last_substep(PIPELINE_POLL_WINDOW);
+        };
+        let start = Instant::now();
+        if more {
+            let w_c = self.overlap.deviation_coupling(self.controller);
+            let sent = self.w_tx.try_push_with(|msg| {
+                msg.step = n + 1;
+                msg.w_c.copy_from_slice(w_c);
+            });
+            debug_assert!(sent, "predictor mailbox full (protocol violated)");
+            self.pipeline.record(posted.elapsed());
+            self.overlap.subtract_deviation(self.controller);
+        }
+        Some(start.elapsed())
     }
 
     fn steps(&mut self) -> Result<()> {
@@ -482,13 +587,25 @@ impl Numerical<'_> {
             self.precompute_and_post(1);
         }
         for n in 0..self.n_steps {
+            let mut busy = Duration::ZERO;
+            if self.nonlinear {
+                match self.pipeline_step(n) {
+                    Some(d) => busy = d,
+                    None => return Ok(()),
+                }
+            }
+            let nonlinear = self.nonlinear;
             // Wait for the last forces of step n.
             let holds = loop {
                 // Read the flags before popping: a message pushed before they were set is seen.
                 let finished = self.shared.stop.load(Ordering::Acquire) || self.shared.rt_done.load(Ordering::Acquire);
                 let got = self.end_rx.try_pop_with(|m| {
                     debug_assert_eq!(m.step, n);
-                    self.controller.set_substep_results(&m.before, &m.last, &m.command);
+                    if nonlinear {
+                        self.controller.close_with_last_force(&m.last);
+                    } else {
+                        self.controller.set_substep_results(&m.before, &m.last, &m.command);
+                    }
                     self.controller
                         .set_true_results(m.true_seen.then_some((&m.true_before[..], &m.true_last[..])));
                     self.before.copy_from_slice(&m.before);
@@ -505,7 +622,9 @@ impl Numerical<'_> {
                 thread::park_timeout(Duration::from_millis(5));
             };
             let received = Instant::now();
-            self.controller.finish_step();
+            if !nonlinear {
+                self.controller.finish_step();
+            }
             let step = self.offset + n + 1;
             if !self.controller.state().is_finite() {
                 return Err(diverged(step, self.controller.dt()));
@@ -536,13 +655,14 @@ impl Numerical<'_> {
             if n + 2 < self.n_steps {
                 self.precompute_and_post(n + 2);
             }
-            self.hist.record(received.elapsed());
+            self.hist.record(received.elapsed() + busy);
         }
         Ok(())
     }
 
     /// `W` of step `m` (whose predictor needs `f_l` at `t_{m+1}`), coupling rows to the
-    /// real-time thread. The controller is inside step `m − 1`.
+    /// real-time thread (a nonlinear substructure's go with the springs' share, in
+    /// [`Numerical::pipeline_step`]). The controller is inside step `m − 1`.
     fn precompute_and_post(&mut self, m: usize) {
         if let Some(&(_, d)) = self.delays.iter().find(|(s, _)| *s == m) {
             thread::sleep(d);
@@ -550,6 +670,9 @@ impl Numerical<'_> {
         self.load.copy_from(self.mass_influence);
         self.load.scale_mut(-self.ag[m + 1]);
         self.overlap.precompute(self.controller, &self.load);
+        if self.nonlinear {
+            return;
+        }
         let w = self.overlap.known();
         let coupling = self.controller.coupling_dofs();
         let posted = self.w_tx.try_push_with(|msg| {
@@ -594,6 +717,9 @@ struct RealTime<'a> {
     t0: Instant,
     w_rx: Consumer<'a, PredictorMsg>,
     end_tx: Producer<'a, EndMsg>,
+    mid_tx: Producer<'a, MidMsg>,
+    /// Post `f^{(k−1)}`, `d^{(k)}` when the last sub-step starts (hysteretic springs).
+    nonlinear: bool,
     worker: Thread,
     shared: &'a Shared,
     stop: &'a StopHandle,
@@ -666,12 +792,27 @@ impl RealTime<'_> {
             if n > 0 {
                 if !self.coupling.has_next() {
                     sleeper.sleep_until(self.t0 + step_start);
-                    if !self.take_predictor() {
+                    if !self.take_predictor() && self.nonlinear {
+                        // The springs' share arrives one pipeline latency (tens of µs) after the
+                        // last sub-step began; a real-time thread that woke late for that
+                        // sub-step (catching up) gets here first. Half a sub-step of grace
+                        // before the late policy, whose hold sub-step would change the test.
+                        let grace = Instant::now() + Duration::from_nanos((dt_ns / (2 * k as u128)) as u64);
+                        while !self.coupling.has_next() && Instant::now() < grace {
+                            std::hint::spin_loop();
+                            self.take_predictor();
+                        }
+                    }
+                    if !self.coupling.has_next() {
                         self.stats.late_steps += 1;
                         holds = self.late_step(&sleeper, n, step_start, dt_ns, (ag_i, ag_i))?;
                     }
                 }
                 self.coupling.begin_next();
+            }
+            if self.nonlinear {
+                let last = Duration::from_nanos(self.slot_offset(dt_ns, holds, k - 1));
+                self.shared.set_last_substep_due(self.t0 + step_start + last);
             }
             let dtau_slot = if holds == 0 {
                 dtau
@@ -698,7 +839,20 @@ impl RealTime<'_> {
                 }
                 let end = self.t0 + step_start + Duration::from_nanos(self.slot_offset(dt_ns, holds, j));
                 let ag = crate::substructure::substep_ground_acceleration(ag_i, ag_next, j, k);
-                let command = self.coupling.next_command();
+                self.coupling.next_command();
+                let command = self.coupling.command();
+                if j == k && self.nonlinear {
+                    let (before, posted) = (self.coupling.force_last(), Instant::now());
+                    // Never full by the protocol (one message per step, read before the step's end).
+                    let sent = self.mid_tx.try_push_with(|m| {
+                        m.step = n;
+                        m.posted = posted;
+                        m.before.copy_from_slice(before);
+                        m.command.copy_from_slice(command);
+                    });
+                    debug_assert!(sent, "pipeline mailbox full (protocol violated)");
+                    self.worker.unpark();
+                }
                 if let Err(e) = self
                     .site
                     .substep(command, ag, dtau_slot, &mut self.force, &mut self.displacement)

@@ -279,6 +279,15 @@ impl SubstepController {
     /// compensation for the next step.
     pub fn finish_step(&mut self) {
         debug_assert_eq!(self.substep, self.k_sub, "finish_step before all sub-steps");
+        self.close_kinematics();
+        self.close_forces();
+    }
+
+    /// The first half of [`finish_step`](Self::finish_step): the state `u_{i+1}`, `v_{i+1}`,
+    /// `a_{i+1}`, which needs only `f^{(k−1)}` and the last command `d^{(k)}` — known once
+    /// sub-step `k − 1` has been measured, one sub-step before the step ends (the real-time
+    /// runner evaluates a nonlinear substructure's springs then, docs/realtime.md).
+    fn close_kinematics(&mut self) {
         // u_{i+1} = x̂ + G_{:,c} f_close with f_close = f^{(k−1)} (or the estimate f̂^{(k)});
         // on the coupling DOFs this is d^{(k)}.
         self.select_closing_force();
@@ -289,6 +298,11 @@ impl SubstepController {
         }
         self.core.update_kinematics(&self.state, &mut self.next);
         std::mem::swap(&mut self.state, &mut self.next);
+    }
+
+    /// The second half of [`finish_step`](Self::finish_step), with `f^{(k)}`: the error force
+    /// and the compensation force for the next step.
+    fn close_forces(&mut self) {
         for k in 0..self.coupling.len() {
             self.error_force[k] = self.force_last[k] - self.est.closing_force[k];
         }
@@ -443,6 +457,52 @@ impl SubstepController {
     /// The last noise-free force the controller was given (zeros before any).
     pub fn true_force_last(&self) -> &[f64] {
         &self.est.true_last
+    }
+
+    /// Whether the numerical substructure has hysteretic springs (the real-time runner then runs
+    /// the one-sub-step pipeline of docs/realtime.md).
+    pub fn is_nonlinear(&self) -> bool {
+        self.nonlinear.is_some()
+    }
+
+    /// The real-time runner's first half of [`finish_step`](Self::finish_step), run as soon as
+    /// sub-step `k − 1` has been measured: the state `u_{i+1}`, `v_{i+1}`, `a_{i+1}` from
+    /// `before = f^{(k−1)}` and the last command `d^{(k)}`; then, if `split` (a next step
+    /// follows), the springs at the next step's displacement predictor `ũ_{i+2}` — what
+    /// [`begin_step`](Self::begin_step) of the next step does first, with the same state, so the
+    /// result is the offline one. [`close_with_last_force`](Self::close_with_last_force) ends
+    /// the step.
+    pub fn close_kinematics_with(&mut self, before: &[f64], last_command: &[f64], split: bool) {
+        self.force_before.copy_from_slice(before);
+        self.command.copy_from_slice(last_command);
+        self.substep = self.k_sub;
+        self.close_kinematics();
+        if split {
+            self.split_nonlinear_part();
+        }
+    }
+
+    /// The second half of [`finish_step`](Self::finish_step) after
+    /// [`close_kinematics_with`](Self::close_kinematics_with): `last = f^{(k)}`, the error force
+    /// and the compensation force.
+    pub fn close_with_last_force(&mut self, last: &[f64]) {
+        self.force_last.copy_from_slice(last);
+        self.close_forces();
+    }
+
+    /// The springs' deviation force `d(ũ)` at the current predictor `ũ` (n; `None` for a linear
+    /// substructure).
+    pub fn deviation(&self) -> Option<&DVector<f64>> {
+        self.nonlinear.as_ref().map(|nl| &nl.deviation)
+    }
+
+    /// `out = K̂⁻¹ d(ũ)`, the springs' share of the predictor (zeros for a linear substructure).
+    pub fn deviation_response(&mut self, out: &mut DVector<f64>) {
+        match &self.nonlinear {
+            Some(nl) => out.copy_from(&nl.deviation),
+            None => out.fill(0.0),
+        }
+        self.core.solve_in_place(out);
     }
 
     /// Step 1 with a predictor assembled elsewhere (`x̂ = W + H f^{(k−1)} + G_{:,c} f_u`, see the
