@@ -103,6 +103,11 @@ pub struct RunArgs {
     /// counts as failed (exit 1); overrides `[realtime] max_missed` (default 0.01 = 1 %)
     #[arg(long, requires = "realtime", value_name = "SHARE")]
     pub max_missed: Option<f64>,
+    /// With --realtime: when the next step's predictor is late, `hold` the actuator (keep the
+    /// wall clock) or `wait` for it (the run equals the offline run); overrides
+    /// `[realtime] late_policy` (default hold)
+    #[arg(long, requires = "realtime", value_name = "POLICY")]
+    pub late_policy: Option<String>,
     /// Serve a live monitor page during the run at ADDR (default: `[monitor] address`, else
     /// 127.0.0.1:8080; see docs/monitor.md)
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "")]

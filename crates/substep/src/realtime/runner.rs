@@ -601,13 +601,15 @@ impl Numerical<'_> {
                 let finished = self.shared.stop.load(Ordering::Acquire) || self.shared.rt_done.load(Ordering::Acquire);
                 let got = self.end_rx.try_pop_with(|m| {
                     debug_assert_eq!(m.step, n);
+                    // The noise-free forces first: closing the forces computes the ideal
+                    // error force from them.
+                    self.controller
+                        .set_true_results(m.true_seen.then_some((&m.true_before[..], &m.true_last[..])));
                     if nonlinear {
                         self.controller.close_with_last_force(&m.last);
                     } else {
                         self.controller.set_substep_results(&m.before, &m.last, &m.command);
                     }
-                    self.controller
-                        .set_true_results(m.true_seen.then_some((&m.true_before[..], &m.true_last[..])));
                     self.before.copy_from_slice(&m.before);
                     self.command.copy_from_slice(&m.command);
                     self.displacement.copy_from_slice(&m.displacement);

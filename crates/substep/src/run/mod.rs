@@ -45,6 +45,13 @@ use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+/// The largest model whose monolithic reference a real-time run integrates beside the test (on
+/// the writer thread, sharing the cores with the numerical thread): a step of a 10³-DOF frame's
+/// reference, Newton included, costs well under a millisecond, a 10⁴-DOF one's is a second full
+/// integration as costly as the test's own. Larger real-time runs record no reference; the
+/// offline run of the same definition has it.
+pub const REALTIME_REFERENCE_MAX_DOFS: usize = 1000;
+
 /// A time rounded to 1 ns, as the CSV files hold it: `i·Δt` without float noise (`19.99`, not
 /// `19.990000000000002`).
 pub fn round_time(t: f64) -> f64 {

@@ -62,7 +62,7 @@ use nalgebra::DMatrix;
 use output::{Format, RawOutput};
 pub use output::{OutputSettings, PLOT_FIGURES, PlotOptions};
 use realtime::RawRealtime;
-pub use realtime::{DEFAULT_MAX_MISSED, RealtimeSettings, check_max_missed, too_many_missed};
+pub use realtime::{DEFAULT_MAX_MISSED, RealtimeSettings, check_max_missed, parse_late_policy, too_many_missed};
 pub use remote::{RemoteDefinition, RemoteProtocol};
 pub(crate) use sensors::RawSensors;
 use serde::Deserialize;

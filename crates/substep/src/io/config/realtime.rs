@@ -2,6 +2,7 @@
 //! as real time.
 
 use crate::error::{Error, Result};
+pub use crate::realtime::LatePolicy;
 use serde::Deserialize;
 
 /// The share of sub-step slots that may miss their deadline before a real-time run counts as
@@ -14,13 +15,32 @@ pub struct RealtimeSettings {
     /// Largest share (0–1) of sub-step slots, holds included, whose work may end after the next
     /// slot's deadline; above it the run failed (exit 1, `"completed": false`).
     pub max_missed: f64,
+    /// What the real-time thread does when the next step's predictor is late: hold the
+    /// actuator (`"hold"`, the default: the test keeps the wall clock) or wait for it and
+    /// re-base the schedule (`"wait"`: the run equals the offline run; for virtual labs and
+    /// quasi-static specimens, docs/realtime.md).
+    pub late_policy: LatePolicy,
 }
 
 impl Default for RealtimeSettings {
     fn default() -> Self {
         Self {
             max_missed: DEFAULT_MAX_MISSED,
+            late_policy: LatePolicy::HoldExtrapolate,
         }
+    }
+}
+
+/// A late policy by its name in `[realtime] late_policy` / `--late-policy`; `what` names the
+/// setting in the message.
+pub fn parse_late_policy(what: &str, name: &str) -> Result<LatePolicy> {
+    match name {
+        "hold" => Ok(LatePolicy::HoldExtrapolate),
+        "wait" => Ok(LatePolicy::Wait),
+        other => Err(Error::invalid(
+            what,
+            format!("must be \"hold\" (keep the wall clock) or \"wait\" (exact, re-based schedule), got {other:?}"),
+        )),
     }
 }
 
@@ -28,6 +48,7 @@ impl Default for RealtimeSettings {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawRealtime {
     pub(crate) max_missed: Option<f64>,
+    pub(crate) late_policy: Option<String>,
 }
 
 impl RawRealtime {
@@ -35,6 +56,9 @@ impl RawRealtime {
         let mut s = RealtimeSettings::default();
         if let Some(x) = self.max_missed {
             s.max_missed = check_max_missed("realtime.max_missed", x)?;
+        }
+        if let Some(name) = &self.late_policy {
+            s.late_policy = parse_late_policy("realtime.late_policy", name)?;
         }
         Ok(s)
     }
@@ -71,6 +95,10 @@ mod tests {
         assert!(!too_many_missed(0, 10_000, 0.0));
         assert!(!too_many_missed(10_000, 10_000, 1.0));
         assert!(!too_many_missed(0, 0, 0.0));
+        assert_eq!(parse_late_policy("x", "wait").unwrap(), LatePolicy::Wait);
+        assert_eq!(parse_late_policy("x", "hold").unwrap(), LatePolicy::HoldExtrapolate);
+        let e = parse_late_policy("realtime.late_policy", "later").unwrap_err().to_string();
+        assert!(e.starts_with("realtime.late_policy: must be \"hold\""), "{e}");
         assert_eq!(check_max_missed("x", 0.05).unwrap(), 0.05);
         for bad in [-0.1, 1.5, f64::NAN, f64::INFINITY] {
             let e = check_max_missed("realtime.max_missed", bad).unwrap_err().to_string();
