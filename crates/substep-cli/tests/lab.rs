@@ -414,3 +414,72 @@ fn a_realtime_run_whose_target_dies_reports_the_link() {
     let n = lab["exchanges"].as_u64().unwrap();
     assert!((200..=210).contains(&n), "{lab}");
 }
+
+/// Issue 38: a yielding numerical substructure (examples/yielding_building.toml, cut to 7 s, where it yields: yielding_examples_in_real_time_equal_the_offline_run)
+/// with a lab target: every protocol against the emulator equals the virtual-lab run, offline
+/// and with `--realtime --late-policy wait` (the one-sub-step springs pipeline).
+#[test]
+fn a_yielding_structure_with_a_lab_target_equals_the_virtual_lab() {
+    let dir = temp_dir("yielding");
+    let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
+    let base = std::fs::read_to_string(format!("{examples}/yielding_building.toml"))
+        .unwrap()
+        .replace("\"records/", &format!("\"{examples}/records/"))
+        .replace("duration = 20.0", "duration = 7.0");
+    assert!(base.contains("duration = 7.0"), "the example changed: adapt this test");
+    let write = |name: &str, lab: &str| std::fs::write(dir.join(format!("{name}.toml")), format!("{base}\n{lab}\n")).unwrap();
+    write("local", "");
+    let local = run(&dir, "local.toml", "local");
+    assert!(local.status.success(), "{}", text(&local.stderr));
+    for (protocol, transport, realtime) in [
+        ("speedgoat", "udp", false),
+        ("speedgoat", "tcp", false),
+        ("generic_tcp", "tcp", false),
+        ("substep_udp", "udp", false),
+        ("substep_udp", "udp", true),
+    ] {
+        let name = format!("{protocol}_{transport}{}", if realtime { "_rt" } else { "" });
+        write(&name, &lab_table(protocol, transport, 9, "timeout = 2.0\n"));
+        let (mut emulator, port) = emulate(&dir, &name, "");
+        write(&name, &lab_table(protocol, transport, port, "timeout = 2.0\n"));
+        let more: &[&str] = if realtime {
+            &["--realtime", "--late-policy", "wait", "--max-missed", "1"]
+        } else {
+            &[]
+        };
+        let out = run_with(&dir, &format!("{name}.toml"), &name, more);
+        let _ = emulator.wait();
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(&name).join("summary.json")).unwrap()).unwrap();
+        assert_eq!(s["completed"], true, "{name}");
+        assert_eq!(s["lab"]["exchanges"], 14000, "{name}: one exchange per sub-step");
+        let files: &[&str] = if realtime { &["history.csv"] } else { &["history.csv", "substeps.csv"] };
+        for file in files {
+            let worst = worst_relative_common(&dir.join("local").join(file), &dir.join(&name).join(file));
+            assert!(worst <= 1e-9, "{name} {file}: {worst:e} of the peak");
+        }
+    }
+}
+
+/// As [`worst_relative`] over the columns both files have (a real-time history has no
+/// phase-lag columns); at least five of them.
+fn worst_relative_common(reference: &Path, other: &Path) -> f64 {
+    let (h1, a) = table(reference);
+    let (h2, b) = table(other);
+    assert_eq!(a.len(), b.len(), "{}", other.display());
+    let mut compared = 0;
+    let worst = h1
+        .iter()
+        .enumerate()
+        .filter(|(_, name)| !name.starts_with("fei"))
+        .filter_map(|(j, name)| Some((j, h2.iter().position(|n| n == name)?)))
+        .map(|(j, k)| {
+            compared += 1;
+            let peak = a.iter().map(|r| r[j].abs()).fold(0.0, f64::max).max(1e-300);
+            a.iter().zip(&b).map(|(x, y)| (x[j] - y[k]).abs()).fold(0.0, f64::max) / peak
+        })
+        .fold(0.0, f64::max);
+    assert!(compared >= 5, "{}: {compared} columns in common", other.display());
+    worst
+}

@@ -105,14 +105,14 @@ impl Simulation {
                 static_load: None,
             },
             Some(s) if s.remote.as_ref().is_some_and(|r| r.mode == Mode::PerStep) => {
-                if springs.is_some() {
-                    return Err(Error::invalid(
-                        "substructure.remote.mode",
-                        "a per-step remote site runs the sub-steps with its own copy of the linear algorithm: \
-                         a nonlinear numerical substructure ([structure.storeys.hysteresis]) needs mode = \"substep\"",
-                    ));
+                // The site ramps from the predictors and G_cc it is sent; the springs' deviation
+                // force is inside the predictor (operator splitting), so a nonlinear numerical
+                // substructure needs nothing more from it. The client checks every command.
+                let mut test = s.build_remote_step_test(model, dt, &load0)?;
+                if let Some(springs) = springs {
+                    test.controller.set_springs(springs);
                 }
-                Engine::RemoteStep(Box::new(s.build_remote_step_test(model, dt, &load0)?))
+                Engine::RemoteStep(Box::new(test))
             }
             Some(s) => {
                 let mut test = s.build_test(model, dt, &load0)?;
