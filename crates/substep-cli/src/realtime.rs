@@ -62,11 +62,6 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     let sub = def.substructure.as_ref().expect("checked above");
     let accel = def.ground_motion.accel.clone();
     let load0 = -def.model.effective_mass_vector() * accel[0];
-    let mut test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
-    // Hysteretic springs: the runner's one-sub-step pipeline (docs/realtime.md).
-    if let Some(h) = &def.hysteresis {
-        test.controller.set_springs(h.build(def.model.n_dofs())?);
-    }
     let max_missed = match args.max_missed {
         Some(x) => substep::io::config::check_max_missed("--max-missed", x)?,
         None => def.realtime.max_missed,
@@ -75,6 +70,18 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         Some(name) => substep::io::config::parse_late_policy("--late-policy", name)?,
         None => def.realtime.late_policy,
     };
+    // Can this model keep the wall clock on this machine? Measured on a throwaway controller
+    // before any site or lab target is connected (docs/realtime.md, budget).
+    let mut probe = substep::substructure::SubstepController::new(&def.model, &sub.settings(def.integrator.dt), &load0)?;
+    if let Some(h) = &def.hysteresis {
+        probe.set_springs(h.build(def.model.n_dofs())?);
+    }
+    substep::realtime::budget::probe(probe, &def.model.effective_mass_vector(), &accel).check("--realtime")?;
+    let mut test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
+    // Hysteretic springs: the runner's one-sub-step pipeline (docs/realtime.md).
+    if let Some(h) = &def.hysteresis {
+        test.controller.set_springs(h.build(def.model.n_dofs())?);
+    }
     let options = RealtimeOptions {
         lock_memory: args.lock_memory,
         fifo_priority: args.fifo_priority,

@@ -460,3 +460,72 @@ fn yielding_examples_in_real_time_equal_the_offline_run() {
         }
     }
 }
+
+/// Issue 38: bad input to a real-time nonlinear run is refused before the test starts, in one
+/// line with exit 2: an integrator that cannot take the model, a late policy that does not
+/// exist, and budgets the model cannot meet on this machine, measured up front — a step's work
+/// over Δt (a 1890-DOF hinged frame at Δt = 10 µs) and the springs' share over one sub-step
+/// (the same frame with 1000 sub-steps of 2 µs). The output folder of an earlier run survives.
+#[test]
+fn realtime_nonlinear_bad_input_is_refused_up_front() {
+    let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
+    let dir = std::env::temp_dir().join(format!("substep-rt-bad-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("out")).unwrap();
+    std::fs::write(dir.join("out/keep.txt"), "an earlier run").unwrap();
+    let read = |name: &str| {
+        std::fs::read_to_string(format!("{examples}/{name}.toml"))
+            .unwrap()
+            .replace("\"records/", &format!("\"{examples}/records/"))
+    };
+    let building = read("yielding_building");
+    let frame = read("hinged_frame")
+        .replace("bays = 5\n", "bays = 20\n")
+        .replace("stories = 9\n", "stories = 30\n");
+    let swap = |text: &str, from: &str, to: &str| {
+        assert!(text.contains(from), "an example changed: {from} is gone");
+        text.replace(from, to)
+    };
+    let cases = [
+        (
+            swap(&building, "scheme = \"average_acceleration\"", "scheme = \"hht\""),
+            vec![],
+            "integrator.scheme: \"hht\" cannot integrate a nonlinear model",
+        ),
+        (building.clone(), vec!["--late-policy", "soon"], "--late-policy: must be \"hold\""),
+        (
+            format!("{building}\n[realtime]\nlate_policy = \"later\"\n"),
+            vec![],
+            "realtime.late_policy: must be \"hold\"",
+        ),
+        (
+            swap(
+                &swap(&frame, "dt = 0.005 ", "dt = 0.00001 "),
+                "duration = 15.0",
+                "duration = 0.05",
+            ),
+            vec![],
+            "--realtime: the numerical substructure cannot keep up: one step's work takes",
+        ),
+        (
+            swap(&swap(&frame, "dt = 0.005 ", "dt = 0.002 "), "substeps = 10\n", "substeps = 1000\n"),
+            vec![],
+            "--realtime: the springs of the nonlinear numerical substructure cannot keep up",
+        ),
+    ];
+    for (i, (config, extra, expected)) in cases.iter().enumerate() {
+        let cfg = format!("bad{i}.toml");
+        std::fs::write(dir.join(&cfg), config).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_substep"))
+            .args(["run", &cfg, "--out", "out", "--realtime"])
+            .args(extra)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "case {i}: {err}");
+        assert!(err.contains(expected), "case {i}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "case {i}: not one line: {err}");
+        assert!(dir.join("out/keep.txt").exists(), "case {i}: the earlier output is gone");
+    }
+}

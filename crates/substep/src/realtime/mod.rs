@@ -51,6 +51,16 @@
 //! stiff models the Newmark acceleration amplifies round-off in `u` by `a0 = 4/Δt²`, see
 //! `docs/realtime.md`).
 //!
+//! # Nonlinear numerical substructures: the one-sub-step pipeline
+//!
+//! Hysteretic springs add `−K̂⁻¹ d(ũ_{i+2})` to the next predictor, with `ũ_{i+2}` the Newmark
+//! displacement predictor of the step's end state, which depends on `f^{(k−1)}`. The
+//! real-time thread posts `f^{(k−1)}` and `d^{(k)}` when the last sub-step begins; the numerical
+//! thread closes the step's kinematics, evaluates the springs and posts `W_c − G_{:,c}ᵀ d`
+//! within that sub-step; `f^{(k)}` then closes the step's forces as offline. The numbers are
+//! the offline algorithm's (docs/realtime.md, docs/theory.md §14.4). [`budget::probe`] measures
+//! before a test whether the step and the springs fit their budgets.
+//!
 //! # Deadlines and the late-step policy
 //!
 //! Every sub-step slot records its wake-up lateness (actual wake-up − deadline) and its
@@ -99,6 +109,7 @@
 //! [`SubstepController`]: crate::substructure::SubstepController
 
 mod bench;
+pub mod budget;
 mod histogram;
 mod os;
 mod overlap;
