@@ -225,8 +225,15 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
                 if reference_failure.is_none()
                     && let Err(e) = reference.step(ag)
                 {
-                    stop.request(format!("the reference solution failed at step {reference_step}: {e}"));
-                    reference_failure = Some(e);
+                    let failed = substep::run::reference_failed(
+                        reference_step,
+                        reference_step as f64 * def.integrator.dt,
+                        &e,
+                    );
+                    if let substep::Error::Stopped { reason, .. } = &failed {
+                        stop.request(reason.clone());
+                    }
+                    reference_failure = Some(failed);
                 }
                 if same_integrator.as_mut().is_some_and(|s| !s.step(ag)) {
                     same_integrator = None;

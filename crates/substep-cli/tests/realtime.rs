@@ -529,3 +529,45 @@ fn realtime_nonlinear_bad_input_is_refused_up_front() {
         assert!(dir.join("out/keep.txt").exists(), "case {i}: the earlier output is gone");
     }
 }
+
+/// Issue 38: a real-time nonlinear run whose Newton reference fails ends as offline: exit 1,
+/// `stopped at step N`, the reference named, `"completed": false`, at the same step as the
+/// offline run and with the rows before it written.
+#[test]
+fn a_failing_newton_reference_ends_a_realtime_run_as_offline() {
+    let dir = std::env::temp_dir().join(format!("substep-rt-newton-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = "[structure.storeys]\nmasses = [2.0e5, 2.0e5]\nstiffness = [3.0e8, 2.5e8]\n\
+                  [structure.storeys.hysteresis]\nkind = \"bilinear\"\nyield_force = 1.0e5\nhardening = 0.02\n\
+                  [ground_motion]\ngenerator = \"harmonic\"\namplitude = 3.0\nfrequency = 2.0\nduration = 2.0\n\
+                  [integrator]\ndt = 0.01\nmax_iterations = 1\n\
+                  [substructure]\ncoupling_dofs = [1]\nsubsteps = 4\n\
+                  [[substructure.specimen]]\nkind = \"linear_sdof\"\ndof = 1\nstiffness = 5.0e7\ndamping = 2.0e5\n";
+    std::fs::write(dir.join("cfg.toml"), config).unwrap();
+    let mut stopped = Vec::new();
+    for (out, extra) in [("offline", &[][..]), ("rt", &["--realtime"][..])] {
+        let o = Command::new(env!("CARGO_BIN_EXE_substep"))
+            .args(["run", "cfg.toml", "--out", out, "--no-plots"])
+            .args(extra)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{out}: {err}");
+        assert!(
+            err.starts_with("error: stopped at step ") && err.contains("the reference solution failed")
+                && err.contains("Newton–Raphson did not converge in 1 iterations"),
+            "{out}: {err}"
+        );
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["completed"], false, "{out}");
+        let step = summary["stopped_at_step"].as_u64().unwrap();
+        assert!(err.starts_with(&format!("error: stopped at step {step} ")), "{out}: {err}");
+        let rows = std::fs::read_to_string(dir.join(out).join("history.csv")).unwrap().lines().count() - 1;
+        assert!(rows as u64 >= step, "{out}: {rows} rows before the stop at step {step}");
+        stopped.push(step);
+    }
+    assert_eq!(stopped[0], stopped[1], "offline and real time stop at different steps");
+}

@@ -52,6 +52,16 @@ use std::time::{Duration, Instant};
 /// offline run of the same definition has it.
 pub const REALTIME_REFERENCE_MAX_DOFS: usize = 1000;
 
+/// The run's failure when its monolithic reference fails at `step` (a Newton iteration that
+/// does not converge): a stop at that step, not bad input.
+pub fn reference_failed(step: usize, time: f64, e: &Error) -> Error {
+    Error::Stopped {
+        step,
+        time,
+        reason: format!("the reference solution failed: {e}"),
+    }
+}
+
 /// A time rounded to 1 ns, as the CSV files hold it: `i·Δt` without float noise (`19.99`, not
 /// `19.990000000000002`).
 pub fn round_time(t: f64) -> f64 {
@@ -659,7 +669,9 @@ impl<'d> Run<'d> {
             if let Some(r) = reference
                 && let Err(e) = r.step(sim.ground_acceleration(i + 1))
             {
-                failure = Some(e);
+                // The test itself may be fine, but it has nothing to be judged against from
+                // here: the run ends (exit 1), naming the step and the reference.
+                failure = Some(reference_failed(i + 1, def.time(i + 1), &e));
                 break;
             }
             if let Some(same) = same_integrator.as_mut()
