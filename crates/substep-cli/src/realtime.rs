@@ -72,7 +72,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     };
     // Can this model keep the wall clock on this machine? Measured on a throwaway controller
     // before any site or lab target is connected (docs/realtime.md, budget).
-    let mut probe = substep::substructure::SubstepController::new(&def.model, &sub.settings(def.integrator.dt), &load0)?;
+    let mut probe =
+        substep::substructure::SubstepController::new(&def.model, &sub.settings(def.integrator.dt), &load0)?;
     if let Some(h) = &def.hysteresis {
         probe.set_springs(h.build(def.model.n_dofs())?);
     }
@@ -225,11 +226,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
                 if reference_failure.is_none()
                     && let Err(e) = reference.step(ag)
                 {
-                    let failed = substep::run::reference_failed(
-                        reference_step,
-                        reference_step as f64 * def.integrator.dt,
-                        &e,
-                    );
+                    let failed =
+                        substep::run::reference_failed(reference_step, reference_step as f64 * def.integrator.dt, &e);
                     if let substep::Error::Stopped { reason, .. } = &failed {
                         stop.request(reason.clone());
                     }

@@ -427,7 +427,8 @@ fn a_yielding_structure_with_a_lab_target_equals_the_virtual_lab() {
         .replace("\"records/", &format!("\"{examples}/records/"))
         .replace("duration = 20.0", "duration = 7.0");
     assert!(base.contains("duration = 7.0"), "the example changed: adapt this test");
-    let write = |name: &str, lab: &str| std::fs::write(dir.join(format!("{name}.toml")), format!("{base}\n{lab}\n")).unwrap();
+    let write =
+        |name: &str, lab: &str| std::fs::write(dir.join(format!("{name}.toml")), format!("{base}\n{lab}\n")).unwrap();
     write("local", "");
     let local = run(&dir, "local.toml", "local");
     assert!(local.status.success(), "{}", text(&local.stderr));
@@ -454,7 +455,11 @@ fn a_yielding_structure_with_a_lab_target_equals_the_virtual_lab() {
             serde_json::from_str(&std::fs::read_to_string(dir.join(&name).join("summary.json")).unwrap()).unwrap();
         assert_eq!(s["completed"], true, "{name}");
         assert_eq!(s["lab"]["exchanges"], 14000, "{name}: one exchange per sub-step");
-        let files: &[&str] = if realtime { &["history.csv"] } else { &["history.csv", "substeps.csv"] };
+        let files: &[&str] = if realtime {
+            &["history.csv"]
+        } else {
+            &["history.csv", "substeps.csv"]
+        };
         for file in files {
             let worst = worst_relative_common(&dir.join("local").join(file), &dir.join(&name).join(file));
             assert!(worst <= 1e-9, "{name} {file}: {worst:e} of the peak");

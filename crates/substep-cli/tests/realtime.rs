@@ -373,7 +373,12 @@ fn yielding_examples_in_real_time_equal_the_offline_run() {
             "yield_force = [6.0e5, 5.0e5, 3.5e5]",
             "yield_force = [6.0e8, 5.0e8, 3.5e8]",
         ),
-        ("hinged_frame", "duration = 15.0", "beam_yield_moment = 4.6e5", "beam_yield_moment = 4.6e8"),
+        (
+            "hinged_frame",
+            "duration = 15.0",
+            "beam_yield_moment = 4.6e5",
+            "beam_yield_moment = 4.6e8",
+        ),
     ];
     let run = |cfg: &str, extra: &[&str], out: &str| {
         let mut args = vec!["run", cfg, "--out", out, "--no-plots"];
@@ -383,7 +388,11 @@ fn yielding_examples_in_real_time_equal_the_offline_run() {
             .current_dir(&dir)
             .output()
             .unwrap();
-        assert!(o.status.success(), "{cfg} {extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            o.status.success(),
+            "{cfg} {extra:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
         String::from_utf8_lossy(&o.stdout).into_owned()
     };
     let read = |p: String| -> (Vec<String>, Vec<Vec<f64>>) {
@@ -408,9 +417,17 @@ fn yielding_examples_in_real_time_equal_the_offline_run() {
         );
         let short = text.replace(duration, "duration = 7.0");
         std::fs::write(dir.join(format!("{name}.toml")), &short).unwrap();
-        std::fs::write(dir.join(format!("{name}_elastic.toml")), short.replace(yield_level, elastic_level)).unwrap();
+        std::fs::write(
+            dir.join(format!("{name}_elastic.toml")),
+            short.replace(yield_level, elastic_level),
+        )
+        .unwrap();
         run(&format!("{name}.toml"), &["--stability", "off"], &format!("off_{name}"));
-        run(&format!("{name}_elastic.toml"), &["--stability", "off"], &format!("el_{name}"));
+        run(
+            &format!("{name}_elastic.toml"),
+            &["--stability", "off"],
+            &format!("el_{name}"),
+        );
         // The numbers, not the pace, are checked: a loaded test machine may miss deadlines.
         let printed = run(
             &format!("{name}.toml"),
@@ -434,29 +451,54 @@ fn yielding_examples_in_real_time_equal_the_offline_run() {
             if peak == 0.0 {
                 continue;
             }
-            let diff = off.iter().zip(&rt).map(|(a, b)| (a[i] - b[j]).abs()).fold(0.0, f64::max);
+            let diff = off
+                .iter()
+                .zip(&rt)
+                .map(|(a, b)| (a[i] - b[j]).abs())
+                .fold(0.0, f64::max);
             if diff / peak > worst.0 {
                 worst = (diff / peak, col.clone());
             }
             compared += 1;
             if col.starts_with('u') && !col.starts_with("uref") {
-                let d = off.iter().zip(&el).map(|(a, b)| (a[i] - b[i]).abs()).fold(0.0, f64::max);
+                let d = off
+                    .iter()
+                    .zip(&el)
+                    .map(|(a, b)| (a[i] - b[i]).abs())
+                    .fold(0.0, f64::max);
                 yielded = yielded.max(d / peak);
             }
         }
         assert!(compared > 10, "{name}: {compared} columns compared");
-        assert!(worst.0 <= 1e-9, "{name}: real time vs offline {} of the peak in {}", worst.0, worst.1);
-        assert!(yielded > 0.01, "{name}: the yielding run is within {yielded} of the elastic one");
+        assert!(
+            worst.0 <= 1e-9,
+            "{name}: real time vs offline {} of the peak in {}",
+            worst.0,
+            worst.1
+        );
+        assert!(
+            yielded > 0.01,
+            "{name}: the yielding run is within {yielded} of the elastic one"
+        );
         // The error against the Newton reference: printed and in summary.json, the offline one.
-        let (s_off, s_rt) = (summary(format!("off_{name}/summary.json")), summary(format!("rt_{name}/summary.json")));
+        let (s_off, s_rt) = (
+            summary(format!("off_{name}/summary.json")),
+            summary(format!("rt_{name}/summary.json")),
+        );
         assert_eq!(s_rt["completed"], true, "{name}");
-        assert!(printed.contains("max error vs monolithic Newmark + Newton solution (nonlinear)"), "{printed}");
+        assert!(
+            printed.contains("max error vs monolithic Newmark + Newton solution (nonlinear)"),
+            "{printed}"
+        );
         for key in ["max_displacement_error", "max_force_error"] {
             let (a, b) = (
                 s_off["reference"][key].as_f64().unwrap(),
                 s_rt["reference"][key].as_f64().unwrap(),
             );
-            assert!(a > 1e-4 && (a - b).abs() <= 1e-6 * a, "{name} {key}: offline {a}, real time {b}");
+            assert!(
+                a > 1e-4 && (a - b).abs() <= 1e-6 * a,
+                "{name} {key}: offline {a}, real time {b}"
+            );
         }
     }
 }
@@ -492,7 +534,11 @@ fn realtime_nonlinear_bad_input_is_refused_up_front() {
             vec![],
             "integrator.scheme: \"hht\" cannot integrate a nonlinear model",
         ),
-        (building.clone(), vec!["--late-policy", "soon"], "--late-policy: must be \"hold\""),
+        (
+            building.clone(),
+            vec!["--late-policy", "soon"],
+            "--late-policy: must be \"hold\"",
+        ),
         (
             format!("{building}\n[realtime]\nlate_policy = \"later\"\n"),
             vec![],
@@ -508,7 +554,11 @@ fn realtime_nonlinear_bad_input_is_refused_up_front() {
             "--realtime: the numerical substructure cannot keep up: one step's work takes",
         ),
         (
-            swap(&swap(&frame, "dt = 0.005 ", "dt = 0.002 "), "substeps = 10\n", "substeps = 1000\n"),
+            swap(
+                &swap(&frame, "dt = 0.005 ", "dt = 0.002 "),
+                "substeps = 10\n",
+                "substeps = 1000\n",
+            ),
             vec![],
             "--realtime: the springs of the nonlinear numerical substructure cannot keep up",
         ),
@@ -526,7 +576,10 @@ fn realtime_nonlinear_bad_input_is_refused_up_front() {
         assert_eq!(o.status.code(), Some(2), "case {i}: {err}");
         assert!(err.contains(expected), "case {i}: {err}");
         assert_eq!(err.trim_end().lines().count(), 1, "case {i}: not one line: {err}");
-        assert!(dir.join("out/keep.txt").exists(), "case {i}: the earlier output is gone");
+        assert!(
+            dir.join("out/keep.txt").exists(),
+            "case {i}: the earlier output is gone"
+        );
     }
 }
 
@@ -556,7 +609,8 @@ fn a_failing_newton_reference_ends_a_realtime_run_as_offline() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{out}: {err}");
         assert!(
-            err.starts_with("error: stopped at step ") && err.contains("the reference solution failed")
+            err.starts_with("error: stopped at step ")
+                && err.contains("the reference solution failed")
                 && err.contains("Newton–Raphson did not converge in 1 iterations"),
             "{out}: {err}"
         );
@@ -564,8 +618,15 @@ fn a_failing_newton_reference_ends_a_realtime_run_as_offline() {
             serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("summary.json")).unwrap()).unwrap();
         assert_eq!(summary["completed"], false, "{out}");
         let step = summary["stopped_at_step"].as_u64().unwrap();
-        assert!(err.starts_with(&format!("error: stopped at step {step} ")), "{out}: {err}");
-        let rows = std::fs::read_to_string(dir.join(out).join("history.csv")).unwrap().lines().count() - 1;
+        assert!(
+            err.starts_with(&format!("error: stopped at step {step} ")),
+            "{out}: {err}"
+        );
+        let rows = std::fs::read_to_string(dir.join(out).join("history.csv"))
+            .unwrap()
+            .lines()
+            .count()
+            - 1;
         assert!(rows as u64 >= step, "{out}: {rows} rows before the stop at step {step}");
         stopped.push(step);
     }

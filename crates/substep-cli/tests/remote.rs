@@ -753,11 +753,19 @@ fn a_yielding_structure_with_a_remote_site_equals_the_local_run() {
     }
     let local_history = std::fs::read_to_string(dir.join("local/history.csv")).unwrap();
     let local_substeps = std::fs::read_to_string(dir.join("local/substeps.csv")).unwrap();
-    let u1 = |h: &str| -> Vec<f64> { h.lines().skip(1).map(|l| l.split(',').nth(1).unwrap().parse().unwrap()).collect() };
+    let u1 = |h: &str| -> Vec<f64> {
+        h.lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+            .collect()
+    };
     let elastic = u1(&std::fs::read_to_string(dir.join("elastic/history.csv")).unwrap());
     let yielded = u1(&local_history);
     let peak = yielded.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let diff = yielded.iter().zip(&elastic).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+    let diff = yielded
+        .iter()
+        .zip(&elastic)
+        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
     assert!(diff > 0.01 * peak, "the storeys do not yield: {diff} of a peak {peak}");
     for mode in ["per_step", "per_substep"] {
         let (mut site, addr) = serve(&dir);
@@ -767,7 +775,10 @@ fn a_yielding_structure_with_a_remote_site_equals_the_local_run() {
         assert!(out.status.success(), "{mode}: {}", text(&out.stderr));
         let history = std::fs::read_to_string(dir.join(mode).join("history.csv")).unwrap();
         let substeps = std::fs::read_to_string(dir.join(mode).join("substeps.csv")).unwrap();
-        assert!(without_fei(&history) == without_fei(&local_history), "{mode}: history differs");
+        assert!(
+            without_fei(&history) == without_fei(&local_history),
+            "{mode}: history differs"
+        );
         assert!(substeps == local_substeps, "{mode}: substeps differ from the local run");
         assert!(site.wait().unwrap().success());
     }

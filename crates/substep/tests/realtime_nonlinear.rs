@@ -69,7 +69,13 @@ kind = "bouc_wen"
 yield_force = [5.0e5, 4.5e5, 4.0e5, 3.2e5, 2.5e5]
 hardening = 0.05
 "#,
-        yield_drift: &[5.0e5 / 2.0e8, 4.5e5 / 1.8e8, 4.0e5 / 1.6e8, 3.2e5 / 1.3e8, 2.5e5 / 1.0e8],
+        yield_drift: &[
+            5.0e5 / 2.0e8,
+            4.5e5 / 1.8e8,
+            4.0e5 / 1.6e8,
+            3.2e5 / 1.3e8,
+            2.5e5 / 1.0e8,
+        ],
         scales: [0.1, 0.5, 2.0],
     },
 ];
@@ -140,10 +146,7 @@ fn error_and_ductility(records: &[StepRecordOwned], reference: &HistoryTable, yi
     let mut error = 0.0f64;
     for (i, u) in uref.iter().enumerate() {
         let peak = u.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        let diff = records
-            .iter()
-            .map(|r| (r.u[i] - u[r.step]).abs())
-            .fold(0.0, f64::max);
+        let diff = records.iter().map(|r| (r.u[i] - u[r.step]).abs()).fold(0.0, f64::max);
         error = error.max(diff / peak);
     }
     let ductility = (0..n)
@@ -172,7 +175,11 @@ fn a_grid_of_yielding_real_time_tests_keeps_time_and_its_reference() {
     for s in &STRUCTURES {
         for (level, &scale) in s.scales.iter().enumerate() {
             for (specimen_name, specimen) in SPECIMENS {
-                let ks: Vec<usize> = if full { vec![2, 5, 10] } else { vec![[2, 5, 10][cell % 3]] };
+                let ks: Vec<usize> = if full {
+                    vec![2, 5, 10]
+                } else {
+                    vec![[2, 5, 10][cell % 3]]
+                };
                 cell += 1;
                 for k_sub in ks {
                     let name = format!("{} × {scale} × {specimen_name} × k_sub {k_sub}", s.name);
@@ -199,7 +206,10 @@ fn a_grid_of_yielding_real_time_tests_keeps_time_and_its_reference() {
                     match level {
                         0 => assert!(ductility < 1.0, "{name}: the elastic level yields ({ductility})"),
                         2 => assert!(ductility > 5.0, "{name}: ductility {ductility} ≤ 5"),
-                        _ => assert!(ductility > 1.0, "{name}: the moderate level does not yield ({ductility})"),
+                        _ => assert!(
+                            ductility > 1.0,
+                            "{name}: the moderate level does not yield ({ductility})"
+                        ),
                     }
                     assert!(missed < 0.01, "{name}: {:.3} % of the deadlines missed", 100.0 * missed);
                     assert!(error < 0.03, "{name}: {:.3} % from the Newton reference", 100.0 * error);

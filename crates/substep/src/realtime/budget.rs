@@ -37,11 +37,7 @@ pub struct BudgetProbe {
 /// and springs are changed) under the loads `−M ι a_g` of the first samples of `ground_accel`,
 /// with zero coupling forces, and time them. Stops early once the probe has taken more than a
 /// second (a model that slow fails the check anyway).
-pub fn probe(
-    mut controller: SubstepController,
-    mass_influence: &DVector<f64>,
-    ground_accel: &[f64],
-) -> BudgetProbe {
+pub fn probe(mut controller: SubstepController, mass_influence: &DVector<f64>, ground_accel: &[f64]) -> BudgetProbe {
     let k = controller.substeps();
     let n_c = controller.n_coupling();
     let zeros = vec![0.0; n_c];
@@ -170,7 +166,10 @@ mod tests {
         assert!(probe_of(4_999, Some(499)).check("--realtime").is_ok());
         assert!(probe_of(4_999, None).check("--realtime").is_ok());
         let e = probe_of(5_001, None).check("--realtime").unwrap_err().to_string();
-        assert!(e.starts_with("--realtime: the numerical substructure cannot keep up: one step's work takes 5.00 ms"), "{e}");
+        assert!(
+            e.starts_with("--realtime: the numerical substructure cannot keep up: one step's work takes 5.00 ms"),
+            "{e}"
+        );
         assert!(e.contains("Δt = 5.00 ms"), "{e}");
         let e = probe_of(100, Some(501)).check("--realtime").unwrap_err().to_string();
         assert!(e.contains("their share of the next predictor takes 501.0 µs"), "{e}");

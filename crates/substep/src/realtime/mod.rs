@@ -341,7 +341,11 @@ impl fmt::Display for RealtimeReport {
         writeln!(f, "completion:       {}", self.completion_summary())?;
         writeln!(f, "numerical step:   {}", self.numerical_summary())?;
         if self.pipeline.count() > 0 {
-            writeln!(f, "springs pipeline: {} (budget: one sub-step)", self.pipeline_summary())?;
+            writeln!(
+                f,
+                "springs pipeline: {} (budget: one sub-step)",
+                self.pipeline_summary()
+            )?;
         }
         writeln!(
             f,

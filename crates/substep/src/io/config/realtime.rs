@@ -97,7 +97,9 @@ mod tests {
         assert!(!too_many_missed(0, 0, 0.0));
         assert_eq!(parse_late_policy("x", "wait").unwrap(), LatePolicy::Wait);
         assert_eq!(parse_late_policy("x", "hold").unwrap(), LatePolicy::HoldExtrapolate);
-        let e = parse_late_policy("realtime.late_policy", "later").unwrap_err().to_string();
+        let e = parse_late_policy("realtime.late_policy", "later")
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("realtime.late_policy: must be \"hold\""), "{e}");
         assert_eq!(check_max_missed("x", 0.05).unwrap(), 0.05);
         for bad in [-0.1, 1.5, f64::NAN, f64::INFINITY] {
