@@ -72,16 +72,17 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     };
     // Can this model keep the wall clock on this machine? Measured on a throwaway controller
     // before any site or lab target is connected (docs/realtime.md, budget).
+    // Hysteretic springs run in the runner's one-sub-step pipeline (docs/realtime.md).
+    let springs = || def.hysteresis.as_ref().map(|h| h.build(def.model.n_dofs())).transpose();
     let mut probe =
         substep::substructure::SubstepController::new(&def.model, &sub.settings(def.integrator.dt), &load0)?;
-    if let Some(h) = &def.hysteresis {
-        probe.set_springs(h.build(def.model.n_dofs())?);
+    if let Some(s) = springs()? {
+        probe.set_springs(s);
     }
     substep::realtime::budget::probe(probe, &def.model.effective_mass_vector(), &accel).check("--realtime")?;
     let mut test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
-    // Hysteretic springs: the runner's one-sub-step pipeline (docs/realtime.md).
-    if let Some(h) = &def.hysteresis {
-        test.controller.set_springs(h.build(def.model.n_dofs())?);
+    if let Some(s) = springs()? {
+        test.controller.set_springs(s);
     }
     let options = RealtimeOptions {
         lock_memory: args.lock_memory,
@@ -95,14 +96,10 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     // REALTIME_REFERENCE_MAX_DOFS DOFs (a step well under a millisecond). A larger model's
     // reference would be a second full integration next to the real-time thread on the same
     // cores; those runs record no reference and say so (run offline for it).
-    let mut reference = substep::io::Reference::new(def)?;
-    let no_reference = reference
-        .as_ref()
-        .filter(|r| r.n_dofs() > substep::run::REALTIME_REFERENCE_MAX_DOFS)
-        .map(|r| r.n_dofs());
-    if no_reference.is_some() {
-        reference = None;
-    }
+    let (mut reference, no_reference) = match substep::io::Reference::new(def)? {
+        Some(r) if r.n_dofs() > substep::run::REALTIME_REFERENCE_MAX_DOFS => (None, Some(r.n_dofs())),
+        r => (r, None),
+    };
     // Beside the exact reference, as offline, the same model with the test's own integrator
     // (`reference.same_integrator`: the time step's share of the error).
     let mut same_integrator = reference
@@ -228,9 +225,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
                 {
                     let failed =
                         substep::run::reference_failed(reference_step, reference_step as f64 * def.integrator.dt, &e);
-                    if let substep::Error::Stopped { reason, .. } = &failed {
-                        stop.request(reason.clone());
-                    }
+                    stop.request(failed.to_string());
                     reference_failure = Some(failed);
                 }
                 if same_integrator.as_mut().is_some_and(|s| !s.step(ag)) {

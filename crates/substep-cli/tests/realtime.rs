@@ -1,12 +1,27 @@
 //! `substep run --realtime`: the wall-clock run equals the offline run and reports deadlines.
 
+use std::path::PathBuf;
 use std::process::Command;
+
+/// An empty directory for one test, `substep-rt-TAG-PID` under the system's temporary one.
+fn fresh_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("substep-rt-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A shipped example's text with its record path made absolute (the tests run it elsewhere).
+fn example(name: &str) -> String {
+    let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
+    std::fs::read_to_string(format!("{examples}/{name}.toml"))
+        .unwrap()
+        .replace("\"records/", &format!("\"{examples}/records/"))
+}
 
 #[test]
 fn realtime_run_equals_offline_and_reports_latency() {
-    let dir = std::env::temp_dir().join(format!("substep-rt-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("equal");
     let cfg = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/default.toml"))
         .unwrap()
         .replace("duration = 20.0", "duration = 1.0");
@@ -127,9 +142,7 @@ fn realtime_run_equals_offline_and_reports_latency() {
 /// thread), `stopped_by = "stability"`, exit 1.
 #[test]
 fn stability_stop_reaches_the_realtime_thread() {
-    let dir = std::env::temp_dir().join(format!("substep-rt-stability-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("stability");
     // SDOF 1 Hz, 2 % damping, a stiff spring specimen behind 30 ms of delay: unstable from the
     // start (the indicator's test config with the delay beyond the critical 14.5 ms).
     let cfg = r#"
@@ -269,9 +282,7 @@ stability_window = 1.0
 /// input (exit 2, one line), from the option and from `[realtime] max_missed`.
 #[test]
 fn an_impossible_deadline_fails_the_run() {
-    let dir = std::env::temp_dir().join(format!("substep-rt-missed-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("missed");
     let cfg = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/default.toml"))
         .unwrap()
         .replace("duration = 20.0 ", "duration = 0.01 ")
@@ -362,10 +373,7 @@ fn an_impossible_deadline_fails_the_run() {
 /// differs by more than 1 % of the peak.
 #[test]
 fn yielding_examples_in_real_time_equal_the_offline_run() {
-    let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
-    let dir = std::env::temp_dir().join(format!("substep-rt-yield-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("yield");
     let cases = [
         (
             "yielding_building",
@@ -408,9 +416,7 @@ fn yielding_examples_in_real_time_equal_the_offline_run() {
         serde_json::from_str(&std::fs::read_to_string(dir.join(p)).unwrap()).unwrap()
     };
     for (name, duration, yield_level, elastic_level) in cases {
-        let text = std::fs::read_to_string(format!("{examples}/{name}.toml"))
-            .unwrap()
-            .replace("\"records/", &format!("\"{examples}/records/"));
+        let text = example(name);
         assert!(
             text.contains(duration) && text.contains(yield_level),
             "{name}.toml changed: adapt this test"
@@ -510,18 +516,11 @@ fn yielding_examples_in_real_time_equal_the_offline_run() {
 /// (the same frame with 1000 sub-steps of 2 µs). The output folder of an earlier run survives.
 #[test]
 fn realtime_nonlinear_bad_input_is_refused_up_front() {
-    let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
-    let dir = std::env::temp_dir().join(format!("substep-rt-bad-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fresh_dir("bad");
     std::fs::create_dir_all(dir.join("out")).unwrap();
     std::fs::write(dir.join("out/keep.txt"), "an earlier run").unwrap();
-    let read = |name: &str| {
-        std::fs::read_to_string(format!("{examples}/{name}.toml"))
-            .unwrap()
-            .replace("\"records/", &format!("\"{examples}/records/"))
-    };
-    let building = read("yielding_building");
-    let frame = read("hinged_frame")
+    let building = example("yielding_building");
+    let frame = example("hinged_frame")
         .replace("bays = 5\n", "bays = 20\n")
         .replace("stories = 9\n", "stories = 30\n");
     let swap = |text: &str, from: &str, to: &str| {
@@ -588,9 +587,7 @@ fn realtime_nonlinear_bad_input_is_refused_up_front() {
 /// offline run and with the rows before it written.
 #[test]
 fn a_failing_newton_reference_ends_a_realtime_run_as_offline() {
-    let dir = std::env::temp_dir().join(format!("substep-rt-newton-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("newton");
     let config = "[structure.storeys]\nmasses = [2.0e5, 2.0e5]\nstiffness = [3.0e8, 2.5e8]\n\
                   [structure.storeys.hysteresis]\nkind = \"bilinear\"\nyield_force = 1.0e5\nhardening = 0.02\n\
                   [ground_motion]\ngenerator = \"harmonic\"\namplitude = 3.0\nfrequency = 2.0\nduration = 2.0\n\

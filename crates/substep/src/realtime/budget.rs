@@ -10,6 +10,7 @@
 //! test it defines. The median, not the maximum: a probe of a few steps on a busy machine sees
 //! scheduler stalls that the run's deadline report then counts honestly.
 
+use super::OverlapPredictor;
 use crate::error::{Error, Result};
 use crate::substructure::SubstepController;
 use nalgebra::DVector;
@@ -44,6 +45,9 @@ pub fn probe(mut controller: SubstepController, mass_influence: &DVector<f64>, g
     let mut command = vec![0.0; n_c];
     let mut load = DVector::zeros(mass_influence.len());
     let nonlinear = controller.is_nonlinear();
+    // The springs' coupling rows come from the runner's own code (its known part W is zero here:
+    // only the time counts).
+    let mut overlap = OverlapPredictor::new(&mut controller);
     let mut step_times = Vec::with_capacity(PROBE_STEPS);
     let mut springs_times = Vec::with_capacity(PROBE_STEPS);
     let started = Instant::now();
@@ -60,16 +64,9 @@ pub fn probe(mut controller: SubstepController, mass_influence: &DVector<f64>, g
         command.copy_from_slice(controller.next_command());
         let t1 = Instant::now();
         if nonlinear {
+            // What the pipeline does within the last sub-step.
             controller.close_kinematics_with(&zeros, &command, true);
-            let mut probe_w = 0.0;
-            if let Some(d) = controller.deviation() {
-                // The springs' coupling rows G_{:,c}ᵀ d, as the pipeline forms them.
-                let g = controller.gain_columns();
-                for c in 0..n_c {
-                    probe_w += g.column(c).dot(d);
-                }
-            }
-            std::hint::black_box(probe_w);
+            std::hint::black_box(overlap.deviation_coupling(&controller));
             springs_times.push(t1.elapsed());
             controller.close_with_last_force(&zeros);
         } else {
