@@ -45,6 +45,8 @@ fn report_json(r: &RealtimeReport) -> serde_json::Value {
         "wake_up_latency": histogram_json(&r.histogram),
         "completion_latency": histogram_json(&r.completion),
         "numerical_step": histogram_json(&r.numerical),
+        // Nonlinear numerical substructures only (count 0 otherwise): f^(k-1) posted -> W_c posted.
+        "springs_pipeline": histogram_json(&r.pipeline),
     })
 }
 
@@ -325,11 +327,19 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         not_real_time_reason = Some(format!(
             "not real time: {} of {} sub-step deadlines missed ({}), more than the {} allowed \
              ([realtime] max_missed, --max-missed); the actuator held or jumped on every missed \
-             sub-step, so this was a slower test than the one defined (docs/realtime.md)",
+             sub-step, so this was a slower test than the one defined (docs/realtime.md){}",
             report.missed,
             slots,
             substep::io::format::percent(missed_share),
-            substep::io::format::percent(max_missed)
+            substep::io::format::percent(max_missed),
+            // Without SCHED_FIFO a woken sub-step thread can wait a scheduler slice behind
+            // another thread: the usual cause on a lab PC, and the fix is one flag.
+            if report.fifo == substep::realtime::RtSetting::Applied {
+                ""
+            } else {
+                "; the sub-step thread ran without SCHED_FIFO: try --fifo-priority 80 --lock-memory \
+                 (root or CAP_SYS_NICE / CAP_IPC_LOCK), which removes the scheduler's wake-up delays"
+            }
         ));
     }
     let diverged = matches!(failure, Some(substep::Error::Diverged { .. })) || (runaway.is_some() && failure.is_some());
