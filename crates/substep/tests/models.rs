@@ -534,7 +534,7 @@ fn bad_integrator_input_names_the_key() {
     );
 
     // Scheme names.
-    let msg = message(Scheme::from_name("runge_kutta", 0.25, 0.5, 0.0));
+    let msg = message(Scheme::from_name("runge_kutta", 0.25, 0.5, 0.0, 0.5));
     assert!(
         msg.contains("integrator.scheme") && msg.contains("runge_kutta"),
         "{msg}"
@@ -565,7 +565,11 @@ fn bad_integrator_input_names_the_key() {
         ("alpha_os", Scheme::AlphaOs { alpha: -0.2 }),
         ("exact", Scheme::Exact),
     ] {
-        assert_eq!(Scheme::from_name(name, 0.3, 0.6, -0.2).unwrap(), expected, "{name}");
+        assert_eq!(
+            Scheme::from_name(name, 0.3, 0.6, -0.2, 0.5).unwrap(),
+            expected,
+            "{name}"
+        );
     }
 }
 

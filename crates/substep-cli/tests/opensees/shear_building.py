@@ -20,7 +20,9 @@ SPEC.json (SI units):
     scale       factor on the record (Path -factor)
     integrator  "newmark" (average acceleration, Newton, NormDispIncr `tolerance`, default
                 1e-12), "alpha_os" (AlphaOS `alpha`, Linear -initial) or "alpha_os_tp"
-                (AlphaOS_TP `alpha`, Linear -initial)
+                (AlphaOS_TP `alpha`, Linear -initial), "kr_alpha" (KRAlphaExplicit `rho_inf`,
+                Linear) or "kr_alpha_tp" (KRAlphaExplicit_TP `rho_inf`, Linear)
+    rho_inf     the spectral radius at infinite frequency of the KR-alpha schemes
     alpha       OpenSees' alpha in [2/3, 1] (= 1 + Hilber's alpha) for the alpha-OS schemes
     tolerance   optional, NormDispIncr tolerance of "newmark" [m]
 
@@ -138,6 +140,13 @@ def build(spec, ag):
         ops.algorithm("Linear", "-initial")
         name = "AlphaOS" if scheme == "alpha_os" else "AlphaOS_TP"
         ops.integrator(name, spec["alpha"])
+    elif scheme in ("kr_alpha", "kr_alpha_tp"):
+        # KR-alpha (KRAlphaExplicit: forces at u_{n+alpha_f}) or its two-point form
+        # (KRAlphaExplicit_TP; with rho_inf = 1 the Chen-Ricles algorithm): one linear solve
+        # with the effective mass per step (FullGeneral: the effective mass is dense)
+        ops.algorithm("Linear")
+        name = "KRAlphaExplicit" if scheme == "kr_alpha" else "KRAlphaExplicit_TP"
+        ops.integrator(name, spec["rho_inf"])
     else:
         raise SystemExit(f"unknown integrator {scheme!r}")
     ops.analysis("Transient")

@@ -6,11 +6,14 @@
 
 mod exact;
 mod hht;
+mod kr_alpha;
 mod newmark;
 mod newton;
 
 pub use exact::{ExactFoh, FohMap};
 pub use hht::{AlphaOs, AlphaOsForm, Hht};
+pub use kr_alpha::KrAlpha;
+pub(crate) use kr_alpha::check_rho_inf;
 pub use newmark::{ExplicitNewmark, Newmark, NewmarkConstants, NewmarkCore};
 pub use newton::{NewmarkNewton, NewtonSettings};
 
@@ -109,13 +112,19 @@ pub enum Scheme {
     AlphaOs { alpha: f64 },
     /// α-OS in OpenSees' `AlphaOS_TP` form (differs from `AlphaOs` for nonlinear models only).
     AlphaOsTp { alpha: f64 },
+    /// The Chen–Ricles algorithm (explicit, model-based; docs/theory.md §2.6).
+    Cr,
+    /// KR-α (Kolay–Ricles) with the spectral radius `ρ∞ ∈ [0, 1]` at infinite frequency, OpenSees'
+    /// `KRAlphaExplicit` form (docs/theory.md §2.6).
+    KrAlpha { rho_inf: f64 },
     /// Exact first-order-hold discretisation (reference).
     Exact,
 }
 
 impl Scheme {
-    /// Resolve a scheme name of the config (`newmark` uses the given β, γ).
-    pub fn from_name(name: &str, beta: f64, gamma: f64, alpha: f64) -> Result<Self> {
+    /// Resolve a scheme name of the config (`newmark` uses the given β, γ; `hht` and the α-OS
+    /// schemes Hilber's `alpha`; `kr_alpha` `rho_inf`).
+    pub fn from_name(name: &str, beta: f64, gamma: f64, alpha: f64, rho_inf: f64) -> Result<Self> {
         let nm = |beta, gamma| Ok(Scheme::Newmark { beta, gamma });
         match name {
             "newmark" => nm(beta, gamma),
@@ -128,12 +137,14 @@ impl Scheme {
             "hht" => Ok(Scheme::Hht { alpha }),
             "alpha_os" => Ok(Scheme::AlphaOs { alpha }),
             "alpha_os_tp" => Ok(Scheme::AlphaOsTp { alpha }),
+            "cr" | "chen_ricles" => Ok(Scheme::Cr),
+            "kr_alpha" => Ok(Scheme::KrAlpha { rho_inf }),
             "exact" => Ok(Scheme::Exact),
             other => Err(Error::invalid(
                 "integrator.scheme",
                 format!(
                     "unknown scheme '{other}' (expected one of newmark, central_difference, fox_goodwin, \
-                     linear_acceleration, average_acceleration, galerkin, backward_difference, hht, alpha_os, alpha_os_tp, exact)"
+                     linear_acceleration, average_acceleration, galerkin, backward_difference, hht, alpha_os, alpha_os_tp, cr, kr_alpha, exact)"
                 ),
             )),
         }
@@ -175,6 +186,8 @@ impl Scheme {
                 let (alpha, form) = self.alpha_os_form().expect("an alpha-OS scheme");
                 Box::new(AlphaOs::with_springs(model, dt, alpha, form, None, load0)?)
             }
+            Scheme::Cr => Box::new(KrAlpha::cr(model, dt, None, load0)?),
+            Scheme::KrAlpha { rho_inf } => Box::new(KrAlpha::kr_alpha(model, dt, rho_inf, None, load0)?),
             Scheme::Exact => Box::new(ExactFoh::new(model, dt, load0)?),
         })
     }
@@ -192,7 +205,8 @@ impl Scheme {
 
     /// Build the integrator for a nonlinear model: `model` holds the initial stiffness `K₀`,
     /// `springs` the hysteretic part (docs/theory.md §9). The implicit Newmark schemes iterate
-    /// with Newton–Raphson; α-OS evaluates the springs at its predictor (no iterations).
+    /// with Newton–Raphson; α-OS evaluates the springs at its predictor, CR and KR-α at their
+    /// explicit displacement (no iterations).
     pub fn build_nonlinear<'a>(
         &self,
         model: impl Into<ModelRef<'a>>,
@@ -222,11 +236,21 @@ impl Scheme {
                     load0,
                 )?))
             }
+            (Scheme::Cr | Scheme::KrAlpha { .. }, model) => {
+                let dense = match model {
+                    ModelRef::Dense(m) => std::borrow::Cow::Borrowed(m),
+                    ModelRef::Sparse(m) => std::borrow::Cow::Owned(m.to_dense("cr / kr_alpha (dense α matrices)")?),
+                };
+                Ok(Box::new(match *self {
+                    Scheme::KrAlpha { rho_inf } => KrAlpha::kr_alpha(&dense, dt, rho_inf, Some(springs), load0)?,
+                    _ => KrAlpha::cr(&dense, dt, Some(springs), load0)?,
+                }))
+            }
             _ => Err(Error::invalid(
                 "integrator.scheme",
                 format!(
                     "{} cannot integrate a nonlinear model: use an implicit Newmark scheme (e.g. \
-                     average_acceleration, solved by Newton–Raphson) or alpha_os",
+                     average_acceleration, solved by Newton–Raphson), alpha_os, cr or kr_alpha",
                     self.name()
                 ),
             )),
@@ -241,6 +265,8 @@ impl Scheme {
             Scheme::Hht { .. } => "hht",
             Scheme::AlphaOs { .. } => "alpha_os",
             Scheme::AlphaOsTp { .. } => "alpha_os_tp",
+            Scheme::Cr => "cr",
+            Scheme::KrAlpha { .. } => "kr_alpha",
             Scheme::Exact => "the exact scheme",
         }
     }

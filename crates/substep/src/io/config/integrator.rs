@@ -2,7 +2,10 @@
 
 use super::forbid;
 use crate::error::{Error, Result, require_non_negative, require_positive};
-use crate::integrate::{NewtonSettings, Scheme, check_hilber_alpha};
+use crate::integrate::{NewtonSettings, Scheme, check_hilber_alpha, check_rho_inf};
+
+/// KR-α's `ρ∞` when the config gives none (Kolay & Ricles' recommended range is 0.5–1).
+pub const DEFAULT_RHO_INF: f64 = 0.5;
 use serde::Deserialize;
 
 #[derive(Debug, Clone)]
@@ -26,6 +29,8 @@ pub(crate) struct RawIntegrator {
     pub(crate) beta: Option<f64>,
     pub(crate) gamma: Option<f64>,
     pub(crate) alpha: Option<f64>,
+    /// KR-α's spectral radius at infinite frequency.
+    pub(crate) rho_inf: Option<f64>,
     pub(crate) dt: f64,
     pub(crate) duration: Option<f64>,
     pub(crate) tolerance: Option<f64>,
@@ -67,12 +72,12 @@ impl RawIntegrator {
     pub(crate) fn check_nonlinear(&self, scheme: Scheme) -> Result<()> {
         match scheme {
             Scheme::Newmark { beta, .. } if beta > 0.0 => Ok(()),
-            Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. } => Ok(()),
+            Scheme::AlphaOs { .. } | Scheme::AlphaOsTp { .. } | Scheme::Cr | Scheme::KrAlpha { .. } => Ok(()),
             _ => Err(Error::invalid(
                 "integrator.scheme",
                 format!(
                     "\"{}\" cannot integrate a nonlinear model ([structure.storeys.hysteresis]): use an implicit \
-                     Newmark scheme (e.g. average_acceleration, solved by Newton–Raphson) or alpha_os",
+                     Newmark scheme (e.g. average_acceleration, solved by Newton–Raphson), alpha_os, cr or kr_alpha",
                     self.scheme
                 ),
             )),
@@ -101,13 +106,28 @@ impl RawIntegrator {
                 format!("only used with scheme = \"hht\" or \"alpha_os\", not \"{name}\""),
             ));
         }
+        if name != "kr_alpha" && self.rho_inf.is_some() {
+            return Err(Error::invalid(
+                "integrator.rho_inf",
+                format!("only used with scheme = \"kr_alpha\", not \"{name}\""),
+            ));
+        }
         let beta = self.beta.unwrap_or(0.25);
         let gamma = self.gamma.unwrap_or(0.5);
         if is_newmark {
             require_non_negative("integrator.beta", beta)?;
             require_non_negative("integrator.gamma", gamma)?;
         }
-        let scheme = Scheme::from_name(name, beta, gamma, self.alpha.unwrap_or(-0.1))?;
+        let scheme = Scheme::from_name(
+            name,
+            beta,
+            gamma,
+            self.alpha.unwrap_or(-0.1),
+            self.rho_inf.unwrap_or(DEFAULT_RHO_INF),
+        )?;
+        if let Scheme::KrAlpha { rho_inf } = scheme {
+            check_rho_inf(rho_inf)?;
+        }
         if let Scheme::Hht { alpha } | Scheme::AlphaOs { alpha } | Scheme::AlphaOsTp { alpha } = scheme {
             check_hilber_alpha(alpha)?;
         }
