@@ -510,6 +510,28 @@ fn bad_integrator_input_names_the_key() {
             );
         }
     }
+    // KR-α's ρ∞ outside [0, 1]; CR and KR-α on a model with a massless DOF (they solve M a = …).
+    for rho_inf in [-0.1, 1.1, f64::NAN] {
+        expect_key(
+            Scheme::KrAlpha { rho_inf }.build(&model, 0.01, &f0),
+            "integrator.rho_inf",
+            &format!("kr_alpha {rho_inf}"),
+        );
+    }
+    // (StructuralModel::new refuses such a mass; a library caller can still build one by hand.)
+    let massless = StructuralModel {
+        mass: dmatrix![1.0, 0.0; 0.0, 0.0],
+        damping: DMatrix::zeros(2, 2),
+        stiffness: dmatrix![2.0, -1.0; -1.0, 1.0],
+        influence: dvector![1.0, 1.0],
+    };
+    for scheme in [Scheme::Cr, Scheme::KrAlpha { rho_inf: 0.5 }] {
+        let msg = message(scheme.build(&massless, 0.01, &DVector::zeros(2)));
+        assert!(
+            msg.contains("integrator.scheme") && msg.contains("mass"),
+            "{scheme:?}: {msg}"
+        );
+    }
     assert!(Scheme::Hht { alpha: -1.0 / 3.0 }.build(&model, 0.01, &f0).is_ok());
     assert!(Scheme::Hht { alpha: 0.0 }.build(&model, 0.01, &f0).is_ok());
     // Newmark parameters.
@@ -563,6 +585,9 @@ fn bad_integrator_input_names_the_key() {
         ("backward_difference", Scheme::Newmark { beta: 1.0, gamma: 1.5 }),
         ("hht", Scheme::Hht { alpha: -0.2 }),
         ("alpha_os", Scheme::AlphaOs { alpha: -0.2 }),
+        ("cr", Scheme::Cr),
+        ("chen_ricles", Scheme::Cr),
+        ("kr_alpha", Scheme::KrAlpha { rho_inf: 0.5 }),
         ("exact", Scheme::Exact),
     ] {
         assert_eq!(

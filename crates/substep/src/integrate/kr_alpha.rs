@@ -1,4 +1,4 @@
-//! Model-based explicit schemes of real-time hybrid simulation (docs/theory.md §2.6): the
+//! Model-based explicit schemes of real-time hybrid simulation (docs/theory.md §2.8): the
 //! Chen–Ricles (CR) algorithm and KR-α (Kolay–Ricles), both explicit in displacement and velocity
 //! and unconditionally stable for linear and softening systems.
 //!

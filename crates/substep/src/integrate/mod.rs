@@ -112,10 +112,10 @@ pub enum Scheme {
     AlphaOs { alpha: f64 },
     /// α-OS in OpenSees' `AlphaOS_TP` form (differs from `AlphaOs` for nonlinear models only).
     AlphaOsTp { alpha: f64 },
-    /// The Chen–Ricles algorithm (explicit, model-based; docs/theory.md §2.6).
+    /// The Chen–Ricles algorithm (explicit, model-based; docs/theory.md §2.8).
     Cr,
     /// KR-α (Kolay–Ricles) with the spectral radius `ρ∞ ∈ [0, 1]` at infinite frequency, OpenSees'
-    /// `KRAlphaExplicit` form (docs/theory.md §2.6).
+    /// `KRAlphaExplicit` form (docs/theory.md §2.8).
     KrAlpha { rho_inf: f64 },
     /// Exact first-order-hold discretisation (reference).
     Exact,

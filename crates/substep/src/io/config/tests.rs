@@ -608,3 +608,44 @@ fn generated_toml_errors_name_the_key_path() {
     assert!(e.starts_with("<dict>: integrator.dt: "), "{e}");
     assert!(!e.contains("line "), "{e}");
 }
+
+/// `[integrator] scheme = "cr" | "kr_alpha"` with `rho_inf`: defaults, ranges, misuse.
+#[test]
+fn explicit_model_based_schemes_in_the_config() {
+    let base = "[structure.shear_building]\nstories = 3\nstory_mass = 1e5\nfirst_period = 0.5\n\
+                [ground_motion]\ngenerator = \"sine_sweep\"\namplitude = 1\nf0 = 0.2\nf1 = 3\nduration = 1\n";
+    let d = parse(&format!("{base}[integrator]\nscheme = \"kr_alpha\"\ndt = 0.01\n")).unwrap();
+    assert_eq!(d.integrator.scheme, Scheme::KrAlpha { rho_inf: 0.5 });
+    let d = parse(&format!(
+        "{base}[integrator]\nscheme = \"kr_alpha\"\nrho_inf = 0.8\ndt = 0.01\n"
+    ))
+    .unwrap();
+    assert_eq!(d.integrator.scheme, Scheme::KrAlpha { rho_inf: 0.8 });
+    let d = parse(&format!("{base}[integrator]\nscheme = \"cr\"\ndt = 0.01\n")).unwrap();
+    assert_eq!(d.integrator.scheme, Scheme::Cr);
+    for (integrator, key, words) in [
+        ("scheme = \"kr_alpha\"\nrho_inf = 1.5", "integrator.rho_inf", "[0, 1]"),
+        ("scheme = \"kr_alpha\"\nrho_inf = -0.1", "integrator.rho_inf", "[0, 1]"),
+        ("scheme = \"cr\"\nrho_inf = 0.5", "integrator.rho_inf", "only used with"),
+        (
+            "scheme = \"average_acceleration\"\nrho_inf = 0.5",
+            "integrator.rho_inf",
+            "only used with",
+        ),
+        (
+            "scheme = \"kr_alpha\"\nalpha = -0.1",
+            "integrator.alpha",
+            "only used with",
+        ),
+        ("scheme = \"cr\"\nbeta = 0.25", "integrator.beta", "only used with"),
+    ] {
+        let msg = err(&format!("{base}[integrator]\n{integrator}\ndt = 0.01\n"));
+        assert!(msg.contains(key) && msg.contains(words), "{integrator}: {msg}");
+    }
+    // The sub-step algorithm integrates with Newmark: a substructure test with CR is refused.
+    let msg = err(&format!(
+        "{base}[integrator]\nscheme = \"cr\"\ndt = 0.01\n[substructure]\ncoupling_dofs = [3]\nsubsteps = 2\n\
+         [[substructure.specimen]]\nkind = \"linear_sdof\"\ndof = 3\nstiffness = 1e6\n"
+    ));
+    assert!(msg.contains("integrator.scheme") && msg.contains("'cr'"), "{msg}");
+}
