@@ -68,7 +68,7 @@ impl KrAlpha {
     }
 
     /// KR-α with `ρ∞ = rho_inf` (OpenSees `KRAlphaExplicit rho_inf`).
-    pub fn kr_alpha(
+    pub fn with_rho_inf(
         model: &StructuralModel,
         dt: f64,
         rho_inf: f64,

@@ -187,7 +187,7 @@ impl Scheme {
                 Box::new(AlphaOs::with_springs(model, dt, alpha, form, None, load0)?)
             }
             Scheme::Cr => Box::new(KrAlpha::cr(model, dt, None, load0)?),
-            Scheme::KrAlpha { rho_inf } => Box::new(KrAlpha::kr_alpha(model, dt, rho_inf, None, load0)?),
+            Scheme::KrAlpha { rho_inf } => Box::new(KrAlpha::with_rho_inf(model, dt, rho_inf, None, load0)?),
             Scheme::Exact => Box::new(ExactFoh::new(model, dt, load0)?),
         })
     }
@@ -242,7 +242,7 @@ impl Scheme {
                     ModelRef::Sparse(m) => std::borrow::Cow::Owned(m.to_dense("cr / kr_alpha (dense α matrices)")?),
                 };
                 Ok(Box::new(match *self {
-                    Scheme::KrAlpha { rho_inf } => KrAlpha::kr_alpha(&dense, dt, rho_inf, Some(springs), load0)?,
+                    Scheme::KrAlpha { rho_inf } => KrAlpha::with_rho_inf(&dense, dt, rho_inf, Some(springs), load0)?,
                     _ => KrAlpha::cr(&dense, dt, Some(springs), load0)?,
                 }))
             }
