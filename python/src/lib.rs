@@ -198,6 +198,5 @@ fn _substep(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(study::study_plan, m)?)?;
     m.add_function(wrap_pyfunction!(study::study_run, m)?)?;
     m.add_function(wrap_pyfunction!(study::write_container, m)?)?;
-    m.add_function(wrap_pyfunction!(study::has_hdf5, m)?)?;
     Ok(())
 }

@@ -137,9 +137,3 @@ pub fn write_container(py: Python<'_>, dir: &str, format: &str, summary_json: &s
         .map_err(|e| pyo3::exceptions::PyOSError::new_err(e.to_string()))?;
     Ok(path.map(|p| p.display().to_string()).unwrap_or_default())
 }
-
-/// Whether this build writes HDF5 / MATLAB files (the `hdf5` feature).
-#[pyfunction]
-pub fn has_hdf5() -> bool {
-    Format::container_support()
-}

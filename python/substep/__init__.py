@@ -123,7 +123,7 @@ class Result:
           ``substeps.csv``, ``response.csv`` and ``summary.json`` in it, byte for byte as
           ``substep run`` writes them (timings aside);
         * ``*.csv``: the history alone;
-        * ``*.h5`` / ``*.hdf5``: HDF5 (needs the package built with the hdf5 feature);
+        * ``*.h5`` / ``*.hdf5``: HDF5;
         * ``*.mat``: a MATLAB level-5 MAT-file (every build; ``scipy.io.loadmat`` and MATLAB's
           ``load`` read it; see docs/python.md).
 
@@ -165,8 +165,6 @@ def _save_binary(result: Result, path: Path, suffix: str) -> List[str]:
     import tempfile
 
     fmt = "mat" if suffix == ".mat" else "hdf5"
-    if fmt == "hdf5" and not _substep.has_hdf5():
-        raise ConfigError(f"{path}: this build of substep has no HDF5 support (build it with the hdf5 feature)")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".substep-", dir=path.parent))
     try:

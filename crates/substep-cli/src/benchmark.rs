@@ -78,7 +78,7 @@ pub struct RthsArgs {
     #[arg(long, value_enum, value_name = "FORMAT", default_value = "png")]
     pub plot_format: crate::plots::PlotFormat,
     /// The traces also in one file: hdf5 (traces.h5), mat or mat73 (traces.mat; MATLAB); the CSV
-    /// files are always written. hdf5 and mat73 need a build with `--features hdf5`
+    /// files are always written
     #[arg(long, value_name = "FORMAT", default_value = "csv")]
     pub format: String,
 }

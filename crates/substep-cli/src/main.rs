@@ -87,7 +87,7 @@ pub struct RunArgs {
     pub plot_format: Option<plots::PlotFormat>,
     /// Result container besides the CSV files: csv (none), hdf5 (results.h5), mat (MATLAB
     /// results.mat, level 5) or mat73 (MATLAB v7.3, for runs over 2 GB); overrides
-    /// `[output] format`. hdf5 and mat73 need a build with `--features hdf5`
+    /// `[output] format`
     #[arg(long, value_name = "FORMAT")]
     pub format: Option<String>,
     /// Run against the wall clock (sub-steps paced at Δt/k_sub, see docs/realtime.md)

@@ -11,9 +11,8 @@
 //! or `-p` naming another target (the workspace's default binary is `substep`). A trailing `\`
 //! joins the next line; in a bare block (usage synopses) an indented line continues the command
 //! above it. Words are split as a shell does (quotes, `\`), a word starting with `#` ends the
-//! command, and the brackets of synopsis notation (`[--quick]`) are dropped. Options documented
-//! for `--features hdf5` builds exist in every build, so every option is checked against the
-//! default build.
+//! command, and the brackets of synopsis notation (`[--quick]`) are dropped. Every option is
+//! checked against the default build.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -1,6 +1,6 @@
 //! `substep study` end to end: study.csv with one row per run in run order, equal to
 //! `substep run` of the same variant; figures; a failing run keeps the others; bad study files
-//! are bad input (exit code 2); `--format hdf5|mat73` without the feature says how to enable it.
+//! are bad input (exit code 2); `--format mat|mat73` give MATLAB level-5 / v7.3 files in every build.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -146,24 +146,14 @@ fn container_formats_need_the_feature_or_work() {
         &14u32.to_le_bytes(),
         "an miMATRIX element follows the header"
     );
-    // MATLAB v7.3: the hdf5 feature.
+    // MATLAB v7.3 (pure-Rust HDF5 writer, every build).
     let out = run("mat73");
-    if cfg!(feature = "hdf5") {
-        assert!(out.status.success(), "{}", text(&out.stderr));
-        let head = std::fs::read(dir.join("o/results.mat")).unwrap();
-        assert!(head.starts_with(b"MATLAB 7.3 MAT-file"));
-        assert_eq!(&head[124..128], b"\x00\x02IM");
-        // the HDF5 signature right after the 512-byte user block
-        assert_eq!(&head[512..520], b"\x89HDF\r\n\x1a\n");
-    } else {
-        assert_eq!(out.status.code(), Some(2));
-        let e = text(&out.stderr);
-        assert!(
-            e.starts_with("error: --format: format `mat73`: this build of substep has no HDF5 support"),
-            "{e}"
-        );
-        assert!(e.contains("--features hdf5"), "{e}");
-    }
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let head = std::fs::read(dir.join("o/results.mat")).unwrap();
+    assert!(head.starts_with(b"MATLAB 7.3 MAT-file"));
+    assert_eq!(&head[124..128], b"\x00\x02IM");
+    // the HDF5 signature right after the 512-byte user block
+    assert_eq!(&head[512..520], b"\x89HDF\r\n\x1a\n");
     let out = substep(&dir, &["run", "base.toml", "--out", "o", "--quiet", "--format", "xlsx"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("unknown output format `xlsx`"));

@@ -19,7 +19,7 @@
 //! known and each block of [`BLOCK_ROWS`] rows is written in place, so memory does not grow
 //! with the length of the run. An element's byte count is a `u32` and MATLAB reads at most
 //! 2³¹ − 1 bytes per variable in this format: a larger table is refused with a message that
-//! points to `mat73` (MATLAB v7.3, the `hdf5` feature).
+//! points to `mat73` (MATLAB v7.3).
 
 use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name, split_header};
 use crate::error::{Error, Result};
@@ -205,7 +205,7 @@ fn write_table<W: Write + Seek>(out: &mut W, name: &str, csv: &Path, shown: &str
             shown,
             format!(
                 "table `{name}` ({rows} rows × {} columns, {:.1} GB) is larger than a level-5 MAT-file \
-                 variable (2 GB); use --format mat73 (MATLAB v7.3, build with --features hdf5) or hdf5",
+                 variable (2 GB); use --format mat73 (MATLAB v7.3) or hdf5",
                 columns.len(),
                 total as f64 / 1e9
             ),

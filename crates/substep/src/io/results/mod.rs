@@ -5,10 +5,9 @@
 //! The CSV files are always written first, row by row while the run steps (a run killed at any
 //! moment keeps what it recorded); the container is built from them after the run, one table
 //! per CSV file, streamed in blocks of [`BLOCK_ROWS`] rows so that its memory does not grow with
-//! the length of the run. The level-5 MAT-file (`mat`, [`mat5`]) is pure Rust and always there.
-//! HDF5 and MATLAB v7.3 need the system library (Debian `libhdf5-dev`) and so the cargo
-//! feature `hdf5`; without it, choosing `hdf5` or `mat73` is refused with a message saying how
-//! to enable it.
+//! the length of the run (the level-5 MAT-file; HDF5 and MATLAB v7.3 are assembled in memory,
+//! see `hdf5_writer`). All three writers are pure Rust and in every build: the level-5
+//! MAT-file is [`mat5`], HDF5 and MATLAB v7.3 are written with `hdf5-pure` (no libhdf5).
 //!
 //! Layout (both containers; see docs/config.md "Output formats"):
 //! * `results.h5`: a group per table (`/history`, `/substeps`, `/response`, ...), in it one 1-D
@@ -24,7 +23,6 @@ use crate::error::{Error, Result};
 use std::io::BufRead;
 use std::path::{Path, PathBuf};
 
-#[cfg(feature = "hdf5")]
 mod hdf5_writer;
 pub mod mat5;
 
@@ -55,16 +53,10 @@ pub enum Format {
     Mat73,
 }
 
-/// How to get a build that writes HDF5 / MATLAB files (the one-line refusal without it).
-pub const ENABLE_HINT: &str = "this build of substep has no HDF5 support: install libhdf5-dev and pkg-config \
-     (apt-get install -y libhdf5-dev pkg-config) and build with `--features hdf5` \
-     (cargo install --path crates/substep-cli --features hdf5)";
-
 impl Format {
     pub const NAMES: &'static [&'static str] = &["csv", "hdf5", "mat", "mat73"];
 
-    /// The format named `name`; `what` (the config key or option) names it in errors. `hdf5`
-    /// and `mat73` in a build without the `hdf5` feature are refused with [`ENABLE_HINT`].
+    /// The format named `name`; `what` (the config key or option) names it in errors.
     pub fn parse(what: &str, name: &str) -> Result<Self> {
         let f = match name {
             "csv" => Self::Csv,
@@ -78,20 +70,7 @@ impl Format {
                 ));
             }
         };
-        if f.needs_hdf5() && !Self::container_support() {
-            return Err(Error::invalid(what, format!("format `{name}`: {ENABLE_HINT}")));
-        }
         Ok(f)
-    }
-
-    /// Whether this build can write HDF5 and MATLAB v7.3 files (the `hdf5` feature).
-    pub const fn container_support() -> bool {
-        cfg!(feature = "hdf5")
-    }
-
-    /// Whether the format needs the `hdf5` feature.
-    pub const fn needs_hdf5(self) -> bool {
-        matches!(self, Self::Hdf5 | Self::Mat73)
     }
 
     pub fn name(self) -> &'static str {
@@ -284,19 +263,10 @@ fn write_impl(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Me
     write_hdf5(path, format, tables, meta)
 }
 
-#[cfg(feature = "hdf5")]
 fn write_hdf5(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
     write_via_temp(path, |tmp, shown| {
         hdf5_writer::write_file(tmp, format == Format::Mat73, tables, meta, shown)
     })
-}
-
-#[cfg(not(feature = "hdf5"))]
-fn write_hdf5(path: &Path, format: Format, _tables: &[(&str, PathBuf)], _meta: &Metadata) -> Result<()> {
-    Err(Error::file(
-        path.display().to_string(),
-        format!("format `{}`: {ENABLE_HINT}", format.name()),
-    ))
 }
 
 /// Write the container at `path` through `write(tmp, shown)` into a temporary file beside it,
@@ -426,13 +396,8 @@ mod tests {
         assert_eq!(Format::parse("output.format", "csv").unwrap(), Format::Csv);
         let e = Format::parse("output.format", "xlsx").unwrap_err().to_string();
         assert!(e.starts_with("output.format: unknown output format `xlsx`"), "{e}");
-        let h = Format::parse("output.format", "hdf5");
-        if Format::container_support() {
-            assert_eq!(h.unwrap(), Format::Hdf5);
-        } else {
-            let e = h.unwrap_err().to_string();
-            assert!(e.contains("--features hdf5"), "{e}");
-        }
+        assert_eq!(Format::parse("output.format", "hdf5").unwrap(), Format::Hdf5);
+        assert_eq!(Format::parse("output.format", "mat73").unwrap(), Format::Mat73);
         assert_eq!(matlab_name("u1"), "u1");
         assert_eq!(matlab_name("1a-b"), "x1a_b");
     }
