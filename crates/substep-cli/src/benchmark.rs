@@ -146,7 +146,7 @@ fn table(setup: &StudySetup, rows: &[RthsRow]) -> String {
         "RTHS benchmark: controller {}, record {} × {}, {}",
         setup.kind.name(),
         setup.base.record.name,
-        substep::io::format::sig(setup.base.intensity, 6),
+        substep::format::sig(setup.base.intensity, 6),
         alg
     );
     let head = "    J1     J2     J3     J4     J5     J6     J7     J8     J9";
@@ -198,7 +198,7 @@ fn markdown(setup: &StudySetup, rows: &[RthsRow], command: &str, plots: &[PathBu
         "Controller `{}`, record `{}` × {}.\n",
         setup.kind.name(),
         setup.base.record.name,
-        substep::io::format::sig(setup.base.intensity, 6)
+        substep::format::sig(setup.base.intensity, 6)
     );
     let _ = writeln!(
         s,

@@ -11,8 +11,8 @@ use anyhow::{Context, Result};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use substep::format::{percent, sig};
 use substep::io::TestDefinition;
-use substep::io::format::{percent, sig};
 use substep::run::{EngineeringRow, EngineeringSummary, InputMotion, round_time};
 
 /// Rows kept for the figures.

@@ -98,7 +98,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     // REALTIME_REFERENCE_MAX_DOFS DOFs (a step well under a millisecond). A larger model's
     // reference would be a second full integration next to the real-time thread on the same
     // cores; those runs record no reference and say so (run offline for it).
-    let (mut reference, no_reference) = match substep::io::Reference::new(def)? {
+    let (mut reference, no_reference) = match substep::run::Reference::new(def)? {
         Some(r) if r.n_dofs() > substep::run::REALTIME_REFERENCE_MAX_DOFS => (None, Some(r.n_dofs())),
         r => (r, None),
     };
@@ -177,7 +177,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         {
             let reason = format!(
                 "diverged: runaway response: |u| = {} m on DOF {} exceeded {} m at step {}",
-                substep::io::format::sig(x.abs(), 4),
+                substep::format::sig(x.abs(), 4),
                 k + 1,
                 substep::run::RUNAWAY_DISPLACEMENT,
                 r.step
@@ -308,7 +308,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             reason: format!(
                 "the largest displacement error against the reference reached {} of the reference's largest \
                  displacement (more than {} %): the test diverged from the structure it simulates",
-                substep::io::format::percent(overall),
+                substep::format::percent(overall),
                 100.0 * substep::run::DIVERGED_ERROR
             ),
         });
@@ -330,8 +330,8 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
              sub-step, so this was a slower test than the one defined (docs/realtime.md){}",
             report.missed,
             slots,
-            substep::io::format::percent(missed_share),
-            substep::io::format::percent(max_missed),
+            substep::format::percent(missed_share),
+            substep::format::percent(max_missed),
             // Without SCHED_FIFO a woken sub-step thread can wait a scheduler slice behind
             // another thread: the usual cause on a lab PC, and the fix is one flag.
             if report.fifo == substep::realtime::RtSetting::Applied {
@@ -408,16 +408,16 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             "  deadlines: {} of {} sub-step slots missed ({}; at most {} allowed): {}",
             report.missed,
             slots,
-            substep::io::format::percent(missed_share),
-            substep::io::format::percent(max_missed),
+            substep::format::percent(missed_share),
+            substep::format::percent(max_missed),
             if not_real_time { "NOT real time" } else { "real time" }
         );
         println!(
             "  peak relative displacement |u| = {} m (DOF {}, t = {:.3} s); peak coupling force |f_c| = {} N (DOF {}, t = {:.3} s)",
-            substep::io::format::sig(peak_u.0, 7),
+            substep::format::sig(peak_u.0, 7),
             peak_u.1 + 1,
             peak_u.2,
-            substep::io::format::sig(peak_f.0, 7),
+            substep::format::sig(peak_f.0, 7),
             sub.coupling_dofs.get(peak_f.1).map_or(0, |d| d + 1),
             peak_f.2
         );

@@ -13,8 +13,8 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
+use substep::format::percent;
 use substep::io::TestDefinition;
-use substep::io::format::percent;
 use substep::run::{Layout, Run, RunObserver, RunSummary, StepRow, largest};
 use substep::substructure::ErrorForceSpec;
 use substep::substructure::SubstepObserver;
@@ -776,7 +776,7 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
             if let Some(s) = &r.same_integrator {
                 print_time_step_share(&summary.scheme, s);
             }
-        } else if let Some(why) = substep::io::Reference::unavailable(&def) {
+        } else if let Some(why) = substep::run::Reference::unavailable(&def) {
             println!("  no reference solution: {why}");
         }
         if let Some(e) = &summary.engineering {

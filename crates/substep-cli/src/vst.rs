@@ -461,7 +461,7 @@ pub fn grid_markdown(grids: &[(GridActuator, Vec<GridRow>)]) -> String {
         }
         let own: Vec<String> = own
             .iter()
-            .map(|(c, e)| format!("{} % at {} MN·s/m", substep::io::format::sig(100.0 * e, 3), c / 1e6))
+            .map(|(c, e)| format!("{} % at {} MN·s/m", substep::format::sig(100.0 * e, 3), c / 1e6))
             .collect();
         let _ = writeln!(
             md,
@@ -511,10 +511,10 @@ pub fn grid_markdown(grids: &[(GridActuator, Vec<GridRow>)]) -> String {
             } else {
                 String::new()
             };
-            let pct = |e: f64| substep::io::format::sig(100.0 * e, 4);
+            let pct = |e: f64| substep::format::sig(100.0 * e, 4);
             let ratio = |x: f64| {
                 if x.is_finite() {
-                    substep::io::format::sig(x, 3)
+                    substep::format::sig(x, 3)
                 } else {
                     "–".to_string()
                 }

@@ -15,6 +15,7 @@
 
 pub mod error;
 pub mod excitation;
+pub mod format;
 pub mod integrate;
 pub mod io;
 pub mod model;

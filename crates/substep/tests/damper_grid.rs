@@ -201,7 +201,7 @@ fn the_same_integrator_reference_is_newmark_of_the_assembled_structure() {
     let damper = 2.5e6;
     let def = substep::study::vst::grid::definition(damper, 0.01, 3, GridActuator::PureDelay, false).unwrap();
     let accel = def.ground_motion.accel.clone();
-    let mut same = substep::io::Reference::same_integrator(&def).unwrap().unwrap();
+    let mut same = substep::run::Reference::same_integrator(&def).unwrap().unwrap();
     assert_eq!(same.scheme(), "newmark");
 
     let m = DMatrix::from_diagonal_element(3, 3, 2.0e5);

@@ -251,7 +251,7 @@ fn two_coupling_dofs_get_one_model_each_and_stay_finite() {
     assert!(text.contains("kind = \"arx\""));
     let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples"));
     let def = substep::io::TestDefinition::from_toml(&text, "two_specimens.toml", dir).unwrap();
-    let mut sim = substep::io::Simulation::new(&def).unwrap();
+    let mut sim = substep::run::Simulation::new(&def).unwrap();
     while sim.steps_done() < sim.steps_total() {
         sim.step(&mut ()).unwrap();
         let test = sim.substructure_test().unwrap();

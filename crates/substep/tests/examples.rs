@@ -2,7 +2,8 @@
 //! examples cannot rot; the default example stays close to its exact reference.
 
 use std::path::{Path, PathBuf};
-use substep::io::{Reference, Simulation, TestDefinition};
+use substep::io::TestDefinition;
+use substep::run::{Reference, Simulation};
 
 fn examples_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples")

@@ -184,7 +184,7 @@ mod config {
         assert_eq!(got.influence, want.influence);
         // Rayleigh C = 0.1 M + 0.002 K on the space frame's matrices.
         assert!((got.damping.get(0, 0) - (0.1 * want.mass.get(0, 0) + 0.002 * want.stiffness.get(0, 0))).abs() < 1e-6);
-        let mut sim = substep::io::Simulation::new(&d).unwrap();
+        let mut sim = substep::run::Simulation::new(&d).unwrap();
         for _ in 0..sim.steps_total() {
             sim.step(&mut ()).unwrap();
         }

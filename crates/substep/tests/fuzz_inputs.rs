@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
 use substep::excitation::{parse_single_column, parse_two_column};
-use substep::io::{Reference, Simulation, TestDefinition, parse_matrix_market, parse_matrix_market_sparse};
+use substep::io::{TestDefinition, parse_matrix_market, parse_matrix_market_sparse};
+use substep::run::{Reference, Simulation};
 
 const EXTREMES: &[&str] = &[
     "0",

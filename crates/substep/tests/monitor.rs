@@ -4,11 +4,12 @@
 use std::f64::consts::PI;
 use std::path::Path;
 use substep::analysis::StepMap;
-use substep::io::{Simulation, TestDefinition};
+use substep::io::TestDefinition;
 use substep::model::sdof;
 use substep::monitor::energy::EnergyIndicator;
 use substep::monitor::model_view::{Identification, ModelView};
 use substep::monitor::{Controls, StopRequest, frame_ring, token_matches};
+use substep::run::Simulation;
 use substep::specimen::SpecimenSpec;
 use substep::substructure::{ErrorForceSpec, SubstepController, SubstepSettings, SubstructureTest};
 use substep::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab};

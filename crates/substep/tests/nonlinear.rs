@@ -319,11 +319,11 @@ fn hysteretic_specimen_tests_report_their_error_against_a_nonlinear_reference() 
 fn specimens_without_a_model_have_no_reference_and_say_why() {
     let smooth = "kind = \"friction\"\nslip_force = 1.5e5\nmodel = \"smooth\"\nv_ref = 0.01";
     let def = TestDefinition::from_toml(&hysteretic_specimen(smooth, 0.01), "smooth.toml", &data_dir()).unwrap();
-    assert!(substep::io::Reference::new(&def).unwrap().is_none());
-    let why = substep::io::Reference::unavailable(&def).unwrap();
+    assert!(substep::run::Reference::new(&def).unwrap().is_none());
+    let why = substep::run::Reference::unavailable(&def).unwrap();
     assert!(why.contains("smooth"), "{why}");
     let def = TestDefinition::from_toml(&hysteretic_specimen(BOUC_WEN, 0.01), "bw.toml", &data_dir()).unwrap();
-    assert!(substep::io::Reference::unavailable(&def).is_none());
+    assert!(substep::run::Reference::unavailable(&def).is_none());
 }
 
 /// Newton on sparse storage (the path of large models: the tangent assembled as CSC and

@@ -200,7 +200,7 @@ fn the_time_steps_share_shrinks_with_the_order_of_the_scheme() {
 #[ignore]
 fn same_integrator_cost() {
     use std::time::Instant;
-    use substep::io::Reference;
+    use substep::run::Reference;
     struct Nothing;
     impl SubstepObserver for Nothing {}
     impl RunObserver for Nothing {

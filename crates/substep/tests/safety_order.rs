@@ -3,7 +3,8 @@
 //! ideal force and phase-lag report stay visible through the limits.
 
 use std::path::Path;
-use substep::io::{Simulation, TestDefinition};
+use substep::io::TestDefinition;
+use substep::run::Simulation;
 use substep::substructure::SubstepObserver;
 
 const DELAY_SUBSTEPS: usize = 10; // 10 ms at Δτ = 1 ms

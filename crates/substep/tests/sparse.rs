@@ -410,7 +410,8 @@ fn dense_only_features_refuse_large_sparse_models() {
 
 mod config {
     use std::path::Path;
-    use substep::io::{Reference, Simulation, TestDefinition};
+    use substep::io::TestDefinition;
+    use substep::run::{Reference, Simulation};
 
     const MOTION: &str =
         "[ground_motion]\ngenerator = \"harmonic\"\namplitude = 1.0\nfrequency = 2.0\nduration = 0.05\n";

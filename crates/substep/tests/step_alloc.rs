@@ -5,7 +5,8 @@
 //! allocator).
 
 use std::path::Path;
-use substep::io::{Simulation, TestDefinition};
+use substep::io::TestDefinition;
+use substep::run::Simulation;
 use substep::substructure::SubstepObserver;
 
 #[path = "common/counting_alloc.rs"]

@@ -1,15 +1,14 @@
 //! Input and output around the numerical core: MatrixMarket matrices, TOML test definitions
-//! (documented in `docs/config.md`) and the stepping of a defined test ([`run`]).
+//! (documented in `docs/config.md`), result containers and site definitions. The stepping of a
+//! defined test is [`crate::run`].
 //!
 //! Conventions: SI units; DOF numbers are 1-based in files and messages, 0-based in the
 //! library types; every error is one line naming the file and line or the config key.
 
 pub mod config;
-pub mod format;
 pub mod limits;
 pub mod matrix_market;
 pub mod results;
-pub mod run;
 pub mod site_config;
 
 pub use config::{
@@ -21,4 +20,3 @@ pub use matrix_market::{
     parse_matrix_market, parse_matrix_market_sparse, read_matrix_market, read_matrix_market_sparse,
     read_matrix_market_sparse_with, read_matrix_market_with, write_matrix_market_symmetric, write_matrix_market_vector,
 };
-pub use run::{Reference, Simulation};

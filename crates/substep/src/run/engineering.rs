@@ -4,13 +4,14 @@
 //! 5 % response spectrum. The numerics are `analysis::energy`, `analysis::storey` and
 //! `excitation::spectrum`; this module only records.
 
+use super::Simulation;
 use super::round_time;
 use crate::analysis::energy::{EnergyBalance, EnergyTerms};
 use crate::analysis::spectral::amplitude_spectrum;
 use crate::analysis::storey::StoreyResponse;
 use crate::error::Result;
 use crate::excitation::spectrum::{SpectralOrdinate, log_periods, response_spectrum};
-use crate::io::{Simulation, TestDefinition};
+use crate::io::TestDefinition;
 use serde::Serialize;
 
 /// Largest model for which the per-step engineering quantities are computed (dense products

@@ -21,14 +21,17 @@
 //! ```
 
 mod engineering;
+mod simulation;
 mod stats;
 mod summary;
 mod table;
 
+pub use crate::io::config::EXACT_REFERENCE_MAX_DOFS;
 pub use engineering::{
     EnergySummary, EngineeringRecorder, EngineeringRow, EngineeringSummary, InputMotion, InputMotionSummary,
     MAX_DOFS as ENGINEERING_MAX_DOFS, PeakAt, SPECTRUM_ZETA, SpectrumPeak, StoreyPeak,
 };
+pub use simulation::{Reference, Simulation};
 pub use stats::{ErrorStats, ErrorTracker, Peak, PeakTracker, largest};
 pub use summary::{
     CouplingError, CouplingPeaks, DofError, DofPeaks, ReferenceSummary, RunSummary, SameIntegratorSummary,
@@ -38,7 +41,7 @@ pub use table::{HistoryTable, Table, push_number};
 
 use crate::analysis::tracking::{ErrorAccumulator, TrackingMetrics};
 use crate::error::{Error, Result};
-use crate::io::{Reference, Simulation, SubstructureDefinition, TestDefinition};
+use crate::io::{SubstructureDefinition, TestDefinition};
 use crate::monitor::{StabilityAction, StabilityMonitor, StabilitySettings};
 use crate::substructure::{StepRecord, SubstepObserver};
 use std::ops::ControlFlow;
@@ -441,7 +444,7 @@ fn runaway(u: &[f64]) -> Option<String> {
         .find(|(_, v)| exceeds(v.abs(), RUNAWAY_DISPLACEMENT))?;
     Some(format!(
         "runaway response: |u| = {} m on DOF {} exceeded {RUNAWAY_DISPLACEMENT} m at the step before",
-        crate::io::format::sig(v.abs(), 4),
+        crate::format::sig(v.abs(), 4),
         k + 1
     ))
 }
@@ -719,7 +722,7 @@ impl<'d> Run<'d> {
                 reason: format!(
                     "the largest displacement error against the reference reached {} of the reference's \
                      largest displacement (more than {} %): the test diverged from the structure it simulates",
-                    crate::io::format::percent(overall),
+                    crate::format::percent(overall),
                     100.0 * DIVERGED_ERROR
                 ),
             });

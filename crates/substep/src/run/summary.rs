@@ -3,10 +3,11 @@
 //! file's; the descriptive blocks (substructure, estimation, phase lag) are JSON values whose
 //! keys serialise sorted.
 
+use super::Simulation;
 use super::engineering::{EngineeringSummary, InputMotionSummary};
 use super::stats::{ErrorStats, Peak};
 use crate::compensate::{PhaseLagDefinition, PhaseLagSpec};
-use crate::io::{Simulation, SubstructureDefinition};
+use crate::io::SubstructureDefinition;
 use crate::specimen::SpecimenSpec;
 use crate::substructure::ErrorForceSpec;
 use crate::transfer::Dynamics;
@@ -79,7 +80,7 @@ pub struct ReferenceSummary {
 }
 
 /// The assembled structure integrated with the test's own scheme (its `β`, `γ` and `Δt`:
-/// [`Reference::same_integrator`](crate::io::Reference::same_integrator)) beside the exact
+/// [`Reference::same_integrator`](crate::run::Reference::same_integrator)) beside the exact
 /// reference. Both errors are the largest over the numerical DOFs of the peak displacement
 /// error relative to that DOF's peak, like
 /// [`ReferenceSummary::max_displacement_error`].

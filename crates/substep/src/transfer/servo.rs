@@ -125,16 +125,16 @@ impl ServoParams {
         let pole = |z: &nalgebra::Complex<f64>| {
             format!(
                 "{} {} {}i 1/s",
-                crate::io::format::sig(z.re, 4),
+                crate::format::sig(z.re, 4),
                 if z.im < 0.0 { '-' } else { '+' },
-                crate::io::format::sig(z.im.abs(), 4)
+                crate::format::sig(z.im.abs(), 4)
             )
         };
         let specimen = format!(
             "m = {} kg, c = {} N·s/m, k = {} N/m",
-            crate::io::format::sig(self.m_e, 4),
-            crate::io::format::sig(self.c_e, 4),
-            crate::io::format::sig(self.k_e, 4)
+            crate::format::sig(self.m_e, 4),
+            crate::format::sig(self.c_e, 4),
+            crate::format::sig(self.k_e, 4)
         );
         if let Some(z) = poles.iter().find(|z| z.re >= 0.0) {
             return Err(Error::invalid(
@@ -160,7 +160,7 @@ impl ServoParams {
                     "the servo plant's pole {} (with the specimen: {specimen}) is too fast for RK4 \
                      at the inner step {} s; divide the inner step by at least {factor} (substructure.inner_steps)",
                     pole(z),
-                    crate::io::format::sig(h, 4)
+                    crate::format::sig(h, 4)
                 ),
             ));
         }

@@ -212,7 +212,7 @@ impl RthsResult {
                 "case {}: the actuator force reached {} N, beyond the benchmark's capacity of {FORCE_CAPACITY} N: \
                  a lab test would have overloaded the specimen",
                 self.case,
-                crate::io::format::sig(self.max_force, 4)
+                crate::format::sig(self.max_force, 4)
             ));
         }
         if let Some(g) = &self.guard_trip {

@@ -69,6 +69,7 @@ use serde::Deserialize;
 pub(crate) use specimens::RawSpecimen;
 use std::fmt;
 use std::path::{Path, PathBuf};
+pub use structure::EXACT_REFERENCE_MAX_DOFS;
 use structure::{ModelShape, RawStructure, check_exact_range};
 use substructure::RawSubstructure;
 pub use substructure::SubstructureDefinition;

@@ -71,7 +71,7 @@ pub fn check_max_missed(what: &str, x: f64) -> Result<f64> {
             what,
             format!(
                 "must be a share of the sub-step deadlines between 0 and 1 (0.01 = 1 %), got {}",
-                crate::io::format::sig(x, 6)
+                crate::format::sig(x, 6)
             ),
         ));
     }

@@ -18,6 +18,11 @@ use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::path::Path;
 
+/// The largest assembled model integrated with the exact scheme as a reference; larger models
+/// use Newmark with the run's β, γ and time step (on sparse storage if the model is sparse).
+/// Defined with the test definition because the definition's checks depend on it.
+pub const EXACT_REFERENCE_MAX_DOFS: usize = 200;
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawStructure {
@@ -969,9 +974,7 @@ pub(crate) fn check_exact_range(
         }
     }
     let exact = scheme == Scheme::Exact
-        || sub.is_some_and(|s| {
-            !s.specimens.is_empty() && all_linear && dofs.len() <= crate::io::run::EXACT_REFERENCE_MAX_DOFS
-        });
+        || sub.is_some_and(|s| !s.specimens.is_empty() && all_linear && dofs.len() <= EXACT_REFERENCE_MAX_DOFS);
     for (i, d) in dofs.iter().enumerate() {
         let h = if d.internal { dt_inner } else { dt };
         if !(d.internal || exact) || d.m <= 0.0 {

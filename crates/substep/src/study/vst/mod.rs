@@ -10,7 +10,7 @@
 //!
 //! Every method runs on the same set-up and noise sequence and is compared with the exact
 //! solution of the assembled model (`assemble_monolithic` + `Scheme::Exact`, through
-//! [`crate::io::Reference`]). [`run_study`] returns the numbers ([`Study`]: per-step series and
+//! [`crate::run::Reference`]). [`run_study`] returns the numbers ([`Study`]: per-step series and
 //! error statistics per method, [`acceptance`] the verdicts); tables, CSV and plots are the
 //! front end's (`substep vst`, docs/vst.md).
 //!

@@ -3,8 +3,8 @@
 
 use super::{ErrorForceSpec, Method, TOP, VstSettings, definition, methods};
 use crate::analysis::spectral::band_coherence;
-use crate::io::{Reference, Simulation};
 use crate::monitor::{StabilityMonitor, StabilitySettings, StabilitySummary};
+use crate::run::{Reference, Simulation};
 use crate::substructure::SubstepObserver;
 use crate::{Error, Result};
 

@@ -5,9 +5,9 @@
 //! Both are built once (all allocation happens in the constructors) and then stepped; the
 //! caller records whatever it needs between steps.
 
-use super::config::TestDefinition;
 use crate::error::{Error, Result};
 use crate::integrate::{Integrator, Kinematics, Scheme};
+use crate::io::config::{EXACT_REFERENCE_MAX_DOFS, TestDefinition};
 use crate::material::MaterialSpec;
 use crate::model::Model;
 use crate::model::SpringSpec;
@@ -15,10 +15,6 @@ use crate::site::{Mode, RemoteStepTest};
 use crate::specimen::{FrictionModel, SpecimenSpec, assemble_monolithic_model};
 use crate::substructure::{StepRecord, SubstepObserver, SubstructureTest};
 use nalgebra::{DMatrix, DVector};
-
-/// The largest assembled model integrated with the exact scheme as a reference; larger models
-/// use Newmark with the run's β, γ and time step (on sparse storage if the model is sparse).
-pub const EXACT_REFERENCE_MAX_DOFS: usize = 200;
 
 enum Engine {
     Monolithic {
