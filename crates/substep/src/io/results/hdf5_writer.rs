@@ -29,20 +29,6 @@ const DEFLATE: u32 = 4;
 /// The user block MATLAB v7.3 files start with.
 const USER_BLOCK: usize = 512;
 
-pub(super) fn write_file(
-    tmp: &Path,
-    mat: bool,
-    tables: &[(&str, PathBuf)],
-    meta: &Metadata,
-    shown: &str,
-) -> Result<()> {
-    if mat {
-        write_mat(tmp, tables, meta, shown)
-    } else {
-        write_h5(tmp, tables, meta, shown)
-    }
-}
-
 fn open_table(csv: &Path) -> Result<CsvTable<BufReader<File>>> {
     let csv_name = csv.display().to_string();
     let f = File::open(csv).map_err(|e| Error::file(&csv_name, format!("cannot open: {e}")))?;
@@ -61,7 +47,7 @@ fn read_next(table: &mut CsvTable<BufReader<File>>, block: &mut [Vec<f64>]) -> R
 /// A group per table with one chunked (one block per chunk), deflate-compressed 1-D dataset
 /// per column (`units` attribute) and the column order in `columns`; the summary and config as
 /// root attributes.
-fn write_h5(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
+pub(super) fn write_h5(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
     let h5 = |e: hdf5_pure::Error| Error::file(shown, format!("HDF5: {e}"));
     let mut file = FileBuilder::new();
     let mut open = Vec::with_capacity(tables.len());
@@ -165,7 +151,7 @@ impl DataProducer for ColumnProducer {
 }
 
 /// A MATLAB struct of column vectors per table, `summary` and `config` as char variables.
-fn write_mat(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
+pub(super) fn write_mat(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
     let io = |e: std::io::Error| Error::file(shown, format!("cannot write: {e}"));
     let path = tmp.with_extension("columns.tmp");
     let scratch_file = File::options()

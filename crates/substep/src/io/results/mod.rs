@@ -5,8 +5,7 @@
 //! The CSV files are always written first, row by row while the run steps (a run killed at any
 //! moment keeps what it recorded); the container is built from them after the run, one table
 //! per CSV file, streamed in blocks of [`BLOCK_ROWS`] rows so that its memory does not grow with
-//! the length of the run (the level-5 MAT-file; HDF5 and MATLAB v7.3 are assembled in memory,
-//! see `hdf5_writer`). All three writers are pure Rust and in every build: the level-5
+//! the length of the run. All three writers are pure Rust and in every build: the level-5
 //! MAT-file is [`mat5`], HDF5 and MATLAB v7.3 are written with `hdf5-pure` (no libhdf5).
 //!
 //! Layout (both containers; see docs/config.md "Output formats"):
@@ -257,16 +256,13 @@ pub fn write_tables(path: &Path, format: Format, tables: &[(&str, PathBuf)], met
 }
 
 fn write_impl(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
-    if format == Format::Mat {
-        return write_via_temp(path, |tmp, shown| mat5::write_file(tmp, tables, meta, shown));
+    match format {
+        // No container: both callers return before this (the CSV files are the result).
+        Format::Csv => Ok(()),
+        Format::Mat => write_via_temp(path, |tmp, shown| mat5::write_file(tmp, tables, meta, shown)),
+        Format::Hdf5 => write_via_temp(path, |tmp, shown| hdf5_writer::write_h5(tmp, tables, meta, shown)),
+        Format::Mat73 => write_via_temp(path, |tmp, shown| hdf5_writer::write_mat(tmp, tables, meta, shown)),
     }
-    write_hdf5(path, format, tables, meta)
-}
-
-fn write_hdf5(path: &Path, format: Format, tables: &[(&str, PathBuf)], meta: &Metadata) -> Result<()> {
-    write_via_temp(path, |tmp, shown| {
-        hdf5_writer::write_file(tmp, format == Format::Mat73, tables, meta, shown)
-    })
 }
 
 /// Write the container at `path` through `write(tmp, shown)` into a temporary file beside it,
