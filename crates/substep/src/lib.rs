@@ -30,6 +30,8 @@ pub mod benchmark;
 pub mod compensate;
 pub mod ident;
 pub mod lab;
+pub mod latency;
+pub mod limits;
 pub mod linalg;
 pub mod material;
 pub mod site;

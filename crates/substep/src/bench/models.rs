@@ -99,7 +99,7 @@ pub fn build(model: BenchModel, dofs: usize) -> Result<BuiltModel> {
         return Err(Error::invalid("--dofs", "must be at least 3"));
     }
     let ratio = |m: SparseModel| -> Result<(SparseModel, (f64, f64))> {
-        let w = crate::sparse::lowest_frequencies(&m.mass, &m.stiffness, 2)?;
+        let w = crate::model::lowest_frequencies(&m.mass, &m.stiffness, 2)?;
         let (alpha, beta) = rayleigh_coefficients(ZETA, w[0], w[1])?;
         Ok((m.with_damping(&DampingSpec::Rayleigh { alpha, beta })?, (alpha, beta)))
     };
@@ -172,7 +172,7 @@ pub fn build_hinged_frame(dofs: usize) -> Result<(BuiltModel, crate::model::Hyst
     }
     let f = Frame2d::with_about_dofs((3 * dofs / 7).max(3));
     let (m, springs) = crate::model::frame_2d_hinged(&f, &bench_frame_hinges(&f))?;
-    let w = crate::sparse::lowest_frequencies(&m.mass, &m.stiffness, 2)?;
+    let w = crate::model::lowest_frequencies(&m.mass, &m.stiffness, 2)?;
     let (alpha, beta) = rayleigh_coefficients(ZETA, w[0], w[1])?;
     let n_hinges = springs.springs.len();
     Ok((

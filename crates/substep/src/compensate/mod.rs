@@ -59,6 +59,7 @@ pub use inverse::{InverseFir, InverseFirSpec};
 pub use polynomial::{Polynomial, lagrange_extrapolation_weights};
 pub use site::CompensatedSite;
 pub use spec::{PhaseLagDefinition, PhaseLagSpec};
+pub use crate::substructure::{GuardTrip, PhaseLagReport};
 
 use crate::error::{Error, Result};
 
@@ -109,55 +110,6 @@ pub trait PhaseLagCompensator: Send {
     fn state_len(&self) -> usize;
     fn write_state(&self, out: &mut [f64]);
     fn read_state(&mut self, state: &[f64]);
-}
-
-/// What a phase-lag compensated site reports per sub-step (for records and summaries); see
-/// [`crate::substructure::ExperimentalSubstructure::phase_lag`].
-pub trait PhaseLagReport {
-    /// `d − y` of the last sub-step per coupling DOF (target minus measured displacement).
-    fn tracking_error(&self) -> &[f64];
-    /// `Δu` of the last sub-step per coupling DOF (before the ramp).
-    fn correction(&self) -> &[f64];
-    /// The command sent in the last sub-step, `d + h Δu`.
-    fn command_sent(&self) -> &[f64];
-    /// `h` of the last sub-step.
-    fn ramp_value(&self) -> f64;
-    /// The compensator kind per coupling DOF.
-    fn kinds(&self) -> Vec<&'static str>;
-    /// Per coupling DOF (0-based): why its guard disabled it, if it did. Allocates.
-    fn trips(&self) -> Vec<(usize, GuardTrip)>;
-}
-
-/// Why a [`Guard`] disabled a compensator.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum GuardTrip {
-    /// The target or the measured displacement was not finite.
-    NonFiniteInput,
-    /// The computed correction was not finite.
-    NonFiniteCorrection,
-    /// `|h Δu|` exceeded the bound.
-    Bound { correction: f64, bound: f64 },
-    /// The supervisor of an identified compensator saw its correction amount to a lead of
-    /// `lead` sub-steps, more than `bound`: the compensated loop was going unstable.
-    Unstable { lead: f64, bound: f64 },
-}
-
-impl std::fmt::Display for GuardTrip {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            GuardTrip::NonFiniteInput => write!(f, "non-finite target or measured displacement"),
-            GuardTrip::NonFiniteCorrection => write!(f, "non-finite correction"),
-            GuardTrip::Bound { correction, bound } => {
-                write!(f, "correction {correction:.3e} exceeded the bound {bound:.3e}")
-            }
-            GuardTrip::Unstable { lead, bound } => write!(
-                f,
-                "the correction amounted to a lead of {lead:.1} sub-steps, more than the {bound:.1} \
-                 a delay can need: the compensated loop was going unstable, so the compensator \
-                 backed off"
-            ),
-        }
-    }
 }
 
 /// Output guard of a compensator: the bound on the sent correction `|h Δu|` is

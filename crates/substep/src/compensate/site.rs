@@ -158,7 +158,7 @@ impl<S: ExperimentalSubstructure + ?Sized> ExperimentalSubstructure for Compensa
     fn request_stop(&mut self, reason: &str) -> bool {
         self.inner.request_stop(reason)
     }
-    fn lab_stats(&self) -> Option<&crate::lab::LabStats> {
+    fn lab_stats(&self) -> Option<&crate::substructure::LabStats> {
         self.inner.lab_stats()
     }
     fn pace_ramp(&mut self, clock: Option<Box<dyn crate::substructure::RampClock>>) -> bool {

@@ -10,14 +10,14 @@
 use super::G;
 use super::record::{Record, from_located_samples};
 use crate::error::{Error, Result, require_positive};
-use crate::io::Limits;
+use crate::limits::Limits;
 use std::path::Path;
 
 /// Read a whole record file as text within `limits` (a regular file of at most
 /// `max_file_bytes`, at most `max_record_values` numbers, counted before it is kept); the path
 /// as given names the file in messages.
 fn read_text(path: &Path, limits: &Limits) -> Result<(String, String)> {
-    let text = crate::io::limits::read_record_text(path, limits)?;
+    let text = crate::limits::read_record_text(path, limits)?;
     Ok((path.display().to_string(), text))
 }
 

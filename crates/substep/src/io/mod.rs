@@ -6,7 +6,7 @@
 //! library types; every error is one line naming the file and line or the config key.
 
 pub mod config;
-pub mod limits;
+pub use crate::limits;
 pub mod matrix_market;
 pub mod results;
 pub mod site_config;

@@ -121,7 +121,7 @@ impl SiteDefinition {
         let path = path.as_ref();
         let name = path.display().to_string();
         // Bounded, regular files only (as a test definition): `/dev/zero` or a FIFO is refused.
-        let text = super::limits::read_text(path, super::limits::CONFIG_MAX_BYTES)?;
+        let text = crate::limits::read_text(path, crate::limits::CONFIG_MAX_BYTES)?;
         let base = path.parent().unwrap_or(Path::new("."));
         Self::from_toml(&text, &name, base)
     }

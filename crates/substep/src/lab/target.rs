@@ -11,7 +11,8 @@ use super::channels::ChannelMap;
 use super::frames::{self, OF_BYTES, action, status};
 use super::link::{Link, LinkTransport, Received};
 use crate::error::{Error, Result};
-use crate::realtime::LatencyHistogram;
+use crate::latency::LatencyHistogram;
+pub use crate::substructure::LabStats;
 use crate::substructure::ExperimentalSubstructure;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
@@ -84,71 +85,6 @@ impl LabTargetSpec {
             ));
         }
         Ok(())
-    }
-}
-
-/// What happened on the link (for `summary.json`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct LabStats {
-    pub protocol: &'static str,
-    pub transport: &'static str,
-    /// Sub-steps exchanged (answered or held).
-    pub exchanges: u64,
-    /// Sub-steps whose reply did not come in time: the last measurement was held.
-    pub held: u64,
-    pub max_held_in_a_row: u64,
-    /// Replies that came after their sub-step was held (discarded).
-    pub late: u64,
-    /// Replies to a sub-step already answered (discarded).
-    pub duplicated: u64,
-    /// Replies that fit no request (a sequence number ahead of the one sent; discarded).
-    pub unexpected: u64,
-    /// Frames of the wrong size (discarded).
-    pub malformed: u64,
-    /// Stale frames skipped before a command (speedgoat over UDP).
-    pub stale: u64,
-    /// substep_udp: commands sent a second time when half the budget passed without a reply.
-    pub resent: u64,
-    /// Round trip of the answered exchanges.
-    pub rtt: LatencyHistogram,
-    /// The last exchange: held, and the stray replies it discarded (for `substeps.csv`).
-    pub last_held: bool,
-    pub last_strays: u64,
-}
-
-impl LabStats {
-    fn strays(&self) -> u64 {
-        self.late + self.duplicated + self.unexpected + self.malformed + self.stale
-    }
-
-    /// The `lab` block of `summary.json` (round trips in µs).
-    pub fn json(&self) -> serde_json::Value {
-        let us = |d: Duration| d.as_secs_f64() * 1e6;
-        serde_json::json!({
-            "protocol": self.protocol, "transport": self.transport, "exchanges": self.exchanges,
-            "held": self.held, "max_held_in_a_row": self.max_held_in_a_row, "late": self.late,
-            "duplicated": self.duplicated, "unexpected": self.unexpected, "malformed": self.malformed,
-            "stale": self.stale, "resent": self.resent,
-            "rtt_us": { "p50": us(self.rtt.percentile(0.5)), "p99": us(self.rtt.percentile(0.99)), "max": us(self.rtt.max()) },
-        })
-    }
-
-    /// One line for a printed summary, from the `lab` block of [`LabStats::json`] (what a
-    /// front end has of a finished run).
-    pub fn summary_line(lab: &serde_json::Value) -> String {
-        let us = |k: &str| lab["rtt_us"][k].as_f64().unwrap_or(f64::NAN);
-        format!(
-            "lab target ({} over {}): {} exchanges, {} held, {} late, {} duplicated; round trip p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs",
-            lab["protocol"].as_str().unwrap_or("?"),
-            lab["transport"].as_str().unwrap_or("?"),
-            lab["exchanges"],
-            lab["held"],
-            lab["late"],
-            lab["duplicated"],
-            us("p50"),
-            us("p99"),
-            us("max")
-        )
     }
 }
 

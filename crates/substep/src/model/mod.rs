@@ -11,6 +11,7 @@ mod frame3d;
 mod hysteretic;
 mod modal;
 mod sparse;
+mod sparse_modes;
 
 pub use builders::{
     ShearBuilding, TmdSystem, sdof, shear_building, shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
@@ -23,6 +24,7 @@ pub use frame::{
 pub use frame3d::{Frame3d, Frame3dDof, Section3d, frame_3d};
 pub use hysteretic::{Hysteresis, PDeltaSpec, SpringSpec, Springs};
 pub use modal::{Modes, modes};
+pub use sparse_modes::lowest_frequencies;
 pub use sparse::{
     AUTO_SPARSE_MAX_DENSITY, AUTO_SPARSE_MIN_DOFS, DENSE_MAX_DOFS, Model, ModelRef, SparseModel, Storage,
 };

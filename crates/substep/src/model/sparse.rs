@@ -8,7 +8,8 @@
 
 use super::{DampingSpec, StructuralModel, rayleigh_coefficients};
 use crate::error::{Error, Result, require_non_negative};
-use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor, lowest_frequencies};
+use super::lowest_frequencies;
+use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
 use nalgebra::DVector;
 use std::borrow::Cow;
 

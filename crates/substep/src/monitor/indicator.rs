@@ -3,84 +3,11 @@
 
 use super::energy::EnergyIndicator;
 use super::model_view::{Identification, ModelView};
-use crate::error::{Error, Result, require_positive};
+use crate::error::Result;
 use crate::io::SubstructureDefinition;
 use crate::model::Model;
+pub use crate::substructure::{StabilityAction, StabilitySettings};
 use serde::Serialize;
-
-/// What crossing a threshold does.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum StabilityAction {
-    /// Warn (console, monitor page, `summary.json`) and go on.
-    #[default]
-    Warn,
-    /// Start the controlled ramp-down of the safety limits.
-    Stop,
-}
-
-impl StabilityAction {
-    pub fn name(self) -> &'static str {
-        match self {
-            StabilityAction::Warn => "warn",
-            StabilityAction::Stop => "stop",
-        }
-    }
-}
-
-/// `[substructure.limits] stability` and its thresholds.
-#[derive(Debug, Clone, PartialEq)]
-pub struct StabilitySettings {
-    pub action: StabilityAction,
-    /// Alarm when the energy ratio `η` exceeds this (1 = no damping left).
-    pub energy_threshold: f64,
-    /// Alarm when the model view's margin `1 − ρ` falls below this.
-    pub margin_threshold: f64,
-    /// Sliding window of the energy view and memory of the identification \[s\].
-    pub window: f64,
-    /// Steps between two evaluations of the model view.
-    pub refresh: usize,
-    /// Consecutive evaluations beyond a threshold before the alarm (noise immunity).
-    pub persistence: usize,
-}
-
-impl Default for StabilitySettings {
-    fn default() -> Self {
-        Self {
-            action: StabilityAction::Warn,
-            energy_threshold: 0.8,
-            margin_threshold: -1e-3,
-            window: 2.0,
-            refresh: 10,
-            persistence: 3,
-        }
-    }
-}
-
-impl StabilitySettings {
-    pub fn validate(&self) -> Result<()> {
-        require_positive("substructure.limits.stability_energy", self.energy_threshold)?;
-        if !(self.margin_threshold.is_finite() && self.margin_threshold < 1.0) {
-            return Err(Error::invalid(
-                "substructure.limits.stability_margin",
-                format!("must be a finite number below 1, got {}", self.margin_threshold),
-            ));
-        }
-        require_positive("substructure.limits.stability_window", self.window)?;
-        if self.window > 600.0 {
-            return Err(Error::invalid(
-                "substructure.limits.stability_window",
-                format!("{} s is longer than the maximum of 600 s", self.window),
-            ));
-        }
-        if self.refresh == 0 {
-            return Err(Error::invalid(
-                "substructure.limits.stability_refresh",
-                "must be at least 1 step",
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// Which view raised an alarm.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -110,7 +110,7 @@
 
 mod bench;
 pub mod budget;
-mod histogram;
+
 mod os;
 mod overlap;
 mod ring;
@@ -118,7 +118,7 @@ mod runner;
 mod stop;
 
 pub use bench::{BenchOverlap, bench_overlap, bench_overlap_with};
-pub use histogram::{LatencyHistogram, LatencySummary};
+pub use crate::latency::{LatencyHistogram, LatencySummary};
 pub use os::RtSetting;
 pub use overlap::OverlapPredictor;
 pub use ring::{Consumer, OwnedConsumer, OwnedProducer, Producer, SpscRing, owned_ring};

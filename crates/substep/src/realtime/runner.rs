@@ -1,6 +1,6 @@
 //! [`RealtimeRunner`]: the threads, the schedule and the late-step policy (see the module docs).
 
-use super::histogram::LatencyHistogram;
+use crate::latency::LatencyHistogram;
 use super::os::{self, RtSetting};
 use super::overlap::{CouplingLoop, OverlapPredictor};
 use super::ring::{Consumer, Producer, SpscRing};
@@ -30,7 +30,7 @@ pub struct RealtimeFailure {
     /// [`StopLog::replay`] at `stopped_at`.
     pub stop_log: Option<StopLog>,
     /// A lab target's link statistics up to the failure (the test itself is not returned).
-    pub lab: Option<crate::lab::LabStats>,
+    pub lab: Option<crate::substructure::LabStats>,
 }
 
 impl fmt::Display for RealtimeFailure {

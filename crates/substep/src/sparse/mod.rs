@@ -6,13 +6,11 @@
 
 mod csc;
 mod factor;
-mod modes;
 mod ordering;
 mod supernodal;
 mod symmetric;
 
 pub use csc::CscMatrix;
 pub use factor::{FactorKind, SparseOrdering, SymmetricFactor};
-pub use modes::lowest_frequencies;
 pub(crate) use supernodal::HugeBuf;
 pub use symmetric::SymmetricProduct;

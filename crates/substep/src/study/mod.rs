@@ -153,7 +153,7 @@ impl Study {
     /// `[grid]`, `[samples]`, `seeds`, `seed_key`, `metrics` (docs/config.md "Study files").
     pub fn from_file(path: &Path) -> Result<Self> {
         let name = path.display().to_string();
-        let text = crate::io::limits::read_text(path, crate::io::limits::CONFIG_MAX_BYTES)?;
+        let text = crate::limits::read_text(path, crate::limits::CONFIG_MAX_BYTES)?;
         let dir = path.parent().unwrap_or(Path::new(""));
         let raw: RawStudy = toml::from_str(&text).map_err(|e| toml_error(&e, &text, &name))?;
         let base_rel = raw
@@ -161,7 +161,7 @@ impl Study {
             .clone()
             .ok_or_else(|| Error::invalid(format!("{name}: base"), "missing: the test definition to vary"))?;
         let base_path = dir.join(&base_rel);
-        let base_text = crate::io::limits::read_text(&base_path, crate::io::limits::CONFIG_MAX_BYTES)?;
+        let base_text = crate::limits::read_text(&base_path, crate::limits::CONFIG_MAX_BYTES)?;
         let base_name = base_path.display().to_string();
         let base: Value = toml::from_str(&base_text).map_err(|e| toml_error(&e, &base_text, &base_name))?;
         Self::build(

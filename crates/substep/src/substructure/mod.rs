@@ -10,12 +10,14 @@
 mod compensation;
 mod controller;
 mod estimation;
+mod report;
 mod safety;
 mod test_run;
 
 pub use compensation::{ErrorForceCompensation, ErrorForceSpec};
 pub use controller::{SubstepController, SubstepSettings};
 pub use estimation::{EstimationOutcome, EstimationStats};
+pub use report::{GuardTrip, LabStats, PhaseLagReport, StabilityAction, StabilitySettings};
 pub use safety::{LimitedSite, MAX_RAMP_SUBSTEPS, MAX_RAMP_TIME, RampClock, SafetyLimits, StopLog};
 pub(crate) use test_run::stopped_at;
 pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
@@ -65,7 +67,7 @@ pub trait ExperimentalSubstructure: Send {
         None
     }
     /// Phase-lag compensation of this side, if it has one ([`crate::compensate::CompensatedSite`]).
-    fn phase_lag(&self) -> Option<&dyn crate::compensate::PhaseLagReport> {
+    fn phase_lag(&self) -> Option<&dyn crate::substructure::PhaseLagReport> {
         None
     }
     /// After a controlled stop of a [`LimitedSite`]: what it did (tripping sub-step and ramp),
@@ -89,7 +91,7 @@ pub trait ExperimentalSubstructure: Send {
     }
     /// The link statistics of a lab target ([`crate::lab::LabTarget`]), if this side is one or
     /// wraps one (wrappers forward it). Default: `None`.
-    fn lab_stats(&self) -> Option<&crate::lab::LabStats> {
+    fn lab_stats(&self) -> Option<&crate::substructure::LabStats> {
         None
     }
 }

@@ -35,7 +35,7 @@ pub struct SafetyLimits {
     pub ramp_time: f64,
     /// `stability = "warn" | "stop"` and the thresholds of the on-line stability indicator
     /// ([`crate::monitor`]); the driver runs the indicator and, for "stop", asks for the ramp.
-    pub stability: Option<crate::monitor::StabilitySettings>,
+    pub stability: Option<crate::substructure::StabilitySettings>,
 }
 
 impl SafetyLimits {
@@ -312,7 +312,7 @@ impl ExperimentalSubstructure for LimitedSite {
         }
         true
     }
-    fn lab_stats(&self) -> Option<&crate::lab::LabStats> {
+    fn lab_stats(&self) -> Option<&crate::substructure::LabStats> {
         self.inner.lab_stats()
     }
     fn pace_ramp(&mut self, clock: Option<Box<dyn RampClock>>) -> bool {
@@ -325,7 +325,7 @@ impl ExperimentalSubstructure for LimitedSite {
     fn true_displacement(&self) -> Option<&[f64]> {
         self.inner.true_displacement()
     }
-    fn phase_lag(&self) -> Option<&dyn crate::compensate::PhaseLagReport> {
+    fn phase_lag(&self) -> Option<&dyn crate::substructure::PhaseLagReport> {
         self.inner.phase_lag()
     }
 

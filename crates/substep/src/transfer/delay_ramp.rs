@@ -148,7 +148,7 @@ impl ExperimentalSubstructure for DelayRampSite {
     fn true_displacement(&self) -> Option<&[f64]> {
         self.inner.true_displacement()
     }
-    fn phase_lag(&self) -> Option<&dyn crate::compensate::PhaseLagReport> {
+    fn phase_lag(&self) -> Option<&dyn crate::substructure::PhaseLagReport> {
         self.inner.phase_lag()
     }
     fn take_stop_log(&mut self) -> Option<StopLog> {
@@ -157,7 +157,7 @@ impl ExperimentalSubstructure for DelayRampSite {
     fn request_stop(&mut self, reason: &str) -> bool {
         self.inner.request_stop(reason)
     }
-    fn lab_stats(&self) -> Option<&crate::lab::LabStats> {
+    fn lab_stats(&self) -> Option<&crate::substructure::LabStats> {
         self.inner.lab_stats()
     }
     fn pace_ramp(&mut self, clock: Option<Box<dyn crate::substructure::RampClock>>) -> bool {

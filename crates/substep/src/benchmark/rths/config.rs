@@ -416,7 +416,7 @@ impl BenchmarkConfig {
             }
             _ => {}
         }
-        spec.build(super::run::SAMPLE_TIME).map_err(|e| match e {
+        spec.build(super::controller::SAMPLE_TIME).map_err(|e| match e {
             Error::InvalidInput { what, reason } if what.starts_with("phase_lag.") => Error::invalid(
                 format!("controller.{}.{}", kind.name(), &what["phase_lag.".len()..]),
                 reason,

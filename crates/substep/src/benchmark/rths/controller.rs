@@ -26,6 +26,10 @@ use crate::transfer::converter::Converter;
 use crate::transfer::discrete::DiscreteFilter;
 use crate::transfer::lti::TransferFunction;
 
+/// The benchmark's one rate: h = 1/4096 s (the sample controllers, the plant and the sensors
+/// all run at it).
+pub const SAMPLE_TIME: f64 = 1.0 / 4096.0;
+
 /// `--controller` choices.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ControllerKind {
@@ -103,7 +107,7 @@ pub fn amb_default() -> AmbSpec {
     let plant = crate::transfer::servo::ServoParams::benchmark()
         .closed_form()
         .expect("the nominal plant has a closed form");
-    let h = super::run::SAMPLE_TIME;
+    let h = SAMPLE_TIME;
     AmbSpec {
         lambda: 1.0 - h / 2.0,
         ..AmbSpec::from_plant(&plant, h).expect("the nominal plant has a non-zero DC gain")

@@ -61,6 +61,7 @@ pub use case::{Case, ELCENTRO_CSV, GroundRecord, MAX_DURATION, Specimen, numeric
 pub use compare::{COMPARED, ComparisonRow, compare};
 pub use config::{BenchmarkConfig, CONFIG_KEYS};
 pub use controller::{
+    SAMPLE_TIME,
     Controller, ControllerKind, ControllerSpec, INVERSE_FIR_REFUSED, arx_default, ats_default, sample_feedback,
     sample_feedforward,
 };
@@ -68,7 +69,7 @@ pub use options::{StudyOptions, StudySetup};
 pub use perturb::{PERTURBATION_SIGMA, perturbed_plant, run_perturbed};
 pub use run::{
     Algorithm, Criteria, DIVERGENCE_LIMIT, FORCE_CAPACITY, MAX_LAG, NOISE_POWER_F, NOISE_POWER_X, RthsInput,
-    RthsResult, RunHistory, SAMPLE_TIME, SubstepSpec, Transfer, UNSTABLE_TRACKING_PERCENT, reference, run,
+    RthsResult, RunHistory, SubstepSpec, Transfer, UNSTABLE_TRACKING_PERCENT, reference, run,
 };
 pub use study::{MAX_PERTURBED, PerturbedStats, RthsRow, perturbed_stats, run_study};
 

@@ -14,8 +14,8 @@ use crate::transfer::servo::{Derivative, DifferenceForce, ServoActuator, ServoPa
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector};
 use std::sync::Arc;
 
-/// The benchmark's one rate: h = 1/4096 s.
-pub const SAMPLE_TIME: f64 = 1.0 / 4096.0;
+use super::controller::SAMPLE_TIME;
+
 /// Displacement-sensor noise power `P_x` [m²·s] (σ_x = √(P_x/h) = 1.6e−5 m).
 pub const NOISE_POWER_X: f64 = 6.25e-14;
 /// Force-sensor noise power `P_f` [N²·s] (σ_f = √(P_f/h) ≈ 2.18 N).

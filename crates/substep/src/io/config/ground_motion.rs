@@ -4,7 +4,7 @@
 use super::{check_samples, forbid, prefixed};
 use crate::error::{Error, Result};
 use crate::excitation::{self, Envelope, KanaiTajimi, Record};
-use crate::io::limits::Limits;
+use crate::limits::Limits;
 use serde::Deserialize;
 use std::path::Path;
 

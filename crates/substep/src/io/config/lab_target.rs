@@ -261,7 +261,7 @@ struct RawFaults {
 /// unless `bind` is given, the address to serve).
 pub fn emulator_from_file(path: &Path) -> Result<Emulated> {
     let name = path.display().to_string();
-    let text = crate::io::limits::read_text(path, crate::io::limits::CONFIG_MAX_BYTES)?;
+    let text = crate::limits::read_text(path, crate::limits::CONFIG_MAX_BYTES)?;
     emulator_from_toml(&text, &name, path.parent().unwrap_or(Path::new("")))
 }
 

@@ -3,7 +3,7 @@
 
 use super::OneOrMany;
 use crate::error::{Error, Result};
-use crate::monitor::{StabilityAction, StabilitySettings};
+use crate::substructure::{StabilityAction, StabilitySettings};
 use crate::substructure::SafetyLimits;
 use serde::Deserialize;
 

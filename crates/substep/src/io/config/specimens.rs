@@ -5,7 +5,7 @@
 use super::{MatrixInput, dof_index, matrix_with, one, rekey};
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::excitation::{self};
-use crate::io::limits::Limits;
+use crate::limits::Limits;
 use crate::specimen::{BoucWenParams, FrictionModel, Pinching, SpecimenSpec};
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;

@@ -5,7 +5,7 @@
 use super::{MatrixInput, OneOrMany, SubstructureDefinition, forbid, matrix_with, prefixed, sparse_matrix};
 use crate::error::{Error, Result};
 use crate::integrate::Scheme;
-use crate::io::limits::{self, Limits, RunShape};
+use crate::limits::{self, Limits, RunShape};
 use crate::material::{BoucWenParams, MaterialSpec, check_hardening};
 use crate::model::{
     DENSE_MAX_DOFS, DampingSpec, Frame2d, Frame3d, FrameHinges, HingeLocation, Hysteresis, Model, Section, Section3d,

@@ -2,7 +2,7 @@
 //! (Bathe): `Y = K⁻¹ M X`, Rayleigh–Ritz on `span Y`, repeat. Only `n × p` blocks are stored
 //! (`p` a little larger than the number of modes wanted), never an `n × n` matrix.
 
-use super::{CscMatrix, FactorKind, SymmetricFactor};
+use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
 use crate::error::{Error, Result};
 use nalgebra::DMatrix;
 
@@ -49,7 +49,7 @@ pub fn lowest_frequencies(mass: &CscMatrix, stiffness: &CscMatrix, count: usize)
         }
         let kr = symmetrise(y.transpose() * &ky);
         let mr = symmetrise(y.transpose() * &x);
-        let reduced = crate::model::modes(&mr, &kr).map_err(|e| {
+        let reduced = super::modes(&mr, &kr).map_err(|e| {
             Error::numerical(
                 "modal analysis (subspace iteration)",
                 format!("reduced problem failed: {e}"),
