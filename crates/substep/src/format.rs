@@ -29,6 +29,12 @@ pub fn percent(ratio: f64) -> String {
     }
 }
 
+/// A time rounded to 1 ns, as the CSV files hold it: `i·Δt` without float noise (`19.99`, not
+/// `19.990000000000002`).
+pub fn round_time(t: f64) -> f64 {
+    (t * 1e9).round() / 1e9
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -52,6 +52,7 @@ mod polynomial;
 mod site;
 mod spec;
 
+pub use crate::substructure::{GuardTrip, PhaseLagReport};
 pub use amb::{Amb, AmbSpec, difference_coefficients, inverse_series};
 pub use arx_lag::{ArxPhaseLag, ArxPhaseLagSpec, ErrorPairing, MAX_HISTORY, Regressor};
 pub use ats::{Ats, AtsSpec};
@@ -59,7 +60,6 @@ pub use inverse::{InverseFir, InverseFirSpec};
 pub use polynomial::{Polynomial, lagrange_extrapolation_weights};
 pub use site::CompensatedSite;
 pub use spec::{PhaseLagDefinition, PhaseLagSpec};
-pub use crate::substructure::{GuardTrip, PhaseLagReport};
 
 use crate::error::{Error, Result};
 

@@ -12,8 +12,8 @@
 //! Every error names the file and, where it has one, the line: `K.mtx: line 7: row index 4 is
 //! out of range 1..=3`.
 
-use crate::limits::{CHAIN_BYTES_PER_DOF, Limits, MTX_BYTES_PER_ENTRY, bytes, read_text_checked};
 use crate::error::{Error, Result};
+use crate::limits::{CHAIN_BYTES_PER_DOF, Limits, MTX_BYTES_PER_ENTRY, bytes, read_text_checked};
 use crate::sparse::CscMatrix;
 use nalgebra::DMatrix;
 use std::path::Path;

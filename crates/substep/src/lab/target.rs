@@ -12,8 +12,8 @@ use super::frames::{self, OF_BYTES, action, status};
 use super::link::{Link, LinkTransport, Received};
 use crate::error::{Error, Result};
 use crate::latency::LatencyHistogram;
-pub use crate::substructure::LabStats;
 use crate::substructure::ExperimentalSubstructure;
+pub use crate::substructure::LabStats;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 

@@ -6,9 +6,9 @@
 //! either: the integrators and the sub-step controller take `impl Into<ModelRef>`, so
 //! `&StructuralModel`, `&SparseModel` and `&Model` all work.
 
+use super::lowest_frequencies;
 use super::{DampingSpec, StructuralModel, rayleigh_coefficients};
 use crate::error::{Error, Result, require_non_negative};
-use super::lowest_frequencies;
 use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
 use nalgebra::DVector;
 use std::borrow::Cow;

@@ -2,8 +2,8 @@
 //! (Bathe): `Y = K⁻¹ M X`, Rayleigh–Ritz on `span Y`, repeat. Only `n × p` blocks are stored
 //! (`p` a little larger than the number of modes wanted), never an `n × n` matrix.
 
-use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
 use crate::error::{Error, Result};
+use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
 use nalgebra::DMatrix;
 
 /// Circular frequencies `ω_1 ≤ … ≤ ω_count` [rad/s] of `K φ = ω² M φ` for symmetric positive

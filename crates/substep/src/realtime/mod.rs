@@ -117,8 +117,8 @@ mod ring;
 mod runner;
 mod stop;
 
-pub use bench::{BenchOverlap, bench_overlap, bench_overlap_with};
 pub use crate::latency::{LatencyHistogram, LatencySummary};
+pub use bench::{BenchOverlap, bench_overlap, bench_overlap_with};
 pub use os::RtSetting;
 pub use overlap::OverlapPredictor;
 pub use ring::{Consumer, OwnedConsumer, OwnedProducer, Producer, SpscRing, owned_ring};

@@ -1,12 +1,12 @@
 //! [`RealtimeRunner`]: the threads, the schedule and the late-step policy (see the module docs).
 
-use crate::latency::LatencyHistogram;
 use super::os::{self, RtSetting};
 use super::overlap::{CouplingLoop, OverlapPredictor};
 use super::ring::{Consumer, Producer, SpscRing};
 use super::stop::{PacedRamp, StopHandle};
 use super::{LatePolicy, RealtimeOptions, RealtimeReport, StepRecordOwned};
 use crate::error::{Error, Result};
+use crate::latency::LatencyHistogram;
 use crate::model::ModelRef;
 use crate::substructure::{
     ExperimentalSubstructure, StepRecord, StopLog, SubstepController, SubstructureTest, stopped_at,

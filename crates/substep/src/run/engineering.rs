@@ -4,13 +4,13 @@
 //! 5 % response spectrum. The numerics are `analysis::energy`, `analysis::storey` and
 //! `excitation::spectrum`; this module only records.
 
-use super::Simulation;
-use super::round_time;
+use super::simulation::Simulation;
 use crate::analysis::energy::{EnergyBalance, EnergyTerms};
 use crate::analysis::spectral::amplitude_spectrum;
 use crate::analysis::storey::StoreyResponse;
 use crate::error::Result;
 use crate::excitation::spectrum::{SpectralOrdinate, log_periods, response_spectrum};
+use crate::format::round_time;
 use crate::io::TestDefinition;
 use serde::Serialize;
 

@@ -26,6 +26,7 @@ mod stats;
 mod summary;
 mod table;
 
+pub use crate::format::round_time;
 pub use crate::io::config::EXACT_REFERENCE_MAX_DOFS;
 pub use engineering::{
     EnergySummary, EngineeringRecorder, EngineeringRow, EngineeringSummary, InputMotion, InputMotionSummary,
@@ -63,12 +64,6 @@ pub fn reference_failed(step: usize, time: f64, e: &Error) -> Error {
         time,
         reason: format!("the reference solution failed: {e}"),
     }
-}
-
-/// A time rounded to 1 ns, as the CSV files hold it: `i·Δt` without float noise (`19.99`, not
-/// `19.990000000000002`).
-pub fn round_time(t: f64) -> f64 {
-    (t * 1e9).round() / 1e9
 }
 
 /// What a run records: the columns of its history, sub-step and engineering rows.

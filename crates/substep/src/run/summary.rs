@@ -3,8 +3,8 @@
 //! file's; the descriptive blocks (substructure, estimation, phase lag) are JSON values whose
 //! keys serialise sorted.
 
-use super::Simulation;
 use super::engineering::{EngineeringSummary, InputMotionSummary};
+use super::simulation::Simulation;
 use super::stats::{ErrorStats, Peak};
 use crate::compensate::{PhaseLagDefinition, PhaseLagSpec};
 use crate::io::SubstructureDefinition;

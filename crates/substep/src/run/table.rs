@@ -2,7 +2,8 @@
 //! `substeps.csv`, for front ends that hand arrays to their users), and the number format of
 //! the CSV files.
 
-use super::{Layout, RunObserver, StepRow, round_time};
+use super::{Layout, RunObserver, StepRow};
+use crate::format::round_time;
 use crate::substructure::SubstepObserver;
 use std::fmt::Write as _;
 use std::io::{self, Write};

@@ -1,8 +1,8 @@
 //! Sparse linear algebra for large numerical substructures: square CSC matrices
 //! ([`CscMatrix`]), a once-factorised symmetric positive definite solver with allocation-free
 //! solves ([`SymmetricFactor`]: banded Cholesky, or faer's supernodal Cholesky under an AMD or
-//! nested-dissection ordering with our streaming solve), and the lowest natural frequencies by
-//! subspace iteration ([`lowest_frequencies`]).
+//! nested-dissection ordering with our streaming solve); the lowest natural frequencies of a sparse
+//! model use these factors (`model::lowest_frequencies`, subspace iteration).
 
 mod csc;
 mod factor;

@@ -61,9 +61,8 @@ pub use case::{Case, ELCENTRO_CSV, GroundRecord, MAX_DURATION, Specimen, numeric
 pub use compare::{COMPARED, ComparisonRow, compare};
 pub use config::{BenchmarkConfig, CONFIG_KEYS};
 pub use controller::{
-    SAMPLE_TIME,
-    Controller, ControllerKind, ControllerSpec, INVERSE_FIR_REFUSED, arx_default, ats_default, sample_feedback,
-    sample_feedforward,
+    Controller, ControllerKind, ControllerSpec, INVERSE_FIR_REFUSED, SAMPLE_TIME, arx_default, ats_default,
+    sample_feedback, sample_feedforward,
 };
 pub use options::{StudyOptions, StudySetup};
 pub use perturb::{PERTURBATION_SIGMA, perturbed_plant, run_perturbed};

@@ -45,8 +45,8 @@ mod tests;
 
 use crate::error::{Error, Result};
 use crate::integrate::Scheme;
-use crate::limits::{self, Limits, RunShape};
 use crate::io::matrix_market::{read_matrix_market_sparse_with, read_matrix_market_with};
+use crate::limits::{self, Limits, RunShape};
 use crate::model::{Hysteresis, Model};
 use crate::sparse::CscMatrix;
 use crate::transfer::{ActuatorSpec, Dynamics};

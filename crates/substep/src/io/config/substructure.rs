@@ -14,7 +14,6 @@ use crate::error::{Error, Result};
 use crate::integrate::Scheme;
 use crate::limits::Limits;
 use crate::model::{Model, ModelRef};
-use crate::substructure::{StabilityAction, StabilitySettings};
 use crate::site::openfresco::OpenFrescoSite;
 use crate::site::{Mode, RemoteSite, RemoteStepSite, RemoteStepTest};
 use crate::specimen::SpecimenSpec;
@@ -22,6 +21,7 @@ use crate::substructure::{
     ErrorForceSpec, ExperimentalSubstructure, LimitedSite, SafetyLimits, SubstepController, SubstepSettings,
     SubstructureTest,
 };
+use crate::substructure::{StabilityAction, StabilitySettings};
 use crate::transfer::lti::TransferFunction;
 use crate::transfer::{
     ActuatorSpec, ControlledSite, DelayRamp, DelayRampSite, Dynamics, LabOptions, SensorSpec, VirtualLab,

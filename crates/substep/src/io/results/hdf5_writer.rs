@@ -14,7 +14,7 @@
 //! streamed from it into MATLAB's contiguous layout (uncompressed: MATLAB's `load` reads the
 //! HDF5 1.8 format, and compressed storage needs 1.10).
 
-use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name, split_header};
+use super::table::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name, split_header};
 use crate::error::{Error, Result};
 use hdf5_pure::mat::{Block, Compression, DataProducer, MatBuilder, MatError, Options};
 use hdf5_pure::{AttrValue, FileAccessProperties, FileBuilder, MaxExtent, MemoryStrategy, SyncPolicy};
@@ -249,7 +249,7 @@ mod tests {
 
     #[test]
     fn matlab_header_layout() {
-        let h = matlab_header(crate::io::results::asctime(0));
+        let h = matlab_header(super::super::table::asctime(0));
         assert_eq!(h.len(), 512);
         assert!(h.starts_with(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Thu Jan  1 00:00:00 1970"));
         assert_eq!(&h[116..124], b"        ");

@@ -21,7 +21,7 @@
 //! 2³¹ − 1 bytes per variable in this format: a larger table is refused with a message that
 //! points to `mat73` (MATLAB v7.3).
 
-use super::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name, split_header};
+use super::table::{BLOCK_ROWS, CsvTable, Metadata, column_unit, created_on, matlab_name, split_header};
 use crate::error::{Error, Result};
 use std::io::{BufReader, BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
