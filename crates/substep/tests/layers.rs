@@ -389,8 +389,8 @@ fn the_scan_sees_the_imports_it_checks() {
     assert!(has("excitation/readers", "excitation/record"));
     assert!(has("excitation/spectrum", "integrate"));
     assert!(has("model/sparse_modes", "sparse"));
-    // A parent's path through its child module (`controller::…` in substructure/mod.rs is a
-    // re-export only, so it is not an edge; realtime/mod.rs uses its children in code).
+    // A parent's path through a child it declares (`mat5::write_file` in io/results/mod.rs).
+    assert!(has("io/results", "io/results/mat5"));
     let total: usize = g.edges.values().map(BTreeSet::len).sum();
     assert!(
         g.files.len() > 100 && total > 400,

@@ -3,8 +3,7 @@
 
 use super::OneOrMany;
 use crate::error::{Error, Result};
-use crate::substructure::SafetyLimits;
-use crate::substructure::{StabilityAction, StabilitySettings};
+use crate::substructure::{SafetyLimits, StabilityAction, StabilitySettings};
 use serde::Deserialize;
 
 /// `[substructure.limits]`: one value for all coupling DOFs or one per DOF.
