@@ -58,6 +58,21 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         )
         .into());
     };
+    if let Some(s) = def.substructure.as_ref().filter(|s| s.explicit.is_some()) {
+        return Err(substep::Error::invalid(
+            "--realtime",
+            format!(
+                "integrator.scheme = \"{}\": the real-time runner drives the sub-step algorithm only; run the cr / \
+                 kr_alpha test offline (without --realtime), or use an implicit Newmark scheme for real time",
+                s.explicit.map_or("", |e| if e == substep::integrate::Scheme::Cr {
+                    "cr"
+                } else {
+                    "kr_alpha"
+                })
+            ),
+        )
+        .into());
+    }
     let mut def = def.clone();
     let mut live = crate::monitor::live::Live::start(args, &mut def, &config_name, true)?;
     let def = &def;
@@ -431,7 +446,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         if let Some((scheme, _, u, f)) = reference_errors {
             crate::run::print_reference_error(scheme, u, f);
             if let Some(split) = &time_step_share {
-                crate::run::print_time_step_share(&def.integrator.name, split);
+                crate::run::print_time_step_share(&def.integrator.name, scheme, split);
             }
         }
         if let Some(l) = &lab {

@@ -102,11 +102,13 @@ pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, m
     println!("    (largest |test − reference| over the run and all DOFs, relative to that DOF's peak |reference|)");
 }
 
-/// The summary's line on the time step's share of the error (with the exact reference).
-pub(crate) fn print_time_step_share(scheme: &str, split: &substep::run::SameIntegratorSummary) {
+/// The summary's line on the time step's share of the error (against the exact reference, or
+/// the converged Newton one of a nonlinear structure, `reference`).
+pub(crate) fn print_time_step_share(scheme: &str, reference: &str, split: &substep::run::SameIntegratorSummary) {
+    let against = if reference == "exact" { "exact" } else { "Newton" };
     println!(
         "    the time step alone: {} (the assembled structure integrated with this test's {scheme} scheme and Δt \
-         vs exact); the substructure test vs that solution: {}",
+         vs {against}); the substructure test vs that solution: {}",
         percent(split.integration_error),
         percent(split.max_displacement_error)
     );
@@ -774,7 +776,7 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
         if let Some(r) = &summary.reference {
             print_reference_error(r.scheme, r.max_displacement_error, r.max_force_error);
             if let Some(s) = &r.same_integrator {
-                print_time_step_share(&summary.scheme, s);
+                print_time_step_share(&summary.scheme, r.scheme, s);
             }
         } else if let Some(why) = substep::run::Reference::unavailable(&def) {
             println!("  no reference solution: {why}");

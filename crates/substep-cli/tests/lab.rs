@@ -467,6 +467,55 @@ fn a_yielding_structure_with_a_lab_target_equals_the_virtual_lab() {
     }
 }
 
+/// A CR test (issue 38, docs/theory.md §2.9: the explicit scheme commands the coupling DOF
+/// itself) against the emulator equals its virtual-lab run, as the sub-step algorithm's does;
+/// `--realtime` refuses it in one line with exit 2.
+#[test]
+fn a_cr_test_with_a_lab_target_equals_the_virtual_lab() {
+    let dir = temp_dir("cr");
+    let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
+    let base = std::fs::read_to_string(format!("{examples}/yielding_building_cr.toml"))
+        .unwrap()
+        .replace("\"records/", &format!("\"{examples}/records/"))
+        .replace("duration = 20.0", "duration = 7.0");
+    assert!(
+        base.contains("duration = 7.0") && base.contains("scheme = \"cr\""),
+        "the example changed: adapt this test"
+    );
+    let write =
+        |name: &str, lab: &str| std::fs::write(dir.join(format!("{name}.toml")), format!("{base}\n{lab}\n")).unwrap();
+    write("local", "");
+    let local = run(&dir, "local.toml", "local");
+    assert!(local.status.success(), "{}", text(&local.stderr));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("local").join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["scheme"], "cr");
+    let rt = run_with(&dir, "local.toml", "local_rt", &["--realtime"]);
+    assert_eq!(rt.status.code(), Some(2), "{}", text(&rt.stderr));
+    let e = text(&rt.stderr);
+    assert!(
+        e.contains("--realtime") && e.contains("\"cr\"") && e.lines().count() == 1,
+        "{e}"
+    );
+    for (protocol, transport) in [("speedgoat", "udp"), ("generic_tcp", "tcp")] {
+        let name = format!("{protocol}_{transport}");
+        write(&name, &lab_table(protocol, transport, 9, "timeout = 2.0\n"));
+        let (mut emulator, port) = emulate(&dir, &name, "");
+        write(&name, &lab_table(protocol, transport, port, "timeout = 2.0\n"));
+        let out = run_with(&dir, &format!("{name}.toml"), &name, &[]);
+        let _ = emulator.wait();
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(&name).join("summary.json")).unwrap()).unwrap();
+        assert_eq!(s["completed"], true, "{name}");
+        assert_eq!(s["lab"]["exchanges"], 14000, "{name}: one exchange per sub-step");
+        for file in ["history.csv", "substeps.csv"] {
+            let worst = worst_relative_common(&dir.join("local").join(file), &dir.join(&name).join(file));
+            assert!(worst <= 1e-9, "{name} {file}: {worst:e} of the peak");
+        }
+    }
+}
+
 /// As [`worst_relative`] over the columns both files have (a real-time history has no
 /// phase-lag columns); at least five of them.
 fn worst_relative_common(reference: &Path, other: &Path) -> f64 {

@@ -1,7 +1,7 @@
 //! The amplification matrix of one complete step, probed from the implementation.
 
 use crate::error::{Error, Result};
-use crate::substructure::SubstructureTest;
+use crate::substructure::{CouplingController, SubstructureTest};
 use nalgebra::{Complex, DMatrix, DVector};
 
 /// Stability class of a step map; `tolerance` is the band around `ρ = 1`.
@@ -45,14 +45,14 @@ impl StepMap {
     /// Probe the map by applying one step to each unit state (zero load) and to unit ground
     /// accelerations from the zero state. The test's state is restored afterwards. Fails with
     /// a message naming the part if the experimental side is not linear.
-    pub fn probe(test: &mut SubstructureTest) -> Result<Self> {
+    pub fn probe<C: CouplingController>(test: &mut SubstructureTest<C>) -> Result<Self> {
         test.controller.is_linear()?;
         test.site.is_linear()?;
         let n = test.state_len();
         let mut saved = vec![0.0; n];
         test.write_state(&mut saved);
         let mut x = vec![0.0; n];
-        let column = |test: &mut SubstructureTest, x: &[f64], ag: (f64, f64)| -> Result<DVector<f64>> {
+        let column = |test: &mut SubstructureTest<C>, x: &[f64], ag: (f64, f64)| -> Result<DVector<f64>> {
             test.read_state(x);
             test.step(ag.0, ag.1, &mut ())
                 .map_err(|e| Error::numerical("amplification matrix", format!("probing step failed: {e}")))?;

@@ -389,6 +389,13 @@ impl SubstructureDefinition {
         use crate::compensate::CompensatedSite;
         use crate::substructure::{ExperimentalSubstructure, SubstepController, SubstructureTest};
         use crate::transfer::VirtualLab;
+        if self.explicit.is_some() {
+            return Err(Error::invalid(
+                "integrator.scheme",
+                "this analysis scans the sub-step algorithm; a cr or kr_alpha test is analysed by \
+                 substep::analysis::StepMap on its own test (docs/theory.md §2.9)",
+            ));
+        }
         let n_c = self.coupling_dofs.len();
         let controller = SubstepController::new(model, &self.settings(dt), &DVector::zeros(model.n_dofs()))?;
         let lab = VirtualLab::from_specs(

@@ -79,8 +79,47 @@ impl KrAlpha {
         Self::build(model, dt, Params::kr_alpha(rho_inf), springs, load0)
     }
 
+    /// CR (`rho_inf = None`) or KR-α whose integration-parameter matrices are built from
+    /// `parameter_stiffness` instead of the model's stiffness (which still gives the restoring
+    /// force): the monolithic counterpart of a substructure test whose specimen stiffness is not
+    /// part of `K₀` (docs/theory.md §2.9).
+    pub fn with_parameter_stiffness(
+        model: &StructuralModel,
+        parameter_stiffness: &DMatrix<f64>,
+        dt: f64,
+        rho_inf: Option<f64>,
+        springs: Option<Springs>,
+        load0: &DVector<f64>,
+    ) -> Result<Self> {
+        let p = match rho_inf {
+            None => Params::cr(),
+            Some(r) => {
+                check_rho_inf(r)?;
+                Params::kr_alpha(r)
+            }
+        };
+        if parameter_stiffness.shape() != model.stiffness.shape() {
+            return Err(Error::invalid(
+                "integrator.scheme",
+                "the parameter stiffness K₀ must have the model's size",
+            ));
+        }
+        Self::build_with(model, parameter_stiffness, dt, p, springs, load0)
+    }
+
     fn build(
         model: &StructuralModel,
+        dt: f64,
+        p: Params,
+        springs: Option<Springs>,
+        load0: &DVector<f64>,
+    ) -> Result<Self> {
+        Self::build_with(model, &model.stiffness, dt, p, springs, load0)
+    }
+
+    fn build_with(
+        model: &StructuralModel,
+        parameter_stiffness: &DMatrix<f64>,
         dt: f64,
         p: Params,
         springs: Option<Springs>,
@@ -98,7 +137,7 @@ impl KrAlpha {
                 ),
             ));
         }
-        let a = mass + &model.damping * (p.gamma * dt) + &model.stiffness * (p.beta * dt * dt);
+        let a = mass + &model.damping * (p.gamma * dt) + parameter_stiffness * (p.beta * dt * dt);
         let a = a.lu();
         let singular = || Error::numerical(format!("{name} matrix M + γΔt C + βΔt² K₀"), "is singular");
         let dt_alpha1 = a.solve(mass).ok_or_else(singular)? * dt;
@@ -106,7 +145,7 @@ impl KrAlpha {
             (None, mass.clone().lu())
         } else {
             let b3 = mass * (1.0 - p.alpha_m)
-                + (&model.damping * (p.gamma * dt) + &model.stiffness * (p.beta * dt * dt)) * (1.0 - p.alpha_f);
+                + (&model.damping * (p.gamma * dt) + parameter_stiffness * (p.beta * dt * dt)) * (1.0 - p.alpha_f);
             let alpha3 = a.solve(&b3).ok_or_else(singular)?;
             let mass_alpha3 = mass * &alpha3;
             (Some(mass_alpha3.clone()), (mass - mass_alpha3).lu())
@@ -195,23 +234,43 @@ impl Integrator for KrAlpha {
         self.springs.as_ref()
     }
     fn step(&mut self, load_next: &DVector<f64>) {
+        self.predict();
+        self.correct(load_next, &[], &[]);
+    }
+}
+
+impl KrAlpha {
+    /// The first half of a step: the explicit kinematics `u_{n+1}`, `v_{n+1}` (in
+    /// [`predicted`](Self::predicted)) and the evaluation point `u_{n+α_f}`, `v_{n+α_f}`. They
+    /// need nothing of the step's forces, so a substructure test can command the specimen to
+    /// `u_{n+1}` before [`correct`](Self::correct) (crate::substructure::ExplicitController).
+    pub fn predict(&mut self) {
         let (dt, af) = (self.dt, self.alpha_f);
         let (s, n) = (&self.state, &mut self.next);
-        // explicit kinematics of t_{n+1}
         self.increment.gemv(1.0, &self.dt_alpha1, &s.a, 0.0);
         n.u.copy_from(&s.u);
         n.u.axpy(dt, &s.v, 1.0);
         n.u.axpy((0.5 + self.gamma) * dt, &self.increment, 1.0);
         n.v.copy_from(&s.v);
         n.v += &self.increment;
-        // the evaluation point t_{n+α_f} (t_{n+1} for CR)
         self.u_eval.copy_from(&s.u);
         self.u_eval.axpy(af, &n.u, 1.0 - af);
         self.v_eval.copy_from(&s.v);
         self.v_eval.axpy(af, &n.v, 1.0 - af);
-        // rhs = f_α − K₀ u_α − d(u_α) − C v_α − M α₃ a_n
+    }
+
+    /// The second half: the acceleration `a_{n+1}` from the weighted equilibrium with the
+    /// external forces `extra_force[k]` added at DOF `extra_dofs[k]` (a coupling force already
+    /// weighted to `t_{n+α_f}`; empty for a monolithic step), then the step is committed.
+    pub fn correct(&mut self, load_next: &DVector<f64>, extra_dofs: &[usize], extra_force: &[f64]) {
+        let af = self.alpha_f;
+        let (s, n) = (&self.state, &mut self.next);
+        // rhs = f_α + Sᵀ f_c,α − K₀ u_α − d(u_α) − C v_α − M α₃ a_n
         n.a.copy_from(&self.load_prev);
         n.a.axpy(af, load_next, 1.0 - af);
+        for (&dof, &f) in extra_dofs.iter().zip(extra_force) {
+            n.a[dof] += f;
+        }
         n.a.gemv(-1.0, &self.stiffness, &self.u_eval, 1.0);
         n.a.gemv(-1.0, &self.damping, &self.v_eval, 1.0);
         if let Some(ma3) = &self.mass_alpha3 {
@@ -225,5 +284,29 @@ impl Integrator for KrAlpha {
         self.effective_mass.solve_mut(&mut n.a);
         self.load_prev.copy_from(load_next);
         std::mem::swap(&mut self.state, &mut self.next);
+    }
+
+    /// `u_{n+1}`, `v_{n+1}` of the step begun by [`predict`](Self::predict) (its acceleration is
+    /// not yet known).
+    pub fn predicted(&self) -> &Kinematics {
+        &self.next
+    }
+    /// The weight `α_f` of the step's end at the evaluation point (`1` for CR).
+    pub fn alpha_f(&self) -> f64 {
+        self.alpha_f
+    }
+    /// The committed state (as [`Integrator::state`]), mutable for checkpoints.
+    pub(crate) fn state_mut(&mut self) -> &mut Kinematics {
+        &mut self.state
+    }
+    /// The load of the last committed step (enters the next weighted equilibrium).
+    pub(crate) fn load_prev(&self) -> &DVector<f64> {
+        &self.load_prev
+    }
+    pub(crate) fn load_prev_mut(&mut self) -> &mut DVector<f64> {
+        &mut self.load_prev
+    }
+    pub(crate) fn springs_mut(&mut self) -> Option<&mut Springs> {
+        self.springs.as_mut()
     }
 }

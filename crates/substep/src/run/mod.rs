@@ -253,12 +253,15 @@ impl SubstepObserver for SubstepMetrics {
 
 /// Extra history groups: `fei` (ideal error force) for every virtual (local) substructured run
 /// — a remote site or a lab target reports no noise-free force —, `te`, `du` (tracking error
-/// and correction of the last sub-step) with phase-lag compensation.
+/// and correction of the last sub-step) with phase-lag compensation. The ideal error force is
+/// the sub-step algorithm's: a cr / kr_alpha test has none.
 fn extra_groups(def: &TestDefinition) -> Vec<&'static str> {
     match &def.substructure {
         None => Vec::new(),
-        Some(s) if (s.remote.is_some() || s.lab_target.is_some()) && s.phase_lag.is_some() => vec!["te", "du"],
-        Some(s) if s.remote.is_some() || s.lab_target.is_some() => Vec::new(),
+        Some(s) if (s.remote.is_some() || s.lab_target.is_some() || s.explicit.is_some()) && s.phase_lag.is_some() => {
+            vec!["te", "du"]
+        }
+        Some(s) if s.remote.is_some() || s.lab_target.is_some() || s.explicit.is_some() => Vec::new(),
         Some(s) if s.phase_lag.is_some() => vec!["fei", "te", "du"],
         Some(_) => vec!["fei"],
     }
@@ -266,14 +269,16 @@ fn extra_groups(def: &TestDefinition) -> Vec<&'static str> {
 
 /// Fill the extra columns (group-major, one value per coupling DOF) for the current step.
 fn extra_values(sim: &Simulation, groups: &[&str], out: &mut [f64]) {
-    let Some(test) = sim.substructure_test() else { return };
-    let n_c = test.controller.n_coupling();
+    let (Some(site), Some(coupling)) = (sim.site(), sim.coupling_dofs()) else {
+        return;
+    };
+    let n_c = coupling.len();
     for (g, name) in groups.iter().enumerate() {
         let cols = &mut out[g * n_c..(g + 1) * n_c];
         let src = match *name {
-            "fei" if sim.steps_done() > 0 => test.controller.ideal_error_force(),
-            "te" => test.site.phase_lag().map(|p| p.tracking_error()),
-            "du" => test.site.phase_lag().map(|p| p.correction()),
+            "fei" if sim.steps_done() > 0 => sim.substructure_test().and_then(|t| t.controller.ideal_error_force()),
+            "te" => site.phase_lag().map(|p| p.tracking_error()),
+            "du" => site.phase_lag().map(|p| p.correction()),
             _ => None,
         };
         match src {
@@ -300,7 +305,10 @@ impl SameIntegrator {
     /// Beside `exact` when it is the exact reference; `None` otherwise, and when the
     /// same-integrator reference cannot be built — an extra, never a reason to refuse a test.
     pub fn beside(def: &TestDefinition, exact: &Reference) -> Option<Self> {
-        if exact.scheme() != "exact" {
+        // A cr / kr_alpha test also splits its error against the converged Newton reference of
+        // a nonlinear structure: its own scheme on the assembled model is explicit, no Newton.
+        let explicit = def.substructure.as_ref().is_some_and(|s| s.explicit.is_some());
+        if exact.scheme() != "exact" && !explicit {
             return None;
         }
         let reference = Reference::same_integrator(def).ok().flatten()?;

@@ -13,7 +13,9 @@ use crate::model::Model;
 use crate::model::SpringSpec;
 use crate::site::{Mode, RemoteStepTest};
 use crate::specimen::{FrictionModel, SpecimenSpec, assemble_monolithic_model};
-use crate::substructure::{StepRecord, SubstepObserver, SubstructureTest};
+use crate::substructure::{
+    CouplingController, ExperimentalSubstructure, ExplicitController, StepRecord, SubstepObserver, SubstructureTest,
+};
 use nalgebra::{DMatrix, DVector};
 
 enum Engine {
@@ -25,6 +27,8 @@ enum Engine {
         static_load: Option<DVector<f64>>,
     },
     Substructured(Box<SubstructureTest>),
+    /// A CR / KR-α substructure test (docs/theory.md §2.9).
+    Explicit(Box<SubstructureTest<ExplicitController>>),
     /// A remote site in per-step mode (the site runs the sub-steps).
     RemoteStep(Box<RemoteStepTest>),
 }
@@ -110,6 +114,10 @@ impl Simulation {
                 }
                 Engine::RemoteStep(Box::new(test))
             }
+            Some(s) if s.explicit.is_some() => {
+                let dense = model.dense("a cr or kr_alpha substructure test")?;
+                Engine::Explicit(Box::new(s.build_explicit_test(&dense, dt, springs, &load0)?))
+            }
             Some(s) => {
                 let mut test = s.build_test(model, dt, &load0)?;
                 if let Some(springs) = springs {
@@ -151,6 +159,7 @@ impl Simulation {
         match &self.engine {
             Engine::Monolithic { integrator, .. } => integrator.state(),
             Engine::Substructured(test) => test.controller.state(),
+            Engine::Explicit(test) => test.controller.state(),
             Engine::RemoteStep(test) => test.controller.state(),
         }
     }
@@ -161,6 +170,7 @@ impl Simulation {
         match &self.engine {
             Engine::Monolithic { integrator, .. } => integrator.springs(),
             Engine::Substructured(test) => test.controller.springs(),
+            Engine::Explicit(test) => test.controller.springs(),
             Engine::RemoteStep(_) => None,
         }
     }
@@ -170,14 +180,36 @@ impl Simulation {
         match &self.engine {
             Engine::Monolithic { .. } => None,
             Engine::Substructured(test) => Some(test.record()),
+            Engine::Explicit(test) => Some(test.record()),
             Engine::RemoteStep(test) => Some(test.record()),
         }
     }
 
-    /// The substructure test (controller and experimental side), if there is one.
-    pub fn substructure_test(&self) -> Option<&SubstructureTest> {
+    /// The experimental side of a local or per-sub-step test (virtual lab, lab target, site),
+    /// whichever algorithm drives it.
+    pub fn site(&self) -> Option<&dyn ExperimentalSubstructure> {
         match &self.engine {
             Engine::Monolithic { .. } | Engine::RemoteStep(_) => None,
+            Engine::Substructured(test) => Some(test.site.as_ref()),
+            Engine::Explicit(test) => Some(test.site.as_ref()),
+        }
+    }
+
+    /// The coupling DOFs (0-based) of a substructured run.
+    pub fn coupling_dofs(&self) -> Option<&[usize]> {
+        match &self.engine {
+            Engine::Monolithic { .. } => None,
+            Engine::Substructured(test) => Some(test.controller.coupling_dofs()),
+            Engine::Explicit(test) => Some(test.controller.coupling_dofs()),
+            Engine::RemoteStep(test) => Some(test.controller.coupling_dofs()),
+        }
+    }
+
+    /// The substructure test of the sub-step algorithm (controller and experimental side), if
+    /// there is one.
+    pub fn substructure_test(&self) -> Option<&SubstructureTest> {
+        match &self.engine {
+            Engine::Monolithic { .. } | Engine::RemoteStep(_) | Engine::Explicit(_) => None,
             Engine::Substructured(test) => Some(test),
         }
     }
@@ -189,6 +221,7 @@ impl Simulation {
     pub fn request_stop(&mut self, reason: &str) -> bool {
         match &mut self.engine {
             Engine::Substructured(test) => test.site.request_stop(reason),
+            Engine::Explicit(test) => test.site.request_stop(reason),
             _ => false,
         }
     }
@@ -230,6 +263,7 @@ impl Simulation {
                 }
             }
             Engine::Substructured(test) => test.step(ag_i, ag_next, observer)?,
+            Engine::Explicit(test) => test.step(ag_i, ag_next, observer)?,
             Engine::RemoteStep(test) => test.step(ag_i, ag_next, observer)?,
         }
         self.step = i + 1;
@@ -290,7 +324,9 @@ impl Reference {
     /// and `Δt`) whatever its size: the monolithic solution the test would give with an ideal
     /// actuator and converged sub-stepping if the specimen were part of the model. Its distance
     /// from the test is the error the substructuring and the transfer system add, without the
-    /// time integration's own error, which the exact reference includes.
+    /// time integration's own error, which the exact reference includes. A cr / kr_alpha test
+    /// (`SubstructureDefinition::explicit`) gets its own explicit scheme instead, also on a
+    /// nonlinear structure.
     pub fn same_integrator(def: &TestDefinition) -> Result<Option<Self>> {
         Self::build(def, true).map_err(|e| in_config(e, &def.source))
     }
@@ -400,7 +436,10 @@ impl Reference {
         if exact && assembled.is_sparse() {
             assembled = Model::Dense(assembled.dense("the exact reference")?.into_owned());
         }
-        let (scheme, name) = if nonlinear {
+        let (scheme, name) = if let (true, Some(explicit)) = (same_integrator, s.explicit) {
+            // a cr / kr_alpha test: the assembled model with the same explicit scheme
+            (explicit, if explicit == Scheme::Cr { "cr" } else { "kr_alpha" })
+        } else if nonlinear {
             // Nonlinear: Newmark with the test's β, γ and Δt, Newton–Raphson to convergence.
             (
                 Scheme::Newmark {
@@ -422,7 +461,33 @@ impl Reference {
         };
         let mass_influence = assembled.effective_mass_vector();
         let load = -&mass_influence * def.ground_motion.accel.first().copied().unwrap_or(0.0);
-        let integrator = if nonlinear {
+        let explicit_split = same_integrator && s.explicit.is_some();
+        let integrator = if explicit_split {
+            // The test's K₀ is the numerical substructure's stiffness: the specimens' stiffness
+            // enters only through the measured force, so the monolithic counterpart keeps it out
+            // of the integration-parameter matrices too.
+            let dense = assembled.dense("the same-integrator reference of a cr / kr_alpha test")?;
+            let mut k0 = DMatrix::zeros(n_assembled, n_assembled);
+            k0.view_mut((0, 0), (n, n))
+                .copy_from(&def.model.dense("the numerical substructure")?.stiffness);
+            let rho_inf = match scheme {
+                Scheme::KrAlpha { rho_inf } => Some(rho_inf),
+                _ => None,
+            };
+            let springs = if nonlinear {
+                Some(springs.build(n_assembled)?)
+            } else {
+                None
+            };
+            Box::new(crate::integrate::KrAlpha::with_parameter_stiffness(
+                &dense,
+                &k0,
+                def.integrator.dt,
+                rho_inf,
+                springs,
+                &load,
+            )?)
+        } else if nonlinear {
             scheme.build_nonlinear(
                 &assembled,
                 springs.build(n_assembled)?,

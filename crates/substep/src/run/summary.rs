@@ -311,7 +311,7 @@ pub(super) fn phase_lag_json(p: &PhaseLagDefinition) -> Value {
 /// `(estimation, phase_lag, warnings)` of the summary.
 /// The `lab` block of a run against a lab target; a warning when sub-steps were held.
 pub(super) fn lab_summary(sim: &Simulation, warnings: &mut Vec<String>) -> Option<Value> {
-    let s = sim.substructure_test()?.site.lab_stats()?;
+    let s = sim.site()?.lab_stats()?;
     if s.held > 0 {
         warnings.push(format!(
             "lab target: {} sub-step(s) held the last measurement (no reply in time; at most {} in a row)",
@@ -323,30 +323,33 @@ pub(super) fn lab_summary(sim: &Simulation, warnings: &mut Vec<String>) -> Optio
 
 pub(super) fn compensation_summary(sim: &Simulation) -> (Option<Value>, Option<Value>, Vec<String>) {
     let mut warnings = Vec::new();
-    let Some(test) = sim.substructure_test() else {
+    let (Some(site), Some(coupling)) = (sim.site(), sim.coupling_dofs()) else {
         return (None, None, warnings);
     };
-    let estimation = test.controller.estimation_stats().map(|s| {
-        if s.guard_fallbacks() > 0 {
-            warnings.push(format!(
-                "error-force estimation fell back to the plain algorithm in {} step(s) after its warm-up \
+    let estimation = sim
+        .substructure_test()
+        .and_then(|t| t.controller.estimation_stats())
+        .map(|s| {
+            if s.guard_fallbacks() > 0 {
+                warnings.push(format!(
+                    "error-force estimation fell back to the plain algorithm in {} step(s) after its warm-up \
                  ({} ill-conditioned, {} implausible predictions)",
-                s.guard_fallbacks(),
-                s.ill_conditioned,
-                s.implausible
-            ));
-        }
-        json!({
-            "steps": s.steps, "estimated": s.estimated, "fallbacks": s.fallbacks(),
-            "warm_up": s.warm_up, "ill_conditioned": s.ill_conditioned, "implausible": s.implausible,
-        })
-    });
-    let phase_lag = test.site.phase_lag().map(|p| {
+                    s.guard_fallbacks(),
+                    s.ill_conditioned,
+                    s.implausible
+                ));
+            }
+            json!({
+                "steps": s.steps, "estimated": s.estimated, "fallbacks": s.fallbacks(),
+                "warm_up": s.warm_up, "ill_conditioned": s.ill_conditioned, "implausible": s.implausible,
+            })
+        });
+    let phase_lag = site.phase_lag().map(|p| {
         let trips: Vec<Value> = p
             .trips()
             .into_iter()
             .map(|(i, t)| {
-                let dof = test.controller.coupling_dofs()[i] + 1;
+                let dof = coupling[i] + 1;
                 warnings.push(format!(
                     "phase-lag compensator of coupling DOF {dof} disabled by its guard: {t}"
                 ));

@@ -10,6 +10,7 @@
 mod compensation;
 mod controller;
 mod estimation;
+mod explicit;
 mod report;
 mod safety;
 mod test_run;
@@ -17,10 +18,11 @@ mod test_run;
 pub use compensation::{ErrorForceCompensation, ErrorForceSpec};
 pub use controller::{SubstepController, SubstepSettings};
 pub use estimation::{EstimationOutcome, EstimationStats};
+pub use explicit::ExplicitController;
 pub use report::{GuardTrip, LabStats, PhaseLagReport, StabilityAction, StabilitySettings};
 pub use safety::{LimitedSite, MAX_RAMP_SUBSTEPS, MAX_RAMP_TIME, RampClock, SafetyLimits, StopLog};
 pub(crate) use test_run::stopped_at;
-pub use test_run::{StepRecord, SubstepObserver, SubstructureTest};
+pub use test_run::{CouplingController, StepRecord, SubstepObserver, SubstructureTest};
 
 use crate::error::Result;
 

@@ -4,8 +4,109 @@
 use super::StopLog;
 use super::{ExperimentalSubstructure, SubstepController};
 use crate::error::{Error, Result};
-use crate::model::ModelRef;
+use crate::integrate::Kinematics;
+use crate::model::{ModelRef, Springs};
 use nalgebra::DVector;
+
+/// The numerical side of a substructure test in step phases: [`begin_step`](Self::begin_step),
+/// `k_sub` times [`next_command`](Self::next_command) / [`feedback`](Self::feedback), then
+/// [`finish_step`](Self::finish_step); none of them allocates. The sub-step algorithm
+/// ([`SubstepController`]) and the model-based explicit schemes
+/// ([`super::ExplicitController`]) implement it, so both drive the same experimental sides.
+pub trait CouplingController: Send {
+    /// Begin step `i → i+1` with the external load `f_l,i+1` at its end.
+    fn begin_step(&mut self, load_next: &DVector<f64>);
+    /// The command of the next sub-step \[m\], one value per coupling DOF.
+    fn next_command(&mut self) -> &[f64];
+    /// The force measured at the end of that sub-step \[N\].
+    fn feedback(&mut self, measured_force: &[f64]);
+    /// Its noise-free value, when the experimental side knows it. Default: ignored.
+    fn feedback_true(&mut self, _true_force: &[f64]) {}
+    /// Close the step after its last sub-step.
+    fn finish_step(&mut self);
+    fn substeps(&self) -> usize;
+    fn dt(&self) -> f64;
+    fn coupling_dofs(&self) -> &[usize];
+    fn n_coupling(&self) -> usize {
+        self.coupling_dofs().len()
+    }
+    /// The last command \[m\].
+    fn command(&self) -> &[f64];
+    /// The state of the numerical DOFs after the last completed step.
+    fn state(&self) -> &Kinematics;
+    /// The hysteretic springs of a nonlinear numerical substructure, if any.
+    fn springs(&self) -> Option<&Springs>;
+    /// Measured coupling force of the last completed step \[N\].
+    fn coupling_force(&self) -> &[f64];
+    /// Error force `f^{(k)} − f^{(k−1)}` of the last completed step \[N\].
+    fn error_force(&self) -> &[f64];
+    /// Compensation force entering the next step \[N\] (zero without error-force compensation).
+    fn compensation_force(&self) -> &[f64];
+    /// `Ok` if one step is a linear map of the state (for the amplification-matrix analysis);
+    /// otherwise an error naming the nonlinear part.
+    fn is_linear(&self) -> Result<()>;
+    /// Length of the algorithm state (amplification-matrix analysis, checkpoints).
+    fn state_len(&self) -> usize;
+    fn write_state(&self, out: &mut [f64]);
+    fn read_state(&mut self, state: &[f64]);
+}
+
+impl CouplingController for SubstepController {
+    fn begin_step(&mut self, load_next: &DVector<f64>) {
+        SubstepController::begin_step(self, load_next)
+    }
+    fn next_command(&mut self) -> &[f64] {
+        SubstepController::next_command(self)
+    }
+    fn feedback(&mut self, measured_force: &[f64]) {
+        SubstepController::feedback(self, measured_force)
+    }
+    fn feedback_true(&mut self, true_force: &[f64]) {
+        SubstepController::feedback_true(self, true_force)
+    }
+    fn finish_step(&mut self) {
+        SubstepController::finish_step(self)
+    }
+    fn substeps(&self) -> usize {
+        SubstepController::substeps(self)
+    }
+    fn dt(&self) -> f64 {
+        SubstepController::dt(self)
+    }
+    fn coupling_dofs(&self) -> &[usize] {
+        SubstepController::coupling_dofs(self)
+    }
+    fn command(&self) -> &[f64] {
+        SubstepController::command(self)
+    }
+    fn state(&self) -> &Kinematics {
+        SubstepController::state(self)
+    }
+    fn springs(&self) -> Option<&Springs> {
+        SubstepController::springs(self)
+    }
+    fn coupling_force(&self) -> &[f64] {
+        SubstepController::coupling_force(self)
+    }
+    fn error_force(&self) -> &[f64] {
+        SubstepController::error_force(self)
+    }
+    fn compensation_force(&self) -> &[f64] {
+        SubstepController::compensation_force(self)
+    }
+    fn is_linear(&self) -> Result<()> {
+        SubstepController::is_linear(self)
+    }
+    fn state_len(&self) -> usize {
+        SubstepController::state_len(self)
+    }
+    fn write_state(&self, out: &mut [f64]) {
+        SubstepController::write_state(self, out)
+    }
+    fn read_state(&mut self, state: &[f64]) {
+        SubstepController::read_state(self, state)
+    }
+}
 
 /// Receives every sub-step (for `substeps.csv` or live plots). The default does nothing.
 pub trait SubstepObserver {
@@ -42,7 +143,7 @@ pub struct StepRecord<'a> {
 impl<'a> StepRecord<'a> {
     /// The record of `controller`'s last completed step `step` (shared by every driver of the
     /// controller: offline, remote per-step).
-    pub fn of(controller: &'a SubstepController, step: usize, measured_displacement: &'a [f64]) -> Self {
+    pub fn of(controller: &'a impl CouplingController, step: usize, measured_displacement: &'a [f64]) -> Self {
         let s = controller.state();
         StepRecord {
             step,
@@ -58,9 +159,10 @@ impl<'a> StepRecord<'a> {
     }
 }
 
-/// A substructure test: controller + experimental side + ground motion load.
-pub struct SubstructureTest {
-    pub controller: SubstepController,
+/// A substructure test: controller (the sub-step algorithm unless said otherwise) +
+/// experimental side + ground motion load.
+pub struct SubstructureTest<C: CouplingController = SubstepController> {
+    pub controller: C,
     pub site: Box<dyn ExperimentalSubstructure>,
     /// `M ι`: the load is `−M ι a_g`.
     mass_influence: DVector<f64>,
@@ -70,10 +172,10 @@ pub struct SubstructureTest {
     measured_displacement: Vec<f64>,
 }
 
-impl SubstructureTest {
+impl<C: CouplingController> SubstructureTest<C> {
     pub fn new<'a>(
         model: impl Into<ModelRef<'a>>,
-        controller: SubstepController,
+        controller: C,
         site: Box<dyn ExperimentalSubstructure>,
     ) -> Result<Self> {
         let model = model.into();

@@ -18,8 +18,8 @@ use crate::site::openfresco::OpenFrescoSite;
 use crate::site::{Mode, RemoteSite, RemoteStepSite, RemoteStepTest};
 use crate::specimen::SpecimenSpec;
 use crate::substructure::{
-    ErrorForceSpec, ExperimentalSubstructure, LimitedSite, SafetyLimits, SubstepController, SubstepSettings,
-    SubstructureTest,
+    ErrorForceSpec, ExperimentalSubstructure, ExplicitController, LimitedSite, SafetyLimits, SubstepController,
+    SubstepSettings, SubstructureTest,
 };
 use crate::substructure::{StabilityAction, StabilitySettings};
 use crate::transfer::lti::TransferFunction;
@@ -46,9 +46,13 @@ pub struct SubstructureDefinition {
     pub force_sensors: Vec<SensorSpec>,
     pub displacement_sensors: Vec<SensorSpec>,
     pub error_force: ErrorForceSpec,
-    /// Newmark β, γ of the integrator.
+    /// Newmark β, γ of the integrator (average acceleration ¼, ½ for an explicit scheme: the
+    /// β, γ of its converged Newton reference).
     pub beta: f64,
     pub gamma: f64,
+    /// `Some(Scheme::Cr | Scheme::KrAlpha)`: the model-based explicit scheme drives the test
+    /// ([`ExplicitController`], docs/theory.md §2.9) instead of the sub-step algorithm.
+    pub explicit: Option<Scheme>,
     /// Phase-lag compensation of the actuators (`[substructure.phase_lag]`), if any.
     pub phase_lag: Option<PhaseLagDefinition>,
     /// A remote site instead of the virtual lab (the specimens, if any, then only feed the
@@ -96,6 +100,13 @@ impl SubstructureDefinition {
     /// The experimental side for `controller`: the virtual lab or the remote site (per
     /// sub-step), wrapped in the safety limits when given.
     pub fn build_site(&self, controller: &SubstepController, dt: f64) -> Result<Box<dyn ExperimentalSubstructure>> {
+        self.site_for(Some(controller), dt)
+    }
+
+    /// As [`build_site`](Self::build_site); `controller` is needed only by a per-sub-step
+    /// `substep` site (it is told the controller's gains), which an explicit scheme refuses
+    /// in the config.
+    fn site_for(&self, controller: Option<&SubstepController>, dt: f64) -> Result<Box<dyn ExperimentalSubstructure>> {
         let n_c = self.coupling_dofs.len();
         let site: Box<dyn ExperimentalSubstructure> = match &self.remote {
             None if self.lab_target.is_some() => {
@@ -104,12 +115,21 @@ impl SubstructureDefinition {
             }
             None => Box::new(self.virtual_lab(dt)?),
             Some(r) => match (r.protocol, r.mode) {
-                (RemoteProtocol::Substep, Mode::PerSubstep) => Box::new(RemoteSite::for_controller(
-                    r.address.as_str(),
-                    r.transport,
-                    controller,
-                    &r.client_options(),
-                )?),
+                (RemoteProtocol::Substep, Mode::PerSubstep) => {
+                    let controller = controller.ok_or_else(|| {
+                        Error::invalid(
+                            "substructure.remote.protocol",
+                            "a substep site is told the sub-step algorithm's gains; with cr or kr_alpha use \
+                             protocol = \"openfresco\"",
+                        )
+                    })?;
+                    Box::new(RemoteSite::for_controller(
+                        r.address.as_str(),
+                        r.transport,
+                        controller,
+                        &r.client_options(),
+                    )?)
+                }
                 (RemoteProtocol::OpenFresco, _) => {
                     Box::new(OpenFrescoSite::connect(r.address.as_str(), n_c, &r.client_options())?)
                 }
@@ -178,6 +198,7 @@ impl SubstructureDefinition {
             .remote
             .as_ref()
             .ok_or_else(|| Error::invalid("substructure.remote", "is required for a per-step remote test"))?;
+        self.refuse_explicit()?;
         let controller = SubstepController::new(model, &self.settings(dt), load0)?;
         let site = RemoteStepSite::for_controller(r.address.as_str(), r.transport, &controller, &r.client_options())?;
         RemoteStepTest::new(model, controller, site)
@@ -192,9 +213,48 @@ impl SubstructureDefinition {
         load0: &DVector<f64>,
     ) -> Result<SubstructureTest> {
         let model = model.into();
+        self.refuse_explicit()?;
         let controller = SubstepController::new(model, &self.settings(dt), load0)?;
         let site = self.build_site(&controller, dt)?;
         SubstructureTest::new(model, controller, site)
+    }
+
+    /// The test of this definition with a model-based explicit scheme
+    /// ([`Self::explicit`]): [`ExplicitController`] and the experimental side, for the dense
+    /// `model` at rest with the numerical substructure's `springs` and initial load `load0`.
+    pub fn build_explicit_test(
+        &self,
+        model: &crate::model::StructuralModel,
+        dt: f64,
+        springs: Option<crate::model::Springs>,
+        load0: &DVector<f64>,
+    ) -> Result<SubstructureTest<ExplicitController>> {
+        let scheme = match self.explicit {
+            Some(Scheme::Cr) => crate::integrate::KrAlpha::cr(model, dt, springs, load0)?,
+            Some(Scheme::KrAlpha { rho_inf }) => {
+                crate::integrate::KrAlpha::with_rho_inf(model, dt, rho_inf, springs, load0)?
+            }
+            _ => {
+                return Err(Error::invalid(
+                    "integrator.scheme",
+                    "an explicit substructure test needs scheme = \"cr\" or \"kr_alpha\"",
+                ));
+            }
+        };
+        let controller = ExplicitController::new(scheme, &self.coupling_dofs, self.substeps)?;
+        let site = self.site_for(None, dt)?;
+        SubstructureTest::new(model, controller, site)
+    }
+
+    /// A cr / kr_alpha definition has no sub-step controller ([`Self::build_explicit_test`]).
+    fn refuse_explicit(&self) -> Result<()> {
+        match self.explicit {
+            Some(_) => Err(Error::invalid(
+                "integrator.scheme",
+                "a cr or kr_alpha test runs through build_explicit_test, not the sub-step controller",
+            )),
+            None => Ok(()),
+        }
     }
 
     /// Settings of the sub-step controller for time step `dt`.
@@ -263,14 +323,16 @@ impl RawSubstructure {
         limits: &Limits,
     ) -> Result<SubstructureDefinition> {
         let p = "substructure.";
-        let (beta, gamma) = match scheme {
-            Scheme::Newmark { beta, gamma } if beta > 0.0 => (beta, gamma),
+        let (beta, gamma, explicit) = match scheme {
+            Scheme::Newmark { beta, gamma } if beta > 0.0 => (beta, gamma, None),
+            // the model-based explicit schemes command the step's displacement directly
+            Scheme::Cr | Scheme::KrAlpha { .. } => (0.25, 0.5, Some(scheme)),
             _ => {
                 return Err(Error::invalid(
                     "integrator.scheme",
                     format!(
-                        "the substructure algorithm needs an implicit Newmark scheme (beta > 0); \
-                         '{scheme_name}' cannot be used with [substructure]"
+                        "the substructure algorithm needs an implicit Newmark scheme (beta > 0), cr or \
+                         kr_alpha; '{scheme_name}' cannot be used with [substructure]"
                     ),
                 ));
             }
@@ -476,6 +538,28 @@ impl RawSubstructure {
             .as_ref()
             .map_or(ErrorForceSpec::None, RawErrorForce::spec);
         error_force.validate()?;
+        if explicit.is_some() {
+            if self.error_force.is_some() && error_force != ErrorForceSpec::None {
+                return Err(Error::invalid(
+                    format!("{p}error_force"),
+                    format!(
+                        "error-force compensation belongs to the sub-step algorithm; '{scheme_name}' commands the \
+                         step's displacement directly and has none (remove [substructure.error_force])"
+                    ),
+                ));
+            }
+            if let Some(r) = &remote
+                && r.protocol == RemoteProtocol::Substep
+            {
+                return Err(Error::invalid(
+                    format!("{p}remote.protocol"),
+                    format!(
+                        "a substep site runs the sub-step algorithm's ramp; with '{scheme_name}' use protocol = \
+                         \"openfresco\" (the site is sent each step's target)"
+                    ),
+                ));
+            }
+        }
         let phase_lag = match &self.phase_lag {
             Some(raw) => raw.build(dt, self.substeps, &actuator)?,
             None => None,
@@ -490,6 +574,7 @@ impl RawSubstructure {
             error_force,
             beta,
             gamma,
+            explicit,
             limits: self
                 .limits
                 .as_ref()

@@ -249,6 +249,7 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
         error_force: method.error_force,
         beta,
         gamma,
+        explicit: None,
         phase_lag: method.phase_lag.map(|spec| PhaseLagDefinition {
             spec,
             ramp: Ramp::new(0, s.ramp_steps * s.k_sub),

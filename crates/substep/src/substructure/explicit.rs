@@ -1,0 +1,232 @@
+//! Substructure tests with a model-based explicit scheme, CR or KR-α (docs/theory.md §2.9),
+//! beside the sub-step algorithm.
+//!
+//! [`crate::integrate::KrAlpha`] gives the displacement of the next step before its restoring
+//! force is known, so the coupling DOFs are commanded to it directly, with no gain and no
+//! prediction of the force:
+//!
+//! ```text
+//! u_{i+1} = u_i + Δt v_i + (½ + γ) Δt² α₁ a_i,      v_{i+1} = v_i + Δt α₁ a_i,
+//! d^{(j)} = u_{i,c} + (j/k) (u_{i+1,c} − u_{i,c}),   j = 1 … k_sub,
+//! M (I − α₃) a_{i+1} = f_{l,α} − K₀ u_α − d(u_α) − C v_α − M α₃ a_i + Sᵀ f_{c,α},
+//! f_{c,α} = (1 − α_f) f_{c,i} + α_f f^{(k)},
+//! ```
+//!
+//! where `f^{(k)}` is the force measured at the end of the last sub-step (at `u_{i+1,c}` with an
+//! ideal actuator) and `f_{c,i}` that of the step before. The numerical substructure's springs
+//! are evaluated at `u_α` as in the monolithic scheme (one-point form); the specimen's force is
+//! weighted between the two measured ones (two-point form, OpenSees' `KRAlphaExplicit_TP` for an
+//! experimental element: a specimen cannot be held at `u_α` and then moved on to `u_{i+1}`).
+//! For CR `α_f = 1` and both forms coincide; for a linear specimen they coincide for every ρ∞,
+//! so an ideal test of a linear specimen is the monolithic scheme on the assembled model.
+//!
+//! The ramp is linear from the last step's target; the sub-steps only pace the actuators (the
+//! sub-step algorithm's gain `G_cc` feedback is absent). Error-force compensation does not
+//! apply; the error force `f^{(k)} − f^{(k−1)}` is still reported. None of the phases allocates.
+
+use super::test_run::CouplingController;
+use crate::error::{Error, Result};
+use crate::integrate::{Integrator, Kinematics, KrAlpha};
+use crate::model::Springs;
+use nalgebra::DVector;
+
+/// The numerical side of a CR / KR-α substructure test (see the module docs).
+pub struct ExplicitController {
+    scheme: KrAlpha,
+    coupling: Vec<usize>,
+    k_sub: usize,
+    /// `u_{i,c}` (where this step's ramp starts) and `u_{i+1,c}`.
+    target_prev: Vec<f64>,
+    target: Vec<f64>,
+    command: Vec<f64>,
+    /// `f_{c,i}` of the last completed step, `f^{(j)}` and `f^{(j−1)}` of the current one.
+    force: Vec<f64>,
+    force_last: Vec<f64>,
+    force_before: Vec<f64>,
+    weighted: Vec<f64>,
+    error_force: Vec<f64>,
+    /// No error-force compensation: always zero (for the step record).
+    compensation_force: Vec<f64>,
+    /// `f_l,i+1`, given at the step's beginning, used at its end.
+    load_next: DVector<f64>,
+    substep: usize,
+}
+
+impl ExplicitController {
+    /// `scheme` at rest (built for the numerical model with its springs and `f_l(0)`), driving
+    /// `coupling_dofs` (0-based, distinct) through `substeps` sub-steps per step.
+    pub fn new(scheme: KrAlpha, coupling_dofs: &[usize], substeps: usize) -> Result<Self> {
+        let n = scheme.state().u.len();
+        if substeps == 0 {
+            return Err(Error::invalid("substructure.substeps", "must be at least 1"));
+        }
+        if coupling_dofs.is_empty() {
+            return Err(Error::invalid(
+                "substructure.coupling_dofs",
+                "must list at least one DOF",
+            ));
+        }
+        for (k, &c) in coupling_dofs.iter().enumerate() {
+            if c >= n {
+                return Err(Error::invalid(
+                    "substructure.coupling_dofs",
+                    format!("DOF {} is out of range (the model has DOFs 1..={n})", c + 1),
+                ));
+            }
+            if coupling_dofs[..k].contains(&c) {
+                return Err(Error::invalid(
+                    "substructure.coupling_dofs",
+                    format!("DOF {} is listed twice", c + 1),
+                ));
+            }
+        }
+        let n_c = coupling_dofs.len();
+        let zeros = || vec![0.0; n_c];
+        Ok(Self {
+            scheme,
+            coupling: coupling_dofs.to_vec(),
+            k_sub: substeps,
+            target_prev: zeros(),
+            target: zeros(),
+            command: zeros(),
+            force: zeros(),
+            force_last: zeros(),
+            force_before: zeros(),
+            weighted: zeros(),
+            error_force: zeros(),
+            compensation_force: zeros(),
+            load_next: DVector::zeros(n),
+            substep: 0,
+        })
+    }
+
+    /// `cr` or `kr_alpha`.
+    pub fn scheme_name(&self) -> &'static str {
+        self.scheme.name()
+    }
+    /// Coupling part of this step's target `u_{i+1,c}` \[m\] (after [`begin_step`](CouplingController::begin_step)).
+    pub fn target(&self) -> &[f64] {
+        &self.target
+    }
+}
+
+impl CouplingController for ExplicitController {
+    fn begin_step(&mut self, load_next: &DVector<f64>) {
+        self.load_next.copy_from(load_next);
+        self.scheme.predict();
+        let next = &self.scheme.predicted().u;
+        for (k, &c) in self.coupling.iter().enumerate() {
+            self.target[k] = next[c];
+        }
+        self.force_last.copy_from_slice(&self.force);
+        self.force_before.copy_from_slice(&self.force);
+        self.substep = 0;
+    }
+
+    fn next_command(&mut self) -> &[f64] {
+        debug_assert!(self.substep < self.k_sub, "next_command called after the last sub-step");
+        let r = (self.substep + 1) as f64 / self.k_sub as f64;
+        for k in 0..self.coupling.len() {
+            self.command[k] = (1.0 - r) * self.target_prev[k] + r * self.target[k];
+        }
+        if self.substep + 1 == self.k_sub {
+            // exactly the target, not the ramp's rounding of it
+            self.command.copy_from_slice(&self.target);
+        }
+        &self.command
+    }
+
+    fn feedback(&mut self, measured_force: &[f64]) {
+        std::mem::swap(&mut self.force_before, &mut self.force_last);
+        self.force_last.copy_from_slice(measured_force);
+        self.substep += 1;
+    }
+
+    fn finish_step(&mut self) {
+        debug_assert_eq!(self.substep, self.k_sub, "finish_step before all sub-steps");
+        let af = self.scheme.alpha_f();
+        for k in 0..self.coupling.len() {
+            self.weighted[k] = (1.0 - af) * self.force[k] + af * self.force_last[k];
+            self.error_force[k] = self.force_last[k] - self.force_before[k];
+        }
+        self.scheme.correct(&self.load_next, &self.coupling, &self.weighted);
+        self.force.copy_from_slice(&self.force_last);
+        self.target_prev.copy_from_slice(&self.target);
+    }
+
+    fn substeps(&self) -> usize {
+        self.k_sub
+    }
+    fn dt(&self) -> f64 {
+        self.scheme.dt()
+    }
+    fn coupling_dofs(&self) -> &[usize] {
+        &self.coupling
+    }
+    fn command(&self) -> &[f64] {
+        &self.command
+    }
+    fn state(&self) -> &Kinematics {
+        self.scheme.state()
+    }
+    fn springs(&self) -> Option<&Springs> {
+        self.scheme.springs()
+    }
+    fn coupling_force(&self) -> &[f64] {
+        &self.force
+    }
+    fn error_force(&self) -> &[f64] {
+        &self.error_force
+    }
+    fn compensation_force(&self) -> &[f64] {
+        &self.compensation_force
+    }
+
+    fn is_linear(&self) -> Result<()> {
+        if self.springs().is_some_and(|s| !s.is_linear()) {
+            return Err(Error::invalid(
+                "structure.storeys.hysteresis",
+                "the numerical substructure is nonlinear; the linear analysis needs a linear model",
+            ));
+        }
+        Ok(())
+    }
+
+    /// `[u, v, a, f_l,i, u_{i,c}, f_{c,i}, springs]`.
+    fn state_len(&self) -> usize {
+        4 * self.scheme.state().u.len() + 2 * self.coupling.len() + self.springs().map_or(0, |s| s.state_len())
+    }
+    fn write_state(&self, out: &mut [f64]) {
+        let s = self.scheme.state();
+        let (n, n_c) = (s.u.len(), self.coupling.len());
+        out[..n].copy_from_slice(s.u.as_slice());
+        out[n..2 * n].copy_from_slice(s.v.as_slice());
+        out[2 * n..3 * n].copy_from_slice(s.a.as_slice());
+        // the load enters the next weighted equilibrium with 1 − α_f
+        out[3 * n..4 * n].copy_from_slice(self.scheme.load_prev().as_slice());
+        let at = 4 * n;
+        out[at..at + n_c].copy_from_slice(&self.target_prev);
+        out[at + n_c..at + 2 * n_c].copy_from_slice(&self.force);
+        if let Some(springs) = self.springs() {
+            springs.write_state(&mut out[at + 2 * n_c..]);
+        }
+    }
+    fn read_state(&mut self, state: &[f64]) {
+        let n = self.scheme.predicted().u.len();
+        let n_c = self.coupling.len();
+        {
+            let s = self.scheme.state_mut();
+            s.u.copy_from_slice(&state[..n]);
+            s.v.copy_from_slice(&state[n..2 * n]);
+            s.a.copy_from_slice(&state[2 * n..3 * n]);
+        }
+        self.scheme.load_prev_mut().copy_from_slice(&state[3 * n..4 * n]);
+        let at = 4 * n;
+        self.target_prev.copy_from_slice(&state[at..at + n_c]);
+        self.force.copy_from_slice(&state[at + n_c..at + 2 * n_c]);
+        if let Some(springs) = self.scheme.springs_mut() {
+            springs.read_state(&state[at + 2 * n_c..]);
+        }
+        self.substep = 0;
+    }
+}
