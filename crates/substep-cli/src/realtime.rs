@@ -50,6 +50,12 @@ fn report_json(r: &RealtimeReport) -> serde_json::Value {
     })
 }
 
+/// The sub-step algorithm's runner or a CR / KR-α test's.
+enum AnyRunner {
+    Substep(Box<RealtimeRunner>),
+    Explicit(Box<RealtimeRunner<substep::substructure::ExplicitController>>),
+}
+
 pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, config_name: String) -> Result<()> {
     let Some(_) = &def.substructure else {
         return Err(substep::Error::invalid(
@@ -58,21 +64,6 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         )
         .into());
     };
-    if let Some(s) = def.substructure.as_ref().filter(|s| s.explicit.is_some()) {
-        return Err(substep::Error::invalid(
-            "--realtime",
-            format!(
-                "integrator.scheme = \"{}\": the real-time runner drives the sub-step algorithm only; run the cr / \
-                 kr_alpha test offline (without --realtime), or use an implicit Newmark scheme for real time",
-                s.explicit.map_or("", |e| if e == substep::integrate::Scheme::Cr {
-                    "cr"
-                } else {
-                    "kr_alpha"
-                })
-            ),
-        )
-        .into());
-    }
     let mut def = def.clone();
     let mut live = crate::monitor::live::Live::start(args, &mut def, &config_name, true)?;
     let def = &def;
@@ -91,16 +82,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     // before any site or lab target is connected (docs/realtime.md, budget).
     // Hysteretic springs run in the runner's one-sub-step pipeline (docs/realtime.md).
     let springs = || def.hysteresis.as_ref().map(|h| h.build(def.model.n_dofs())).transpose();
-    let mut probe =
-        substep::substructure::SubstepController::new(&def.model, &sub.settings(def.integrator.dt), &load0)?;
-    if let Some(s) = springs()? {
-        probe.set_springs(s);
-    }
-    substep::realtime::budget::probe(probe, &def.model.effective_mass_vector(), &accel).check("--realtime")?;
-    let mut test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
-    if let Some(s) = springs()? {
-        test.controller.set_springs(s);
-    }
+    let mass_influence = def.model.effective_mass_vector();
     let options = RealtimeOptions {
         lock_memory: args.lock_memory,
         fifo_priority: args.fifo_priority,
@@ -108,7 +90,30 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         ..RealtimeOptions::default()
     };
     let stop = StopHandle::new();
-    let runner = RealtimeRunner::new(&def.model, test, accel.clone(), options)?.with_stop_handle(stop.clone());
+    let runner = if sub.explicit.is_some() {
+        // CR / KR-α (docs/theory.md §2.9): the whole step runs on the numerical thread.
+        let model = def.model.dense("a cr or kr_alpha substructure test")?;
+        let probe = sub.explicit_controller(&model, def.integrator.dt, springs()?, &load0)?;
+        substep::realtime::budget::probe_steps(probe, &mass_influence, &accel).check("--realtime")?;
+        let test = sub.build_explicit_test(&model, def.integrator.dt, springs()?, &load0)?;
+        AnyRunner::Explicit(Box::new(
+            RealtimeRunner::new(&def.model, test, accel.clone(), options)?.with_stop_handle(stop.clone()),
+        ))
+    } else {
+        let mut probe =
+            substep::substructure::SubstepController::new(&def.model, &sub.settings(def.integrator.dt), &load0)?;
+        if let Some(s) = springs()? {
+            probe.set_springs(s);
+        }
+        substep::realtime::budget::probe(probe, &mass_influence, &accel).check("--realtime")?;
+        let mut test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
+        if let Some(s) = springs()? {
+            test.controller.set_springs(s);
+        }
+        AnyRunner::Substep(Box::new(
+            RealtimeRunner::new(&def.model, test, accel.clone(), options)?.with_stop_handle(stop.clone()),
+        ))
+    };
     // The monolithic reference runs on this (the writer's) thread, as offline, up to
     // REALTIME_REFERENCE_MAX_DOFS DOFs (a step well under a millisecond). A larger model's
     // reference would be a second full integration next to the real-time thread on the same
@@ -145,8 +150,9 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
     // reference's and the indicator's when they run; no phase-lag columns (the real-time
     // records do not carry them).
     let indicator_columns = live.indicator().is_some();
-    // As offline: a remote site or a lab target reports no noise-free force, so no `fei`.
-    let ideal_column = sub.remote.is_none() && sub.lab_target.is_none();
+    // As offline: a remote site or a lab target reports no noise-free force, so no `fei`; nor
+    // does a CR / KR-α test keep an ideal error force.
+    let ideal_column = sub.remote.is_none() && sub.lab_target.is_none() && sub.explicit.is_none();
     let layout = substep::run::Layout {
         n_dofs: def.model.n_dofs(),
         coupling_dofs: sub.coupling_dofs.clone(),
@@ -275,14 +281,21 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
             last_flush = std::time::Instant::now();
         }
     };
-    let result = runner.run(sink);
+    // A lab target's link statistics: with the test, or with the failure.
+    let result = match runner {
+        AnyRunner::Substep(runner) => runner
+            .run(sink)
+            .map(|(report, test)| (report, test.site.lab_stats().cloned())),
+        AnyRunner::Explicit(runner) => runner
+            .run(sink)
+            .map(|(report, test)| (report, test.site.lab_stats().cloned())),
+    };
     w.flush().context("history.csv")?;
     if let Some(e) = write_error {
         return Err(anyhow::Error::from(e).context(format!("cannot write {}", history_path.display())));
     }
-    // A lab target's link statistics: with the test, or with the failure.
     let (report, failure, stop, lab) = match result {
-        Ok((report, test)) => (report, None, None, test.site.lab_stats().cloned()),
+        Ok((report, lab)) => (report, None, None, lab),
         Err(f) => {
             let f = *f;
             (f.report, Some(f.error), f.stopped_at.zip(f.stop_log), f.lab)

@@ -468,8 +468,8 @@ fn a_yielding_structure_with_a_lab_target_equals_the_virtual_lab() {
 }
 
 /// A CR test (issue 38, docs/theory.md §2.9: the explicit scheme commands the coupling DOF
-/// itself) against the emulator equals its virtual-lab run, as the sub-step algorithm's does;
-/// `--realtime` refuses it in one line with exit 2.
+/// itself) against the emulator equals its virtual-lab run, offline and in real time, as the
+/// sub-step algorithm's does.
 #[test]
 fn a_cr_test_with_a_lab_target_equals_the_virtual_lab() {
     let dir = temp_dir("cr");
@@ -490,26 +490,33 @@ fn a_cr_test_with_a_lab_target_equals_the_virtual_lab() {
     let s: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("local").join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["scheme"], "cr");
-    let rt = run_with(&dir, "local.toml", "local_rt", &["--realtime"]);
-    assert_eq!(rt.status.code(), Some(2), "{}", text(&rt.stderr));
-    let e = text(&rt.stderr);
-    assert!(
-        e.contains("--realtime") && e.contains("\"cr\"") && e.lines().count() == 1,
-        "{e}"
-    );
-    for (protocol, transport) in [("speedgoat", "udp"), ("generic_tcp", "tcp")] {
-        let name = format!("{protocol}_{transport}");
+    for (protocol, transport, realtime) in [
+        ("speedgoat", "udp", false),
+        ("generic_tcp", "tcp", false),
+        ("substep_udp", "udp", true),
+    ] {
+        let name = format!("{protocol}_{transport}{}", if realtime { "_rt" } else { "" });
         write(&name, &lab_table(protocol, transport, 9, "timeout = 2.0\n"));
         let (mut emulator, port) = emulate(&dir, &name, "");
         write(&name, &lab_table(protocol, transport, port, "timeout = 2.0\n"));
-        let out = run_with(&dir, &format!("{name}.toml"), &name, &[]);
+        let more: &[&str] = if realtime {
+            &["--realtime", "--late-policy", "wait", "--max-missed", "1"]
+        } else {
+            &[]
+        };
+        let out = run_with(&dir, &format!("{name}.toml"), &name, more);
         let _ = emulator.wait();
         assert!(out.status.success(), "{name}: {}", text(&out.stderr));
         let s: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join(&name).join("summary.json")).unwrap()).unwrap();
         assert_eq!(s["completed"], true, "{name}");
         assert_eq!(s["lab"]["exchanges"], 14000, "{name}: one exchange per sub-step");
-        for file in ["history.csv", "substeps.csv"] {
+        let files: &[&str] = if realtime {
+            &["history.csv"]
+        } else {
+            &["history.csv", "substeps.csv"]
+        };
+        for &file in files {
             let worst = worst_relative_common(&dir.join("local").join(file), &dir.join(&name).join(file));
             assert!(worst <= 1e-9, "{name} {file}: {worst:e} of the peak");
         }

@@ -387,6 +387,13 @@ fn yielding_examples_in_real_time_equal_the_offline_run() {
             "beam_yield_moment = 4.6e5",
             "beam_yield_moment = 4.6e8",
         ),
+        // CR drives the test (docs/theory.md §2.9): the same runner, its own coupling loop.
+        (
+            "yielding_building_cr",
+            "duration = 20.0",
+            "yield_force = [6.0e5, 5.0e5, 3.5e5]",
+            "yield_force = [6.0e8, 5.0e8, 3.5e8]",
+        ),
     ];
     let run = |cfg: &str, extra: &[&str], out: &str| {
         let mut args = vec!["run", cfg, "--out", out, "--no-plots"];

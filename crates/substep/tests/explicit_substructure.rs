@@ -368,3 +368,77 @@ fn explicit_substructure_tests_refuse_what_belongs_to_the_sub_step_algorithm() {
     };
     assert!(e.contains("integrator.scheme") && e.contains("cr or"), "{e}");
 }
+
+/// CR and KR-α tests of yielding buildings against the wall clock equal their offline runs:
+/// the real-time runner's coupling loop ramps to `W_c + H f^{(k)}` (docs/realtime.md), the
+/// numerical thread prepares each step's right-hand side during its sub-steps. `LatePolicy::Wait`
+/// keeps the numbers exact on a loaded machine (the pace is the benchmarks' business); the
+/// missed-deadline share is printed.
+#[test]
+fn cr_and_kr_alpha_tests_in_real_time_equal_their_offline_runs() {
+    use substep::realtime::{LatePolicy, RealtimeOptions, RealtimeRunner, StepRecordOwned};
+    let dir = std::env::temp_dir().join(format!("substep-explicit-rt-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    write_record(&dir);
+    let mut cell = 0;
+    for (structure, storeys) in YIELDING {
+        for rho_inf in [None, Some(0.5)] {
+            let (specimen_name, specimen) = SPECIMENS[cell % 2];
+            let k_sub = [2, 10][(cell / 2) % 2];
+            cell += 1;
+            let text = format!(
+                "{storeys}[structure.rayleigh]\nzeta = 0.02\nmodes = [1, 2]\n[ground_motion]\n\
+                 file = \"elcentro_strong.csv\"\nscale = 2.0\n[integrator]\n{}\ndt = 0.005\nduration = 2.0\n\
+                 [substructure]\ncoupling_dofs = [1]\nsubsteps = {k_sub}\n[[substructure.specimen]]\ndof = 1\n{specimen}\n",
+                scheme_lines(rho_inf)
+            );
+            let name = format!(
+                "{structure} × {specimen_name} × {} × k_sub {k_sub}",
+                if rho_inf.is_none() { "cr" } else { "kr_alpha 0.5" }
+            );
+            let (def, offline, _) = run(&text, &dir);
+            let sub = def.substructure.as_ref().unwrap();
+            let model = def.model.dense("test").unwrap();
+            let accel = def.ground_motion.accel.clone();
+            let load0 = -def.model.effective_mass_vector() * accel[0];
+            let springs = || Some(def.hysteresis.as_ref().unwrap().build(def.model.n_dofs()).unwrap());
+            let test = sub
+                .build_explicit_test(&model, def.integrator.dt, springs(), &load0)
+                .unwrap();
+            let options = RealtimeOptions {
+                late_policy: LatePolicy::Wait,
+                ..RealtimeOptions::default()
+            };
+            let runner = RealtimeRunner::new(&def.model, test, accel, options).unwrap();
+            let mut records: Vec<StepRecordOwned> = Vec::new();
+            let report = match runner.run(|r: &StepRecordOwned| records.push(r.clone())) {
+                Ok((report, _)) => report,
+                Err(f) => panic!("{name}: {f}"),
+            };
+            assert_eq!(records.len(), offline.history.column("u1").unwrap().len(), "{name}");
+            let mut worst = 0.0f64;
+            for d in 0..def.model.n_dofs() {
+                let u = offline.history.column(&format!("u{}", d + 1)).unwrap();
+                let peak = u.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+                for r in &records {
+                    worst = worst.max((r.u[d] - u[r.step]).abs() / peak);
+                }
+            }
+            let fc = offline.history.column("fc1").unwrap();
+            let peak = fc.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            for r in &records {
+                worst = worst.max((r.coupling_force[0] - fc[r.step]).abs() / peak);
+            }
+            let slots = report.substeps + report.hold_substeps;
+            println!(
+                "{name}: real time vs offline {worst:.1e} of the peak; missed {} of {slots} ({:.3} %), numerical p99 {:?}",
+                report.missed,
+                100.0 * report.missed as f64 / slots as f64,
+                report.numerical_summary().p99
+            );
+            assert!(worst <= 1e-9, "{name}: real time vs offline {worst:e} of the peak");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

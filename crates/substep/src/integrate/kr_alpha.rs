@@ -263,9 +263,16 @@ impl KrAlpha {
     /// external forces `extra_force[k]` added at DOF `extra_dofs[k]` (a coupling force already
     /// weighted to `t_{n+α_f}`; empty for a monolithic step), then the step is committed.
     pub fn correct(&mut self, load_next: &DVector<f64>, extra_dofs: &[usize], extra_force: &[f64]) {
+        self.prepare(load_next, extra_dofs, extra_force);
+        self.close(&[], &[]);
+    }
+
+    /// The part of [`correct`](Self::correct) that needs no force of the step's end: the
+    /// right-hand side `f_α + Sᵀ f_known − K₀ u_α − d(u_α) − C v_α − M α₃ a_n` (in the work
+    /// vector, [`prepared`](Self::prepared)), the springs evaluated and committed at `u_α`.
+    pub fn prepare(&mut self, load_next: &DVector<f64>, extra_dofs: &[usize], extra_force: &[f64]) {
         let af = self.alpha_f;
         let (s, n) = (&self.state, &mut self.next);
-        // rhs = f_α + Sᵀ f_c,α − K₀ u_α − d(u_α) − C v_α − M α₃ a_n
         n.a.copy_from(&self.load_prev);
         n.a.axpy(af, load_next, 1.0 - af);
         for (&dof, &f) in extra_dofs.iter().zip(extra_force) {
@@ -281,9 +288,35 @@ impl KrAlpha {
             springs.add_deviation(-1.0, n.a.as_mut_slice());
             springs.commit();
         }
-        self.effective_mass.solve_mut(&mut n.a);
         self.load_prev.copy_from(load_next);
+    }
+
+    /// The right-hand side of the last [`prepare`](Self::prepare).
+    pub fn prepared(&self) -> &DVector<f64> {
+        &self.next.a
+    }
+
+    /// After [`prepare`](Self::prepare): add `extra_force` at `extra_dofs` (the force of the
+    /// step's end), solve for `a_{n+1}` and commit the step.
+    pub fn close(&mut self, extra_dofs: &[usize], extra_force: &[f64]) {
+        let n = &mut self.next;
+        for (&dof, &f) in extra_dofs.iter().zip(extra_force) {
+            n.a[dof] += f;
+        }
+        self.effective_mass.solve_mut(&mut n.a);
         std::mem::swap(&mut self.state, &mut self.next);
+    }
+
+    /// `Δt α₁` (n × n), `(½ + γ) Δt` and `(M (I − α₃))⁻¹` (allocates; for set-up): what maps
+    /// a right-hand side to the next step's displacement, `u_{n+2} = u_{n+1} + Δt v_{n+1} +
+    /// (½ + γ) Δt · Δt α₁ · (M (I − α₃))⁻¹ rhs`.
+    pub fn displacement_maps(&self) -> Result<(&DMatrix<f64>, f64, DMatrix<f64>)> {
+        let n = self.state.u.len();
+        let inverse = self
+            .effective_mass
+            .solve(&DMatrix::identity(n, n))
+            .ok_or_else(|| Error::numerical(format!("{} effective mass M (I − α₃)", self.name), "is singular"))?;
+        Ok((&self.dt_alpha1, (0.5 + self.gamma) * self.dt, inverse))
     }
 
     /// `u_{n+1}`, `v_{n+1}` of the step begun by [`predict`](Self::predict) (its acceleration is

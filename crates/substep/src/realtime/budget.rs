@@ -12,7 +12,7 @@
 
 use super::OverlapPredictor;
 use crate::error::{Error, Result};
-use crate::substructure::SubstepController;
+use crate::substructure::{CouplingController, SubstepController};
 use nalgebra::DVector;
 use std::time::{Duration, Instant};
 
@@ -82,6 +82,44 @@ pub fn probe(mut controller: SubstepController, mass_influence: &DVector<f64>, g
         steps: step_times.len(),
         step: median(&mut step_times),
         springs: nonlinear.then(|| median(&mut springs_times)),
+        dt: controller.dt(),
+        k_sub: k,
+    }
+}
+
+/// As [`probe`] for any controller whose whole step runs on the numerical thread within `Δt`
+/// (a CR / KR-α test, whose springs are evaluated at `u_α` during the step: no springs'
+/// budget): up to [`PROBE_STEPS`] steps with zero coupling forces, timed.
+pub fn probe_steps<C: CouplingController>(
+    mut controller: C,
+    mass_influence: &DVector<f64>,
+    ground_accel: &[f64],
+) -> BudgetProbe {
+    let k = controller.substeps();
+    let zeros = vec![0.0; controller.n_coupling()];
+    let mut load = DVector::zeros(mass_influence.len());
+    let mut step_times = Vec::with_capacity(PROBE_STEPS);
+    let started = Instant::now();
+    for i in 0..PROBE_STEPS {
+        let ag = ground_accel.get(i + 1).copied().unwrap_or(0.0);
+        let t0 = Instant::now();
+        load.copy_from(mass_influence);
+        load.scale_mut(-ag);
+        controller.begin_step(&load);
+        for _ in 0..k {
+            controller.next_command();
+            controller.feedback(&zeros);
+        }
+        controller.finish_step();
+        step_times.push(t0.elapsed());
+        if started.elapsed() > Duration::from_secs(1) {
+            break;
+        }
+    }
+    BudgetProbe {
+        steps: step_times.len(),
+        step: median(&mut step_times),
+        springs: None,
         dt: controller.dt(),
         k_sub: k,
     }

@@ -110,6 +110,7 @@
 
 mod bench;
 pub mod budget;
+mod controllers;
 
 mod os;
 mod overlap;
@@ -119,8 +120,9 @@ mod stop;
 
 pub use crate::latency::{LatencyHistogram, LatencySummary};
 pub use bench::{BenchOverlap, bench_overlap, bench_overlap_with};
+pub use controllers::{ExplicitOverlap, RealtimeController};
 pub use os::RtSetting;
-pub use overlap::OverlapPredictor;
+pub use overlap::{CouplingLoop, OverlapPredictor};
 pub use ring::{Consumer, OwnedConsumer, OwnedProducer, Producer, SpscRing, owned_ring};
 pub use runner::{RealtimeFailure, RealtimeResult, RealtimeRunner};
 pub use stop::StopHandle;

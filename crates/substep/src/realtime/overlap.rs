@@ -2,7 +2,7 @@
 //! [`crate::realtime`]): [`OverlapPredictor`] is the numerical side (n-sized work, one thread),
 //! [`CouplingLoop`] the real-time side (coupling-sized work only).
 
-use crate::substructure::{ErrorForceCompensation, SubstepController};
+use crate::substructure::{CouplingController, ErrorForceCompensation, ExplicitController, SubstepController};
 use nalgebra::{DMatrix, DVector};
 
 /// `out[r] = w[r] + Σ_j h[r, j] p[j] + Σ_j g[r, j] f_u[j]` for the rows `rows` of `h` and `g`
@@ -123,7 +123,7 @@ impl OverlapPredictor {
 /// run with the same inputs) and the coupling rows of the next predictor. `next_command` and
 /// `feedback` repeat [`SubstepController::next_command`] / [`SubstepController::feedback`]
 /// operation for operation.
-pub(crate) struct CouplingLoop {
+pub struct CouplingLoop {
     k: usize,
     dt: f64,
     gain_cc: DMatrix<f64>,
@@ -143,9 +143,40 @@ pub(crate) struct CouplingLoop {
     compensation_force: Vec<f64>,
     error_force: Vec<f64>,
     substep: usize,
+    /// A CR / KR-α test: the next target follows from `f^{(k)}` (not `f^{(k−1)}`), and the ramp
+    /// has no gain term.
+    explicit: bool,
 }
 
 impl CouplingLoop {
+    /// The coupling loop of a CR / KR-α test ([`ExplicitController`]) whose current step has
+    /// begun: the ramp `d^{(j)} = (1 − r) x_prev + r x` to the step's target, and the next target
+    /// `x_next = W_c + H f^{(k)}` (`h_cc` from [`ExplicitController::target_maps`]).
+    pub fn explicit(controller: &ExplicitController, h_cc: &DMatrix<f64>) -> Self {
+        let n_c = controller.n_coupling();
+        let force = DVector::from_column_slice(controller.coupling_force());
+        Self {
+            k: controller.substeps(),
+            dt: controller.dt(),
+            gain_cc: DMatrix::zeros(n_c, n_c),
+            h_cc: h_cc.clone(),
+            predictor_c_prev: DVector::from_column_slice(controller.target_prev()),
+            predictor_c: DVector::from_column_slice(controller.target()),
+            predictor_c_next: DVector::zeros(n_c),
+            has_next: false,
+            force_last: force.clone(),
+            force_before: force.clone(),
+            force,
+            command: DVector::zeros(n_c),
+            hold: DVector::zeros(n_c),
+            compensation: ErrorForceCompensation::none(n_c),
+            compensation_force: vec![0.0; n_c],
+            error_force: vec![0.0; n_c],
+            substep: 0,
+            explicit: true,
+        }
+    }
+
     /// From a controller whose current step has begun (`begin_step`).
     pub fn new(controller: &SubstepController, overlap: &OverlapPredictor) -> Self {
         let n_c = controller.n_coupling();
@@ -169,6 +200,7 @@ impl CouplingLoop {
             compensation_force: controller.compensation_force().to_vec(),
             error_force: vec![0.0; n_c],
             substep: 0,
+            explicit: false,
         }
     }
 
@@ -196,9 +228,15 @@ impl CouplingLoop {
         self.substep = 0;
     }
 
-    /// As [`SubstepController::next_command`].
+    /// As [`SubstepController::next_command`] (or [`ExplicitController`]'s ramp).
     pub fn next_command(&mut self) -> &[f64] {
         let r = (self.substep + 1) as f64 / self.k as f64;
+        if self.explicit {
+            for k in 0..self.command.len() {
+                self.command[k] = r * self.predictor_c[k] + (1.0 - r) * self.predictor_c_prev[k];
+            }
+            return self.command.as_slice();
+        }
         self.command.copy_from(&self.predictor_c_prev);
         self.command.scale_mut(1.0 - r);
         self.command.axpy(r, &self.predictor_c, 1.0);
@@ -228,12 +266,17 @@ impl CouplingLoop {
     /// The coupling rows of the next predictor from the coupling rows `w_c` of `W`
     /// (after [`CouplingLoop::end_step`]).
     pub fn take_predictor(&mut self, w_c: &[f64]) {
+        let forces = if self.explicit {
+            &self.force_last
+        } else {
+            &self.force_before
+        };
         assemble(
             w_c,
             &self.h_cc,
             &self.gain_cc,
             0..w_c.len(),
-            self.force_before.as_slice(),
+            forces.as_slice(),
             &self.compensation_force,
             self.predictor_c_next.as_mut_slice(),
         );

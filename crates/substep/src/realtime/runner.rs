@@ -1,7 +1,8 @@
 //! [`RealtimeRunner`]: the threads, the schedule and the late-step policy (see the module docs).
 
+use super::controllers::RealtimeController;
 use super::os::{self, RtSetting};
-use super::overlap::{CouplingLoop, OverlapPredictor};
+use super::overlap::CouplingLoop;
 use super::ring::{Consumer, Producer, SpscRing};
 use super::stop::{PacedRamp, StopHandle};
 use super::{LatePolicy, RealtimeOptions, RealtimeReport, StepRecordOwned};
@@ -51,61 +52,35 @@ impl std::error::Error for RealtimeFailure {
 
 /// What [`RealtimeRunner::run`] returns: the report and the test, or the failure (error and
 /// report).
-pub type RealtimeResult = std::result::Result<(RealtimeReport, SubstructureTest), Box<RealtimeFailure>>;
+pub type RealtimeResult<C = SubstepController> =
+    std::result::Result<(RealtimeReport, SubstructureTest<C>), Box<RealtimeFailure>>;
 
-/// Runs a [`SubstructureTest`] in real time (see the module docs of [`crate::realtime`]).
-pub struct RealtimeRunner {
-    test: SubstructureTest,
+/// Runs a [`SubstructureTest`] in real time (see the module docs of [`crate::realtime`]): the
+/// sub-step algorithm's by default, or a CR / KR-α test
+/// ([`crate::substructure::ExplicitController`]).
+pub struct RealtimeRunner<C: RealtimeController = SubstepController> {
+    test: SubstructureTest<C>,
+    overlap: C::Overlap,
     mass_influence: DVector<f64>,
     ground_accel: Vec<f64>,
     options: RealtimeOptions,
     stop: StopHandle,
 }
 
-impl RealtimeRunner {
+impl<C: RealtimeController> RealtimeRunner<C> {
     /// `model` is the numerical substructure the test's controller was built from (for the
     /// ground-motion load `−M ι a_g`); `ground_accel[i]` is `a_g` at `t_i = i Δt` from the
     /// test's current state on, so the run has `ground_accel.len() − 1` steps.
     pub fn new<'a>(
         model: impl Into<ModelRef<'a>>,
-        test: SubstructureTest,
+        test: SubstructureTest<C>,
         ground_accel: Vec<f64>,
         options: RealtimeOptions,
     ) -> Result<Self> {
         let model = model.into();
         let n = model.n_dofs();
-        let core = test.controller.newmark_core();
-        // The controller's M ι must be the given model's (the load the runner applies).
-        let same_mass = core.n_dofs() == n && {
-            let iota = match model {
-                ModelRef::Dense(m) => m.influence.clone(),
-                ModelRef::Sparse(m) => m.influence.clone(),
-            };
-            let m_iota = model.effective_mass_vector();
-            let probe =
-                core.mass_damping_columns(1.0, 0.0, &nalgebra::DMatrix::from_column_slice(n, 1, iota.as_slice()));
-            probe
-                .iter()
-                .zip(m_iota.iter())
-                .all(|(a, b)| (a - b).abs() <= 1e-12 * m_iota.amax().max(1e-300))
-        };
-        if !same_mass {
-            return Err(Error::invalid(
-                "realtime.model",
-                "is not the model the substructure test was built from",
-            ));
-        }
-        if matches!(
-            test.controller.compensation().spec,
-            crate::substructure::ErrorForceSpec::Arx { .. }
-        ) {
-            // The estimation changes the last command of each step from the identified model;
-            // the real-time coupling loop only mirrors the plain ramp.
-            return Err(Error::invalid(
-                "substructure.error_force.kind",
-                "\"arx\" is not supported by the real-time runner yet (use none or pid)",
-            ));
-        }
+        let mut test = test;
+        test.controller.check_realtime(model)?;
         if ground_accel.len() < 2 {
             return Err(Error::invalid(
                 "realtime.ground_accel",
@@ -146,8 +121,10 @@ impl RealtimeRunner {
                 "the sub-step length is below 1 µs; it cannot be paced in real time",
             ));
         }
+        let overlap = test.controller.overlap()?;
         Ok(Self {
             test,
+            overlap,
             mass_influence: model.effective_mass_vector(),
             ground_accel,
             options,
@@ -172,10 +149,7 @@ impl RealtimeRunner {
     /// experimental side have advanced; `SubstructureTest::steps_done` and `record` are not
     /// updated by this runner). On failure the run stops, the records so far are flushed to the
     /// sink, and the error comes with the report.
-    pub fn run<F>(
-        mut self,
-        mut sink: F,
-    ) -> std::result::Result<(RealtimeReport, SubstructureTest), Box<RealtimeFailure>>
+    pub fn run<F>(mut self, mut sink: F) -> RealtimeResult<C>
     where
         F: FnMut(&StepRecordOwned) + Send,
     {
@@ -213,7 +187,7 @@ impl RealtimeRunner {
             before: vec![0.0; n_c],
             command: vec![0.0; n_c],
         });
-        let nonlinear = self.test.controller.is_nonlinear();
+        let nonlinear = self.test.controller.uses_pipeline();
         let (mut record_tx, mut record_rx) = records.split();
         let (w_tx, w_rx) = to_rt.split();
         let (end_tx, end_rx) = to_numerical.split();
@@ -231,8 +205,8 @@ impl RealtimeRunner {
         load.copy_from(&self.mass_influence);
         load.scale_mut(-ag[1]);
         self.test.controller.begin_step(&load);
-        let overlap = OverlapPredictor::new(&mut self.test.controller);
-        let coupling = CouplingLoop::new(&self.test.controller, &overlap);
+        let overlap = self.overlap;
+        let coupling = self.test.controller.coupling_loop(&overlap);
         // Where the noise-free bookkeeping stands (a run that continues a test).
         let true_last0 = self.test.controller.true_force_last().to_vec();
 
@@ -252,6 +226,7 @@ impl RealtimeRunner {
         let numerical = Numerical {
             controller: &mut self.test.controller,
             overlap,
+            w_c: vec![0.0; n_c],
             mass_influence: &self.mass_influence,
             load,
             ag,
@@ -508,9 +483,11 @@ fn diverged(step: usize, dt: f64) -> Error {
 // ----------------------------------------------------------------------------------------------
 // Numerical thread
 
-struct Numerical<'a> {
-    controller: &'a mut SubstepController,
-    overlap: OverlapPredictor,
+struct Numerical<'a, C: RealtimeController> {
+    controller: &'a mut C,
+    overlap: C::Overlap,
+    /// The known part of the next coupling target, posted to the real-time thread.
+    w_c: Vec<f64>,
     mass_influence: &'a DVector<f64>,
     load: DVector<f64>,
     ag: &'a [f64],
@@ -534,7 +511,7 @@ struct Numerical<'a> {
     hist: LatencyHistogram,
 }
 
-impl Numerical<'_> {
+impl<C: RealtimeController> Numerical<'_, C> {
     fn run(mut self) -> (LatencyHistogram, LatencyHistogram, RtSetting, Result<()>) {
         let shared = self.shared;
         let _done = SetOnDrop(&shared.numerical_done, None);
@@ -557,7 +534,7 @@ impl Numerical<'_> {
             let finished = shared.stop.load(Ordering::Acquire) || shared.rt_done.load(Ordering::Acquire);
             let got = self.mid_rx.try_pop_with(|m| {
                 debug_assert_eq!(m.step, n);
-                controller.close_kinematics_with(&m.before, &m.command, more);
+                controller.pipeline_close(&m.before, &m.command, more);
                 m.posted
             });
             if let Some(p) = got {
@@ -570,14 +547,14 @@ impl Numerical<'_> {
         };
         let start = Instant::now();
         if more {
-            let w_c = self.overlap.deviation_coupling(self.controller);
+            let w_c = self.controller.pipeline_coupling(&mut self.overlap);
             let sent = self.w_tx.try_push_with(|msg| {
                 msg.step = n + 1;
                 msg.w_c.copy_from_slice(w_c);
             });
             debug_assert!(sent, "predictor mailbox full (protocol violated)");
             self.pipeline.record(posted.elapsed());
-            self.overlap.subtract_deviation(self.controller);
+            self.controller.pipeline_subtract(&mut self.overlap);
         }
         Some(start.elapsed())
     }
@@ -601,15 +578,12 @@ impl Numerical<'_> {
                 let finished = self.shared.stop.load(Ordering::Acquire) || self.shared.rt_done.load(Ordering::Acquire);
                 let got = self.end_rx.try_pop_with(|m| {
                     debug_assert_eq!(m.step, n);
-                    // The noise-free forces first: closing the forces computes the ideal
-                    // error force from them.
-                    self.controller
-                        .set_true_results(m.true_seen.then_some((&m.true_before[..], &m.true_last[..])));
-                    if nonlinear {
-                        self.controller.close_with_last_force(&m.last);
-                    } else {
-                        self.controller.set_substep_results(&m.before, &m.last, &m.command);
-                    }
+                    self.controller.take_end(
+                        &m.before,
+                        &m.last,
+                        &m.command,
+                        m.true_seen.then_some((&m.true_before[..], &m.true_last[..])),
+                    );
                     self.before.copy_from_slice(&m.before);
                     self.command.copy_from_slice(&m.command);
                     self.displacement.copy_from_slice(&m.displacement);
@@ -651,8 +625,10 @@ impl Numerical<'_> {
                     .push_or_drop(|slot| slot.fill(&record, command, ideal, holds));
             }
             if n + 1 < self.n_steps {
-                let x = self.overlap.predictor(self.controller, &self.before);
-                self.controller.begin_step_with_predictor(x);
+                // f_l at the end of the next step (the sub-step algorithm's W has it already)
+                self.load.copy_from(self.mass_influence);
+                self.load.scale_mut(-self.ag[n + 2]);
+                self.controller.begin_next(&mut self.overlap, &self.before, &self.load);
             }
             if n + 2 < self.n_steps {
                 self.precompute_and_post(n + 2);
@@ -671,17 +647,13 @@ impl Numerical<'_> {
         }
         self.load.copy_from(self.mass_influence);
         self.load.scale_mut(-self.ag[m + 1]);
-        self.overlap.precompute(self.controller, &self.load);
-        if self.nonlinear {
+        if !self.controller.precompute(&mut self.overlap, &self.load, &mut self.w_c) {
             return;
         }
-        let w = self.overlap.known();
-        let coupling = self.controller.coupling_dofs();
+        let w_c = &self.w_c;
         let posted = self.w_tx.try_push_with(|msg| {
             msg.step = m;
-            for (i, &c) in coupling.iter().enumerate() {
-                msg.w_c[i] = w[c];
-            }
+            msg.w_c.copy_from_slice(w_c);
         });
         debug_assert!(posted, "predictor mailbox full (protocol violated)");
     }

@@ -95,6 +95,15 @@ pub struct ErrorForceCompensation {
 }
 
 impl ErrorForceCompensation {
+    /// No compensation (`f_u = 0` always), for `n_c` coupling DOFs.
+    pub fn none(n_c: usize) -> Self {
+        Self {
+            spec: ErrorForceSpec::None,
+            integral: vec![0.0; n_c],
+            previous: vec![0.0; n_c],
+        }
+    }
+
     pub fn new(spec: ErrorForceSpec, n_c: usize) -> Result<Self> {
         spec.validate()?;
         Ok(Self {

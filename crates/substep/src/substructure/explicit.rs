@@ -28,7 +28,7 @@ use super::test_run::CouplingController;
 use crate::error::{Error, Result};
 use crate::integrate::{Integrator, Kinematics, KrAlpha};
 use crate::model::Springs;
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 
 /// The numerical side of a CR / KR-α substructure test (see the module docs).
 pub struct ExplicitController {
@@ -49,6 +49,10 @@ pub struct ExplicitController {
     compensation_force: Vec<f64>,
     /// `f_l,i+1`, given at the step's beginning, used at its end.
     load_next: DVector<f64>,
+    /// The step's right-hand side without `f^{(k)}` is computed ([`Self::prepare_step`]).
+    prepared: bool,
+    /// No noise-free forces are kept: zeros (for the real-time runner's bookkeeping).
+    true_last: Vec<f64>,
     substep: usize,
 }
 
@@ -96,6 +100,8 @@ impl ExplicitController {
             error_force: zeros(),
             compensation_force: zeros(),
             load_next: DVector::zeros(n),
+            prepared: false,
+            true_last: zeros(),
             substep: 0,
         })
     }
@@ -107,6 +113,66 @@ impl ExplicitController {
     /// Coupling part of this step's target `u_{i+1,c}` \[m\] (after [`begin_step`](CouplingController::begin_step)).
     pub fn target(&self) -> &[f64] {
         &self.target
+    }
+    /// Coupling part of the last step's target `u_{i,c}`, where this step's ramp starts \[m\].
+    pub fn target_prev(&self) -> &[f64] {
+        &self.target_prev
+    }
+
+    /// The step's right-hand side without the force of its end, `f_{l,α} + Sᵀ (1 − α_f) f_{c,i}
+    /// − K₀ u_α − d(u_α) − C v_α − M α₃ a_i` (springs committed at `u_α`): known when the step
+    /// begins, so the real-time runner computes it during the sub-steps; `finish_step` then only
+    /// adds `α_f f^{(k)}` and solves. Call after `begin_step`.
+    pub fn prepare_step(&mut self) {
+        let af = self.scheme.alpha_f();
+        for k in 0..self.coupling.len() {
+            self.weighted[k] = (1.0 - af) * self.force[k];
+        }
+        self.scheme.prepare(&self.load_next, &self.coupling, &self.weighted);
+        self.prepared = true;
+    }
+
+    /// The maps of the next target (real-time runner, docs/realtime.md): `Pᵀ` (n × n_c), with
+    /// `P` the coupling rows of `(½ + γ) Δt · Δt α₁ (M (I − α₃))⁻¹`, so that after
+    /// [`prepare_step`](Self::prepare_step) of step `i` the next target is
+    /// `u_{i+2,c} = u_{i+1,c} + Δt v_{i+1,c} + P (rhs + α_f Sᵀ f^{(k)})`; and `H = α_f P Sᵀ`
+    /// (n_c × n_c). Allocates; call once at set-up.
+    pub fn target_maps(&self) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+        let (dt_alpha1, scale, inverse) = self.scheme.displacement_maps()?;
+        let n = inverse.nrows();
+        let n_c = self.coupling.len();
+        let rows = DMatrix::from_fn(n_c, n, |r, j| dt_alpha1[(self.coupling[r], j)] * scale);
+        let p = rows * inverse;
+        let af = self.scheme.alpha_f();
+        let h = DMatrix::from_fn(n_c, n_c, |r, j| af * p[(r, self.coupling[j])]);
+        Ok((p.transpose(), h))
+    }
+
+    /// `W_c = u_{i+1,c} + Δt v_{i+1,c} + P rhs` of the prepared step into `out` (n_c · n work;
+    /// `p_t` is the `Pᵀ` of [`target_maps`](Self::target_maps)).
+    pub fn known_target(&self, p_t: &DMatrix<f64>, out: &mut [f64]) {
+        let next = self.scheme.predicted();
+        let rhs = self.scheme.prepared();
+        let dt = self.dt();
+        for (r, &c) in self.coupling.iter().enumerate() {
+            out[r] = next.u[c] + dt * next.v[c] + p_t.column(r).dot(rhs);
+        }
+    }
+
+    /// The real-time coupling loop's results of the step: `f^{(k−1)}`, `f^{(k)}` and the last
+    /// command; `finish_step` then closes the step as if the sub-steps had run here.
+    pub fn set_substep_results(&mut self, before: &[f64], last: &[f64], last_command: &[f64]) {
+        self.force_before.copy_from_slice(before);
+        self.force_last.copy_from_slice(last);
+        self.command.copy_from_slice(last_command);
+        self.substep = self.k_sub;
+    }
+
+    /// Zeros: no noise-free force is kept (see [`SubstepController::true_force_last`]).
+    ///
+    /// [`SubstepController::true_force_last`]: super::SubstepController::true_force_last
+    pub fn true_force_last(&self) -> &[f64] {
+        &self.true_last
     }
 }
 
@@ -125,13 +191,11 @@ impl CouplingController for ExplicitController {
 
     fn next_command(&mut self) -> &[f64] {
         debug_assert!(self.substep < self.k_sub, "next_command called after the last sub-step");
+        // d^{(j)} = (1 − r) x_prev + r x in the real-time coupling loop's operation order (at
+        // r = 1 this is the target exactly).
         let r = (self.substep + 1) as f64 / self.k_sub as f64;
         for k in 0..self.coupling.len() {
-            self.command[k] = (1.0 - r) * self.target_prev[k] + r * self.target[k];
-        }
-        if self.substep + 1 == self.k_sub {
-            // exactly the target, not the ramp's rounding of it
-            self.command.copy_from_slice(&self.target);
+            self.command[k] = r * self.target[k] + (1.0 - r) * self.target_prev[k];
         }
         &self.command
     }
@@ -144,12 +208,16 @@ impl CouplingController for ExplicitController {
 
     fn finish_step(&mut self) {
         debug_assert_eq!(self.substep, self.k_sub, "finish_step before all sub-steps");
+        if !self.prepared {
+            self.prepare_step();
+        }
         let af = self.scheme.alpha_f();
         for k in 0..self.coupling.len() {
-            self.weighted[k] = (1.0 - af) * self.force[k] + af * self.force_last[k];
+            self.weighted[k] = af * self.force_last[k];
             self.error_force[k] = self.force_last[k] - self.force_before[k];
         }
-        self.scheme.correct(&self.load_next, &self.coupling, &self.weighted);
+        self.scheme.close(&self.coupling, &self.weighted);
+        self.prepared = false;
         self.force.copy_from_slice(&self.force_last);
         self.target_prev.copy_from_slice(&self.target);
     }

@@ -229,6 +229,20 @@ impl SubstructureDefinition {
         springs: Option<crate::model::Springs>,
         load0: &DVector<f64>,
     ) -> Result<SubstructureTest<ExplicitController>> {
+        let controller = self.explicit_controller(model, dt, springs, load0)?;
+        let site = self.site_for(None, dt)?;
+        SubstructureTest::new(model, controller, site)
+    }
+
+    /// The [`ExplicitController`] of [`Self::build_explicit_test`] alone (e.g. a throwaway one
+    /// for the real-time budget probe).
+    pub fn explicit_controller(
+        &self,
+        model: &crate::model::StructuralModel,
+        dt: f64,
+        springs: Option<crate::model::Springs>,
+        load0: &DVector<f64>,
+    ) -> Result<ExplicitController> {
         let scheme = match self.explicit {
             Some(Scheme::Cr) => crate::integrate::KrAlpha::cr(model, dt, springs, load0)?,
             Some(Scheme::KrAlpha { rho_inf }) => {
@@ -241,9 +255,7 @@ impl SubstructureDefinition {
                 ));
             }
         };
-        let controller = ExplicitController::new(scheme, &self.coupling_dofs, self.substeps)?;
-        let site = self.site_for(None, dt)?;
-        SubstructureTest::new(model, controller, site)
+        ExplicitController::new(scheme, &self.coupling_dofs, self.substeps)
     }
 
     /// A cr / kr_alpha definition has no sub-step controller ([`Self::build_explicit_test`]).
