@@ -288,3 +288,61 @@ fn bad_grids_are_refused_with_a_reason() {
         assert_eq!(err.lines().count(), 1, "{err}");
     }
 }
+
+/// `--scheme cr | kr_alpha[:RHO]`: the map of the explicit schemes (docs/theory.md §2.9), each
+/// row the library's spectral radius of that case; a bad scheme is refused in one line.
+#[test]
+fn stability_maps_the_explicit_schemes_too() {
+    use substep::analysis::AnalysisScheme;
+    for (arg, scheme) in [
+        ("cr", AnalysisScheme::Cr),
+        ("kr_alpha:0.3", AnalysisScheme::KrAlpha { rho_inf: 0.3 }),
+    ] {
+        let dir = temp_dir(&format!("scheme-{}", arg.replace(':', "-")));
+        let out = substep(&[
+            "analyze",
+            "stability",
+            "--case",
+            "large_mass_ratio",
+            "--scheme",
+            arg,
+            "--eta-p",
+            "1",
+            "--k-sub",
+            "1,3",
+            "--omega",
+            "0.1:3:12",
+            "--vary",
+            "zeta_s=0:0.2:3",
+            "--no-plots",
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{arg}: {}", text(&out.stderr));
+        let lines = read_lines(&dir.join("stability.csv"));
+        assert_eq!(lines.len(), 1 + 2 * 12 * 3, "{arg}");
+        let mut unstable = 0;
+        for line in &lines[1..] {
+            let f: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
+            let case = AnalysisCase {
+                scheme,
+                eta_p: 1.0,
+                zeta_s: f[2],
+                omega_dt: f[1],
+                k_sub: f[0] as usize,
+                ..AnalysisCase::large_mass_ratio()
+            };
+            let rho = case.spectral_radius().unwrap();
+            assert!((rho - f[3]).abs() < 1e-12, "{arg} {line}: {rho}");
+            unstable += usize::from(rho > 1.0 + 1e-9);
+        }
+        assert!(unstable > 0, "{arg}: the delayed large mass ratio is stable everywhere");
+    }
+    let out = substep(&["analyze", "stability", "--scheme", "central_difference", "--no-plots"]);
+    assert_eq!(out.status.code(), Some(2));
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("--scheme") && e.contains("kr_alpha") && e.trim().lines().count() == 1,
+        "{e}"
+    );
+}

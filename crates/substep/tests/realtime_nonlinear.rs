@@ -9,7 +9,9 @@
 //!
 //! In CI each cell of structure × intensity × specimen runs with one k_sub (2, 5, 10 in turn;
 //! 12 runs of 4 s of El Centro's strong motion). `SUBSTEP_FULL_GRID=1` runs every k_sub in every
-//! cell (36 runs, 8 s each).
+//! cell (36 runs, 8 s each). A cell that misses ≥ 1 % of its deadlines is rerun once (a VM stall
+//! once hit one cell with 1.2 %, and a parallel build another with 42 %); a second miss, or more
+//! than one rerun in the grid, fails.
 
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -172,6 +174,7 @@ fn a_grid_of_yielding_real_time_tests_keeps_time_and_its_reference() {
     let mut worst_error = (0.0f64, String::new());
     let mut worst_missed = (0.0f64, String::new());
     let mut runs = 0;
+    let mut reruns = 0;
     for s in &STRUCTURES {
         for (level, &scale) in s.scales.iter().enumerate() {
             for (specimen_name, specimen) in SPECIMENS {
@@ -188,9 +191,24 @@ fn a_grid_of_yielding_real_time_tests_keeps_time_and_its_reference() {
                     let mut reference = HistoryTable::default();
                     let offline = execute(&def, &mut reference, &AtomicBool::new(false)).unwrap();
                     assert!(offline.completed, "{name}: offline {:?}", offline.failure);
-                    let (report, records) = realtime(&def);
+                    let (mut report, mut records) = realtime(&def);
+                    let share =
+                        |r: &substep::realtime::RealtimeReport| r.missed as f64 / (r.substeps + r.hold_substeps) as f64;
+                    if share(&report) >= 0.01 {
+                        // A shared VM stalls now and then (a neighbour's burst, another test
+                        // binary's build): one rerun of the cell, both printed; a cell that
+                        // misses its deadlines twice fails.
+                        println!(
+                            "{name}: missed {} of {} ({:.3} %) — rerunning the cell once",
+                            report.missed,
+                            report.substeps + report.hold_substeps,
+                            100.0 * share(&report)
+                        );
+                        (report, records) = realtime(&def);
+                        reruns += 1;
+                    }
                     let slots = report.substeps + report.hold_substeps;
-                    let missed = report.missed as f64 / slots as f64;
+                    let missed = share(&report);
                     let (error, ductility) = error_and_ductility(&records, &reference, s.yield_drift);
                     let offline_error = offline.reference.as_ref().unwrap().max_displacement_error;
                     println!(
@@ -226,11 +244,16 @@ fn a_grid_of_yielding_real_time_tests_keeps_time_and_its_reference() {
         }
     }
     println!(
-        "{runs} runs: worst error {:.3} % ({}), worst missed share {:.3} % ({})",
+        "{runs} runs ({reruns} rerun): worst error {:.3} % ({}), worst missed share {:.3} % ({})",
         100.0 * worst_error.0,
         worst_error.1,
         100.0 * worst_missed.0,
         worst_missed.1
+    );
+    // More than one stalled cell is not a noisy neighbour any more.
+    assert!(
+        reruns <= 1,
+        "{reruns} cells missed more than 1 % of their deadlines on the first try"
     );
     assert_eq!(runs, if full { 36 } else { 12 });
 }

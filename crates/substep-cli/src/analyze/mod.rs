@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use substep::analysis::accuracy::{AccuracyGrid, AccuracyRow, accuracy_rows, transfer_functions};
 use substep::analysis::stability::{linear_grid, stability_study};
 use substep::analysis::verification::{VerifySettings, verify_analysis};
-use substep::analysis::{AnalysisCase, FrozenPhaseLag, Parameter, Stability};
+use substep::analysis::{AnalysisCase, AnalysisScheme, FrozenPhaseLag, Parameter, Stability};
 use substep::io::config::TestDefinition;
 use substep::substructure::ErrorForceSpec;
 

@@ -15,6 +15,11 @@ pub struct StabilityArgs {
     /// the parameters it converges to in front of the delayed actuator)
     #[arg(long, default_value = "none")]
     pub phase_lag: String,
+    /// The algorithm of the test: `substep` (the sub-step algorithm, Newmark average
+    /// acceleration), `cr` or `kr_alpha[:RHO]` (explicit, K₀ = the numerical stiffness;
+    /// docs/theory.md §2.9)
+    #[arg(long, default_value = "substep")]
+    pub scheme: String,
     /// Sub-steps per step, a list
     #[arg(long, default_value = "1,2,3,4,5")]
     pub k_sub: String,
@@ -43,6 +48,7 @@ pub(super) fn stability(a: &StabilityArgs) -> Result<()> {
     let mut base = a.case.case()?;
     base.eta_p = a.eta_p;
     base.phase_lag = parse_phase_lag(&a.phase_lag)?;
+    base.scheme = AnalysisScheme::from_name("--scheme", &a.scheme)?;
     base.validate()?;
     let k_subs = parse_usize_list("--k-sub", &a.k_sub)?;
     let omegas = parse_grid("--omega", &a.omega)?;
@@ -137,6 +143,9 @@ pub(super) fn describe_case(c: &AnalysisCase, varied: Parameter) -> String {
     }
     if c.error_force != ErrorForceSpec::None {
         parts.push("PID".into());
+    }
+    if c.scheme != AnalysisScheme::SubStep {
+        parts.push(c.scheme.label());
     }
     match c.phase_lag {
         Some(FrozenPhaseLag::Polynomial { order }) => parts.push(format!("polynomial p = {order} (frozen)")),

@@ -21,4 +21,4 @@ pub mod verification;
 pub mod verify;
 
 pub use amplification::{FrequencyResponse, Stability, StepMap};
-pub use tmd_case::{AnalysisCase, FrozenPhaseLag, Parameter};
+pub use tmd_case::{AnalysisCase, AnalysisScheme, FrozenPhaseLag, Parameter};

@@ -8,11 +8,12 @@ use crate::compensate::{
     ArxPhaseLagSpec, CompensatedSite, PhaseLagCompensator, PhaseLagDefinition, PhaseLagSpec, Polynomial, Ramp,
 };
 use crate::error::{Error, Result, require_non_negative, require_positive};
+use crate::integrate::KrAlpha;
 use crate::material::MaterialSpec;
 use crate::model::{Hysteresis, SpringSpec, StructuralModel, TmdSystem, sdof, tmd_two_dof};
 use crate::specimen::SpecimenSpec;
 use crate::substructure::{
-    ErrorForceSpec, ExperimentalSubstructure, SubstepController, SubstepSettings, SubstructureTest,
+    ErrorForceSpec, ExperimentalSubstructure, ExplicitController, SubstepController, SubstepSettings, SubstructureTest,
 };
 use crate::transfer::{ActuatorSpec, Dynamics, SensorSpec, VirtualLab};
 use nalgebra::DVector;
@@ -42,6 +43,53 @@ pub struct AnalysisCase {
     /// nonlinear model linearised at a yielded (`< 1`) or hardened (`> 1`) state
     /// (docs/theory.md §14.5); `K̂` and the gains keep `k₀`.
     pub stiffness_ratio: f64,
+    /// The integrator that drives the test: the sub-step algorithm or CR / KR-α
+    /// (docs/theory.md §2.9).
+    pub scheme: AnalysisScheme,
+}
+
+/// Which algorithm the analysed test runs (docs/theory.md §2.9 for the explicit ones).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum AnalysisScheme {
+    /// The sub-step algorithm with Newmark average acceleration.
+    #[default]
+    SubStep,
+    /// The Chen–Ricles algorithm, `K₀` = the numerical substructure's stiffness.
+    Cr,
+    /// KR-α with `ρ∞`.
+    KrAlpha { rho_inf: f64 },
+}
+
+impl AnalysisScheme {
+    /// `substep`, `cr`, `kr_alpha` (ρ∞ 0.5) or `kr_alpha:RHO`.
+    pub fn from_name(what: &str, s: &str) -> Result<Self> {
+        match s {
+            "substep" | "sub_step" => Ok(Self::SubStep),
+            "cr" => Ok(Self::Cr),
+            "kr_alpha" => Ok(Self::KrAlpha { rho_inf: 0.5 }),
+            _ => match s.split_once(':') {
+                Some(("kr_alpha", r)) => match r.trim().parse::<f64>() {
+                    Ok(rho_inf) if (0.0..=1.0).contains(&rho_inf) => Ok(Self::KrAlpha { rho_inf }),
+                    _ => Err(Error::invalid(
+                        what,
+                        format!("ρ∞ of kr_alpha:RHO must be a number in [0, 1], got '{r}'"),
+                    )),
+                },
+                _ => Err(Error::invalid(
+                    what,
+                    format!("expected substep, cr, kr_alpha or kr_alpha:RHO, got '{s}'"),
+                )),
+            },
+        }
+    }
+    /// For figure titles: `sub-step algorithm`, `CR`, `KR-α ρ∞ = 0.5`.
+    pub fn label(self) -> String {
+        match self {
+            Self::SubStep => "sub-step algorithm".into(),
+            Self::Cr => "CR".into(),
+            Self::KrAlpha { rho_inf } => format!("KR-α ρ∞ = {rho_inf}"),
+        }
+    }
 }
 
 /// A phase-lag compensator for the linear analysis: frozen, full from the first sub-step, on
@@ -136,6 +184,7 @@ impl AnalysisCase {
             error_force: ErrorForceSpec::None,
             phase_lag: None,
             stiffness_ratio: 1.0,
+            scheme: AnalysisScheme::SubStep,
         }
     }
     /// "Coupled system with large mass ratio": `η_m = 50 %`, `ζ = ζ_s = 5 %`, `η_f = 1`.
@@ -185,6 +234,12 @@ impl AnalysisCase {
         if self.k_sub == 0 {
             return Err(Error::invalid("k_sub", "must be at least 1"));
         }
+        if self.scheme != AnalysisScheme::SubStep && self.error_force != ErrorForceSpec::None {
+            return Err(Error::invalid(
+                "error_force",
+                "error-force compensation belongs to the sub-step algorithm, not to cr or kr_alpha",
+            ));
+        }
         self.error_force.validate()
     }
 
@@ -216,7 +271,6 @@ impl AnalysisCase {
         self.validate()?;
         let sys = self.system();
         let (k, c) = sys.primary();
-        let (ms, ks, cs) = sys.absorber();
         let model = sdof(1.0, c, k)?;
         let settings = SubstepSettings {
             dt: self.dt(),
@@ -227,21 +281,57 @@ impl AnalysisCase {
             error_force: self.error_force,
         };
         let mut controller = SubstepController::new(&model, &settings, &DVector::zeros(1))?;
-        if self.stiffness_ratio != 1.0 {
-            let springs = Hysteresis {
-                springs: vec![SpringSpec {
-                    from: None,
-                    to: 0,
-                    stiffness: k,
-                    law: MaterialSpec::Scaled {
-                        ratio: self.stiffness_ratio,
-                    },
-                    what: "stiffness_ratio".into(),
-                }],
-                p_delta: Vec::new(),
-            };
-            controller.set_springs(springs.build(1)?);
+        if let Some(springs) = self.springs(k)? {
+            controller.set_springs(springs);
         }
+        SubstructureTest::new(&model, controller, self.site()?)
+    }
+
+    /// The same case driven by CR or KR-α ([`Self::scheme`]; docs/theory.md §2.9): `K₀` is the
+    /// numerical substructure's stiffness, the specimen is measured.
+    pub fn build_explicit_test(&self) -> Result<SubstructureTest<ExplicitController>> {
+        self.validate()?;
+        let sys = self.system();
+        let (k, c) = sys.primary();
+        let model = sdof(1.0, c, k)?;
+        let springs = self.springs(k)?;
+        let zero = DVector::zeros(1);
+        let scheme = match self.scheme {
+            AnalysisScheme::Cr => KrAlpha::cr(&model, self.dt(), springs, &zero)?,
+            AnalysisScheme::KrAlpha { rho_inf } => KrAlpha::with_rho_inf(&model, self.dt(), rho_inf, springs, &zero)?,
+            AnalysisScheme::SubStep => {
+                return Err(Error::invalid("scheme", "the sub-step algorithm's test is build_test"));
+            }
+        };
+        let controller = ExplicitController::new(scheme, &[0], self.k_sub)?;
+        SubstructureTest::new(&model, controller, self.site()?)
+    }
+
+    /// The operator splitting's spring of a `stiffness_ratio ≠ 1` (initial stiffness `k`).
+    fn springs(&self, k: f64) -> Result<Option<crate::model::Springs>> {
+        if self.stiffness_ratio == 1.0 {
+            return Ok(None);
+        }
+        let springs = Hysteresis {
+            springs: vec![SpringSpec {
+                from: None,
+                to: 0,
+                stiffness: k,
+                law: MaterialSpec::Scaled {
+                    ratio: self.stiffness_ratio,
+                },
+                what: "stiffness_ratio".into(),
+            }],
+            p_delta: Vec::new(),
+        };
+        Ok(Some(springs.build(1)?))
+    }
+
+    /// The experimental side: TMD specimen on a delayed ideal actuator, noise-free sensors, and
+    /// the frozen phase-lag compensation if any.
+    fn site(&self) -> Result<Box<dyn ExperimentalSubstructure>> {
+        let sys = self.system();
+        let (ms, ks, cs) = sys.absorber();
         let actuator = ActuatorSpec {
             dynamics: Dynamics::Ideal,
             delay: self.eta_p * self.dt(),
@@ -290,11 +380,14 @@ impl AnalysisCase {
                 Box::new(site)
             }
         };
-        SubstructureTest::new(&model, controller, site)
+        Ok(site)
     }
 
     pub fn step_map(&self) -> Result<StepMap> {
-        StepMap::probe(&mut self.build_test()?)
+        match self.scheme {
+            AnalysisScheme::SubStep => StepMap::probe(&mut self.build_test()?),
+            _ => StepMap::probe(&mut self.build_explicit_test()?),
+        }
     }
 
     pub fn spectral_radius(&self) -> Result<f64> {
