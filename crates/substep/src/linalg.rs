@@ -16,9 +16,41 @@ pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
     }
     let mut b = m.clone();
     balance(&mut b)?;
-    let schur = nalgebra::Schur::try_new(b, f64::EPSILON, 200 * n.max(10))?;
-    let ev: Vec<Complex<f64>> = schur.complex_eigenvalues().iter().copied().collect();
+    let (_, t) = nalgebra::Schur::try_new(b, f64::EPSILON, 200 * n.max(10))?.unpack();
+    let ev = quasi_triangular_eigenvalues(&t);
     ev.iter().all(|z| z.re.is_finite() && z.im.is_finite()).then_some(ev)
+}
+
+/// The eigenvalues of a real Schur form `t` (1 × 1 and 2 × 2 diagonal blocks). A 2 × 2 block
+/// `[a b; c d]` has `λ = (a + d)/2 ± √(((a − d)/2)² + b c)`, written so that a block with two
+/// nearly equal real roots stays finite: nalgebra's own `complex_eigenvalues` returned NaN for
+/// such a block (a pair at ±1.6e-8 in one point of a CR stability map, Ω = 3π/4).
+fn quasi_triangular_eigenvalues(t: &DMatrix<f64>) -> Vec<Complex<f64>> {
+    let n = t.nrows();
+    let mut ev = Vec::with_capacity(n);
+    let mut i = 0;
+    while i < n {
+        if i + 1 == n || t[(i + 1, i)] == 0.0 {
+            ev.push(Complex::new(t[(i, i)], 0.0));
+            i += 1;
+            continue;
+        }
+        let (a, b, c, d) = (t[(i, i)], t[(i, i + 1)], t[(i + 1, i)], t[(i + 1, i + 1)]);
+        let mean = 0.5 * (a + d);
+        let half = 0.5 * (a - d);
+        let disc = half * half + b * c;
+        if disc >= 0.0 {
+            let r = disc.sqrt();
+            ev.push(Complex::new(mean + r, 0.0));
+            ev.push(Complex::new(mean - r, 0.0));
+        } else {
+            let r = (-disc).sqrt();
+            ev.push(Complex::new(mean, r));
+            ev.push(Complex::new(mean, -r));
+        }
+        i += 2;
+    }
+    ev
 }
 
 /// Sweeps of [`balance`]: a balanced matrix needs a handful; the cap only matters for
@@ -133,4 +165,40 @@ pub fn rk4_combine<const N: usize>(z0: &[f64; N], h: f64, k: [&[f64; N]; 4]) -> 
         out[i] = z0[i] + h / 6.0 * (k[0][i] + 2.0 * k[1][i] + 2.0 * k[2][i] + k[3][i]);
     }
     out
+}
+
+#[cfg(test)]
+mod eigen_tests {
+    use super::*;
+
+    /// The 2 × 2 block formula against the closed forms: a rotation-scaled block (complex
+    /// pair), a block with two distinct real roots, and a block with two real roots 3e-8 apart,
+    /// where the discriminant is tiny; and `eigenvalues` on a matrix whose Schur form has such a
+    /// block equals the characteristic roots.
+    #[test]
+    fn schur_blocks_give_their_closed_form_eigenvalues() {
+        let t = DMatrix::from_row_slice(2, 2, &[0.3, -0.8, 0.5, 0.3]);
+        let ev = quasi_triangular_eigenvalues(&t);
+        let r = (0.4f64).sqrt();
+        assert!((ev[0] - Complex::new(0.3, r)).norm() < 1e-15 && (ev[1] - Complex::new(0.3, -r)).norm() < 1e-15);
+        let t = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 0.5, -1.0]);
+        let ev = quasi_triangular_eigenvalues(&t);
+        let r = (2.0f64).sqrt();
+        assert!((ev[0].re - r).abs() < 1e-15 && (ev[1].re + r).abs() < 1e-15 && ev[0].im == 0.0);
+        let eps = 1.5e-8;
+        let t = DMatrix::from_row_slice(2, 2, &[eps, 1.0, eps * eps, -eps]);
+        let ev = quasi_triangular_eigenvalues(&t);
+        let r = (2.0f64).sqrt() * eps;
+        assert!((ev[0].re - r).abs() < 1e-22 && (ev[1].re + r).abs() < 1e-22, "{ev:?}");
+        // diag(2, −1, 0.5) in another basis: the eigenvalues are the diagonal's.
+        let q = DMatrix::from_row_slice(3, 3, &[1.0, 2.0, 0.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0]);
+        let m = &q
+            * DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![2.0, -1.0, 0.5]))
+            * q.clone().try_inverse().unwrap();
+        let mut got: Vec<f64> = eigenvalues(&m).unwrap().iter().map(|z| z.re).collect();
+        got.sort_by(f64::total_cmp);
+        for (g, e) in got.iter().zip([-1.0, 0.5, 2.0]) {
+            assert!((g - e).abs() < 1e-12, "{got:?}");
+        }
+    }
 }

@@ -452,7 +452,7 @@ fn cr_and_kr_alpha_tests_in_real_time_equal_their_offline_runs() {
 #[test]
 fn stability_maps_of_the_explicit_schemes_beside_the_sub_step_algorithm() {
     use substep::analysis::{AnalysisCase, AnalysisScheme};
-    let omegas: Vec<f64> = (1..=40).map(|i| 3.14 * i as f64 / 40.0).collect();
+    let omegas: Vec<f64> = (1..=40).map(|i| std::f64::consts::PI * i as f64 / 40.0).collect();
     let schemes = [
         AnalysisScheme::SubStep,
         AnalysisScheme::Cr,
