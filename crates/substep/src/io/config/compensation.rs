@@ -1,7 +1,7 @@
 //! `[substructure.error_force]` and `[substructure.phase_lag]` (docs/config.md, sections of the
 //! same names): the compensation methods.
 
-use super::{forbid, one, prefixed};
+use super::common::{forbid, one, prefixed};
 use crate::compensate::{AmbSpec, ArxPhaseLagSpec, AtsSpec, InverseFirSpec, PhaseLagDefinition, PhaseLagSpec, Ramp};
 use crate::error::{Error, Result, require_non_negative};
 use crate::substructure::ErrorForceSpec;

@@ -1,7 +1,7 @@
 //! `[ground_motion]` (docs/config.md, section `[ground_motion]`): records, generators, scaling,
 //! the ground acceleration at the step times.
 
-use super::{check_samples, forbid, prefixed};
+use super::common::{check_samples, forbid, prefixed};
 use crate::error::{Error, Result};
 use crate::excitation::{self, Envelope, KanaiTajimi, Record};
 use crate::limits::Limits;

@@ -1,6 +1,6 @@
 //! `[integrator]` (docs/config.md, section `[integrator]`): scheme, time step, duration.
 
-use super::forbid;
+use super::common::forbid;
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::integrate::{NewtonSettings, Scheme, check_hilber_alpha, check_rho_inf};
 

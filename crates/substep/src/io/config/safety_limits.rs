@@ -1,7 +1,7 @@
 //! `[substructure.limits]` (docs/config.md, section `[substructure.limits]`): safety limits with
 //! a controlled stop.
 
-use super::OneOrMany;
+use super::common::OneOrMany;
 use crate::error::{Error, Result};
 use crate::substructure::{SafetyLimits, StabilityAction, StabilitySettings};
 use serde::Deserialize;

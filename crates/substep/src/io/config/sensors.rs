@@ -1,7 +1,7 @@
 //! `[substructure.sensors]` (docs/config.md, section `[substructure.sensors]`): load cells and
 //! displacement sensors, noise, filters, converters.
 
-use super::forbid;
+use super::common::forbid;
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::transfer::converter::Converter;
 use crate::transfer::noise::BENCHMARK_SEED;

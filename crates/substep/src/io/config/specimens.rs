@@ -2,7 +2,7 @@
 //! kinds. To add one: a variant of `RawSpecimen` (its keys are the variant's fields) and one arm
 //! of `RawSpecimen::to_spec`.
 
-use super::{MatrixInput, dof_index, matrix_with, one, rekey};
+use super::common::{MatrixInput, dof_index, matrix_with, one, rekey};
 use crate::error::{Error, Result, require_non_negative, require_positive};
 use crate::excitation::{self};
 use crate::limits::Limits;

@@ -2,7 +2,8 @@
 //! explicit matrices, shear building, 2-D frame, SDOF, TMD, damping, storage — and the checks
 //! that keep the exact reference in range.
 
-use super::{MatrixInput, OneOrMany, SubstructureDefinition, forbid, matrix_with, prefixed, sparse_matrix};
+use super::common::{MatrixInput, OneOrMany, forbid, matrix_with, prefixed, sparse_matrix};
+use super::substructure::SubstructureDefinition;
 use crate::error::{Error, Result};
 use crate::integrate::Scheme;
 use crate::limits::{self, Limits, RunShape};

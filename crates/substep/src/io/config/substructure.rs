@@ -3,12 +3,12 @@
 //! specimen, actuator, sensor, compensation, remote and limits tables (their own files).
 
 use super::actuator::RawActuator;
+use super::common::{dof_index, prefixed};
 use super::compensation::{RawErrorForce, RawPhaseLag};
 use super::remote::{RawRemote, RemoteDefinition, RemoteProtocol};
 use super::safety_limits::RawLimits;
 use super::sensors::RawSensors;
 use super::specimens::RawSpecimen;
-use super::{dof_index, prefixed};
 use crate::compensate::PhaseLagDefinition;
 use crate::error::{Error, Result};
 use crate::integrate::Scheme;

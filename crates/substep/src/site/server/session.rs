@@ -1,7 +1,12 @@
 //! One client session ([`Hosted`]: the hosted substructure and the per-step machinery) and the
 //! checks of a handshake (limits, authentication), shared by TCP and UDP.
 
-use super::*;
+use crate::error::Result;
+use crate::site::auth::{MAC_LEN, NONCE_LEN, Role, Secret, SessionKeys};
+use crate::site::limits::{MAX_SITE_RAMP_SUBSTEPS, SiteLimits};
+use crate::site::protocol::{HEADER_LEN, Header, Hello, MAX_DATAGRAM, Message, Mode, Session, StepReply};
+use crate::site::{CommandRamp, substep_ground_acceleration};
+use crate::substructure::ExperimentalSubstructure;
 
 /// One client session: the hosted substructure and the per-step machinery.
 pub(super) struct Hosted {

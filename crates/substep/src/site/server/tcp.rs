@@ -1,7 +1,20 @@
 //! The TCP side of the `SSTP` server: the accept loop (a second client is told `busy` at once),
 //! one connection's handshake and session.
 
-use super::*;
+use super::options::*;
+use super::session::*;
+use crate::error::{Error, Result};
+use crate::site::auth::{MAC_LEN, NONCE_LEN, SessionKeys, TAG_LEN, nonce};
+use crate::site::protocol::{
+    AUTH_FAILED, HEADER_LEN, Header, Hello, MAX_REASON, Message, MessageType, as_auth_failure, decode_frame,
+    hello_payload_len, open_sealed,
+};
+use crate::site::transport::{LinkError, POLL, read_frame, read_full, write_all};
+use crate::substructure::ExperimentalSubstructure;
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, mpsc};
+use std::time::{Duration, Instant};
 
 /// Busy answers in flight at once; a client beyond that is dropped unanswered.
 pub(super) const MAX_BUSY_REPLIES: usize = 64;

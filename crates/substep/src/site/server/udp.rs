@@ -8,7 +8,16 @@
 //! here would let anyone end it with one datagram; the client stops by itself if its own
 //! requests never get through (see [`super::super::protocol`]).
 
-use super::*;
+use super::options::*;
+use super::session::*;
+use crate::error::Result;
+use crate::site::auth::{NONCE_LEN, SessionKeys, nonce};
+use crate::site::protocol::{
+    AUTH_FAILED, HEADER_LEN, Header, Hello, Message, MessageType, VERSION_AUTHENTICATED, decode_frame, open_sealed,
+};
+use crate::substructure::ExperimentalSubstructure;
+use std::net::{SocketAddr, UdpSocket};
+use std::time::Instant;
 
 pub(super) struct UdpSession {
     pub(super) peer: SocketAddr,
