@@ -16,6 +16,7 @@ See ``docs/python.md`` for a worked example.
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
@@ -127,8 +128,19 @@ class Result:
         * ``*.mat``: a MATLAB level-5 MAT-file (every build; ``scipy.io.loadmat`` and MATLAB's
           ``load`` read it; see docs/python.md).
 
-        Returns the paths written.
+        Returns the paths written. A path that cannot be written raises :class:`ConfigError`
+        (also an ``OSError``) naming it.
         """
+        try:
+            return self._save(path)
+        except ConfigError:
+            raise
+        except OSError as e:
+            reason = e.strerror or str(e)
+            where = e.filename or os.fspath(path)
+            raise _WriteError(f"{os.fspath(path)}: cannot write {where}: {reason}") from e
+
+    def _save(self, path: Union[str, "os.PathLike[str]"]) -> List[str]:
         p = Path(path)
         suffix = p.suffix.lower()
         if suffix == ".csv":
@@ -177,17 +189,52 @@ def _save_binary(result: Result, path: Path, suffix: str) -> List[str]:
     return [str(path)]
 
 
+class _WriteError(ConfigError, OSError):
+    """A results path that cannot be written: a :class:`ConfigError` and an ``OSError``."""
+
+
+class _ConfigTypeError(ConfigError, TypeError):
+    """A config or value of the wrong Python type: a :class:`ConfigError` and a ``TypeError``."""
+
+
+def _plain(value, path: str = ""):
+    """`value` (a config dict or one of its values) as plain TOML values: numpy scalars and
+    arrays become numbers and lists; anything else that TOML cannot hold raises
+    :class:`ConfigError` naming its key path."""
+    if isinstance(value, Mapping):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise _ConfigTypeError(f"<dict>: {path or '(top level)'}: the key {k!r} is not a string")
+            out[k] = _plain(v, f"{path}.{k}" if path else k)
+        return out
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, f"{path}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"<dict>: {path}: {value} is not a finite number")
+    if isinstance(value, (str, bool, int, float)):
+        return value
+    raise _ConfigTypeError(
+        f"<dict>: {path}: a {type(value).__name__} is not a config value (use numbers, strings, booleans, "
+        "lists and dicts)"
+    )
+
+
 def _config_source(config: ConfigLike) -> Tuple[str, str, str]:
     """(kind, text, name) of a config given as a path, TOML text or dict."""
     if isinstance(config, Mapping):
-        return "json", json.dumps(config, allow_nan=True), "<dict>"
+        return "json", json.dumps(_plain(config), allow_nan=True), "<dict>"
     if isinstance(config, os.PathLike):
         return "path", os.fspath(config), os.fspath(config)
     if isinstance(config, str):
         if "\n" in config or ("=" in config and not os.path.exists(config)):
             return "toml", config, "<string>"
         return "path", config, config
-    raise TypeError(f"config must be a path, a TOML string or a dict, not {type(config).__name__}")
+    raise _ConfigTypeError(f"config: must be a path, a TOML string or a dict, not {type(config).__name__}")
 
 
 def run(config: ConfigLike, *, raise_on_stop: bool = True) -> Result:
