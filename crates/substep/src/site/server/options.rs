@@ -24,7 +24,7 @@ pub struct ServeOptions {
     pub io_timeout: Duration,
     /// What one client may ask of the site (checked before anything is built).
     pub limits: SiteLimits,
-    /// With a secret, only clients that prove they know it get a session ([`super::auth`]).
+    /// With a secret, only clients that prove they know it get a session ([`crate::site::auth`]).
     pub secret: Option<Secret>,
     /// Client addresses allowed to connect (`None`: any). Others are dropped unanswered.
     pub allow: Option<Vec<IpAddr>>,
