@@ -420,51 +420,17 @@ fn a_realtime_run_whose_target_dies_reports_the_link() {
 /// and with `--realtime --late-policy wait` (the one-sub-step springs pipeline).
 #[test]
 fn a_yielding_structure_with_a_lab_target_equals_the_virtual_lab() {
-    let dir = temp_dir("yielding");
-    let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
-    let base = std::fs::read_to_string(format!("{examples}/yielding_building.toml"))
-        .unwrap()
-        .replace("\"records/", &format!("\"{examples}/records/"))
-        .replace("duration = 20.0", "duration = 7.0");
-    assert!(base.contains("duration = 7.0"), "the example changed: adapt this test");
-    let write =
-        |name: &str, lab: &str| std::fs::write(dir.join(format!("{name}.toml")), format!("{base}\n{lab}\n")).unwrap();
-    write("local", "");
-    let local = run(&dir, "local.toml", "local");
-    assert!(local.status.success(), "{}", text(&local.stderr));
-    for (protocol, transport, realtime) in [
-        ("speedgoat", "udp", false),
-        ("speedgoat", "tcp", false),
-        ("generic_tcp", "tcp", false),
-        ("substep_udp", "udp", false),
-        ("substep_udp", "udp", true),
-    ] {
-        let name = format!("{protocol}_{transport}{}", if realtime { "_rt" } else { "" });
-        write(&name, &lab_table(protocol, transport, 9, "timeout = 2.0\n"));
-        let (mut emulator, port) = emulate(&dir, &name, "");
-        write(&name, &lab_table(protocol, transport, port, "timeout = 2.0\n"));
-        let more: &[&str] = if realtime {
-            &["--realtime", "--late-policy", "wait", "--max-missed", "1"]
-        } else {
-            &[]
-        };
-        let out = run_with(&dir, &format!("{name}.toml"), &name, more);
-        let _ = emulator.wait();
-        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
-        let s: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(dir.join(&name).join("summary.json")).unwrap()).unwrap();
-        assert_eq!(s["completed"], true, "{name}");
-        assert_eq!(s["lab"]["exchanges"], 14000, "{name}: one exchange per sub-step");
-        let files: &[&str] = if realtime {
-            &["history.csv"]
-        } else {
-            &["history.csv", "substeps.csv"]
-        };
-        for file in files {
-            let worst = worst_relative_common(&dir.join("local").join(file), &dir.join(&name).join(file));
-            assert!(worst <= 1e-9, "{name} {file}: {worst:e} of the peak");
-        }
-    }
+    let s = lab_runs_equal_the_virtual_lab(
+        "yielding_building",
+        &[
+            ("speedgoat", "udp", false),
+            ("speedgoat", "tcp", false),
+            ("generic_tcp", "tcp", false),
+            ("substep_udp", "udp", false),
+            ("substep_udp", "udp", true),
+        ],
+    );
+    assert_eq!(s["scheme"], "average_acceleration");
 }
 
 /// A CR test (issue 38, docs/theory.md §2.9: the explicit scheme commands the coupling DOF
@@ -472,29 +438,41 @@ fn a_yielding_structure_with_a_lab_target_equals_the_virtual_lab() {
 /// sub-step algorithm's does.
 #[test]
 fn a_cr_test_with_a_lab_target_equals_the_virtual_lab() {
-    let dir = temp_dir("cr");
+    let s = lab_runs_equal_the_virtual_lab(
+        "yielding_building_cr",
+        &[
+            ("speedgoat", "udp", false),
+            ("generic_tcp", "tcp", false),
+            ("substep_udp", "udp", true),
+        ],
+    );
+    assert_eq!(s["scheme"], "cr");
+}
+
+/// `examples/<example>.toml` shortened to 7 s, run locally (virtual lab), then against the
+/// emulator once per `(protocol, transport, realtime)` (real time with `--late-policy wait`):
+/// each run completes with one exchange per sub-step and its history (and, offline,
+/// substeps.csv) within 1e-9 of the local run's peaks. Returns the local run's summary.
+fn lab_runs_equal_the_virtual_lab(example: &str, cases: &[(&str, &str, bool)]) -> serde_json::Value {
+    let dir = temp_dir(example);
     let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
-    let base = std::fs::read_to_string(format!("{examples}/yielding_building_cr.toml"))
+    let base = std::fs::read_to_string(format!("{examples}/{example}.toml"))
         .unwrap()
         .replace("\"records/", &format!("\"{examples}/records/"))
         .replace("duration = 20.0", "duration = 7.0");
     assert!(
-        base.contains("duration = 7.0") && base.contains("scheme = \"cr\""),
-        "the example changed: adapt this test"
+        base.contains("duration = 7.0"),
+        "{example}.toml changed: adapt this test"
     );
     let write =
         |name: &str, lab: &str| std::fs::write(dir.join(format!("{name}.toml")), format!("{base}\n{lab}\n")).unwrap();
+    let summary = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(name).join("summary.json")).unwrap()).unwrap()
+    };
     write("local", "");
     let local = run(&dir, "local.toml", "local");
     assert!(local.status.success(), "{}", text(&local.stderr));
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("local").join("summary.json")).unwrap()).unwrap();
-    assert_eq!(s["scheme"], "cr");
-    for (protocol, transport, realtime) in [
-        ("speedgoat", "udp", false),
-        ("generic_tcp", "tcp", false),
-        ("substep_udp", "udp", true),
-    ] {
+    for &(protocol, transport, realtime) in cases {
         let name = format!("{protocol}_{transport}{}", if realtime { "_rt" } else { "" });
         write(&name, &lab_table(protocol, transport, 9, "timeout = 2.0\n"));
         let (mut emulator, port) = emulate(&dir, &name, "");
@@ -506,11 +484,13 @@ fn a_cr_test_with_a_lab_target_equals_the_virtual_lab() {
         };
         let out = run_with(&dir, &format!("{name}.toml"), &name, more);
         let _ = emulator.wait();
-        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
-        let s: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(dir.join(&name).join("summary.json")).unwrap()).unwrap();
-        assert_eq!(s["completed"], true, "{name}");
-        assert_eq!(s["lab"]["exchanges"], 14000, "{name}: one exchange per sub-step");
+        assert!(out.status.success(), "{example} {name}: {}", text(&out.stderr));
+        let s = summary(&name);
+        assert_eq!(s["completed"], true, "{example} {name}");
+        assert_eq!(
+            s["lab"]["exchanges"], 14000,
+            "{example} {name}: one exchange per sub-step"
+        );
         let files: &[&str] = if realtime {
             &["history.csv"]
         } else {
@@ -518,9 +498,10 @@ fn a_cr_test_with_a_lab_target_equals_the_virtual_lab() {
         };
         for &file in files {
             let worst = worst_relative_common(&dir.join("local").join(file), &dir.join(&name).join(file));
-            assert!(worst <= 1e-9, "{name} {file}: {worst:e} of the peak");
+            assert!(worst <= 1e-9, "{example} {name} {file}: {worst:e} of the peak");
         }
     }
+    summary("local")
 }
 
 /// As [`worst_relative`] over the columns both files have (a real-time history has no

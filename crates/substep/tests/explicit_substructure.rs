@@ -12,6 +12,9 @@ use substep::analysis::StepMap;
 use substep::io::TestDefinition;
 use substep::run::{HistoryTable, execute};
 
+mod common;
+use common::yielding::{SPECIMENS, STRUCTURES, write_record};
+
 const BUILDING: &str = r#"[structure.storeys]
 masses    = [2.0e5, 2.0e5, 1.5e5]
 stiffness = [3.0e8, 2.5e8, 2.0e8]
@@ -154,60 +157,6 @@ fn an_ideal_linear_test_equals_a_hand_written_partitioned_scheme_and_the_assembl
     );
 }
 
-/// El Centro of the RTHS benchmark from its first non-zero sample.
-fn write_record(dir: &Path) {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/data/rths/elcentro.csv")).unwrap();
-    let mut out = String::from("t,a_g\n");
-    let mut t0 = None;
-    for line in text.lines().filter(|l| !l.starts_with('#') && !l.starts_with('t')) {
-        let mut f = line.split(',');
-        let (t, a): (f64, f64) = (f.next().unwrap().parse().unwrap(), f.next().unwrap().parse().unwrap());
-        if t0.is_none() && a != 0.0 {
-            t0 = Some(t - 0.02);
-        }
-        if let Some(t0) = t0 {
-            out += &format!("{},{a}\n", t - t0);
-        }
-    }
-    std::fs::write(dir.join("elcentro_strong.csv"), out).unwrap();
-}
-
-const YIELDING: [(&str, &str); 2] = [
-    (
-        "3-storey bilinear",
-        r#"[structure.storeys]
-masses    = [2.0e5, 2.0e5, 1.5e5]
-stiffness = [3.0e8, 2.5e8, 2.0e8]
-[structure.storeys.hysteresis]
-kind = "bilinear"
-yield_force = [6.0e5, 5.0e5, 3.5e5]
-hardening = 0.02
-"#,
-    ),
-    (
-        "5-storey Bouc-Wen",
-        r#"[structure.storeys]
-masses    = [1.2e5, 1.2e5, 1.1e5, 1.0e5, 0.8e5]
-stiffness = [2.0e8, 1.8e8, 1.6e8, 1.3e8, 1.0e8]
-[structure.storeys.hysteresis]
-kind = "bouc_wen"
-yield_force = [5.0e5, 4.5e5, 4.0e5, 3.2e5, 2.5e5]
-hardening = 0.05
-"#,
-    ),
-];
-
-const SPECIMENS: [(&str, &str); 2] = [
-    (
-        "spring-dashpot",
-        "kind = \"linear_sdof\"\nstiffness = 5.0e7\ndamping = 2.0e5",
-    ),
-    (
-        "Bouc-Wen damper",
-        "kind = \"bouc_wen\"\nstiffness = 1.0e8\nalpha = 0.05\nyield_displacement = 0.002\ndamping = 2.0e5",
-    ),
-];
-
 /// Two yielding buildings × three intensities (elastic to ductility > 5) × two specimens ×
 /// CR / KR-α (ρ∞ = 0.5) × k_sub 2 or 10, at Δt = 5 ms, ideal actuators: CR within 3 % of the
 /// converged Newmark + Newton reference, KR-α within 5 % (its numerical damping at this Δt),
@@ -222,8 +171,9 @@ fn yielding_explicit_tests_stay_within_3_percent_of_their_newton_reference() {
     write_record(&dir);
     let mut worst = [(0.0f64, String::new()), (0.0f64, String::new())];
     let mut cell = 0;
-    for (structure, storeys) in YIELDING {
-        for scale in [0.1, 0.5, 2.0] {
+    for s in &STRUCTURES {
+        let (structure, storeys) = (s.name, s.storeys);
+        for &scale in &s.scales {
             for (specimen_name, specimen) in SPECIMENS {
                 for rho_inf in [None, Some(0.5)] {
                     let k_sub = [2, 10][cell % 2];
@@ -382,7 +332,8 @@ fn cr_and_kr_alpha_tests_in_real_time_equal_their_offline_runs() {
     std::fs::create_dir_all(&dir).unwrap();
     write_record(&dir);
     let mut cell = 0;
-    for (structure, storeys) in YIELDING {
+    for s in &STRUCTURES {
+        let (structure, storeys) = (s.name, s.storeys);
         for rho_inf in [None, Some(0.5)] {
             let (specimen_name, specimen) = SPECIMENS[cell % 2];
             let k_sub = [2, 10][(cell / 2) % 2];

@@ -13,86 +13,13 @@
 //! once hit one cell with 1.2 %, and a parallel build another with 42 %); a second miss, or more
 //! than one rerun in the grid, fails.
 
-use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use substep::io::TestDefinition;
 use substep::realtime::{RealtimeOptions, RealtimeRunner, StepRecordOwned};
 use substep::run::{HistoryTable, execute};
 
-/// El Centro of the RTHS benchmark from its first non-zero sample (5 s in the file), so the
-/// wall clock is spent on motion.
-fn write_record(dir: &Path) {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/data/rths/elcentro.csv")).unwrap();
-    let mut out = String::from("t,a_g\n");
-    let mut t0 = None;
-    for line in text.lines().filter(|l| !l.starts_with('#') && !l.starts_with('t')) {
-        let mut f = line.split(',');
-        let (t, a): (f64, f64) = (f.next().unwrap().parse().unwrap(), f.next().unwrap().parse().unwrap());
-        if t0.is_none() && a != 0.0 {
-            t0 = Some(t - 0.02);
-        }
-        if let Some(t0) = t0 {
-            out += &format!("{},{a}\n", t - t0);
-        }
-    }
-    std::fs::write(dir.join("elcentro_strong.csv"), out).unwrap();
-}
-
-struct Structure {
-    name: &'static str,
-    storeys: &'static str,
-    /// Yield drift of each storey [m].
-    yield_drift: &'static [f64],
-    /// Record scales: elastic, moderate, ductility > 5.
-    scales: [f64; 3],
-}
-
-const STRUCTURES: [Structure; 2] = [
-    Structure {
-        name: "3-storey bilinear",
-        storeys: r#"[structure.storeys]
-masses    = [2.0e5, 2.0e5, 1.5e5]
-stiffness = [3.0e8, 2.5e8, 2.0e8]
-[structure.storeys.hysteresis]
-kind = "bilinear"
-yield_force = [6.0e5, 5.0e5, 3.5e5]
-hardening = 0.02
-"#,
-        yield_drift: &[6.0e5 / 3.0e8, 5.0e5 / 2.5e8, 3.5e5 / 2.0e8],
-        scales: [0.1, 0.5, 2.0],
-    },
-    Structure {
-        name: "5-storey Bouc-Wen",
-        storeys: r#"[structure.storeys]
-masses    = [1.2e5, 1.2e5, 1.1e5, 1.0e5, 0.8e5]
-stiffness = [2.0e8, 1.8e8, 1.6e8, 1.3e8, 1.0e8]
-[structure.storeys.hysteresis]
-kind = "bouc_wen"
-yield_force = [5.0e5, 4.5e5, 4.0e5, 3.2e5, 2.5e5]
-hardening = 0.05
-"#,
-        yield_drift: &[
-            5.0e5 / 2.0e8,
-            4.5e5 / 1.8e8,
-            4.0e5 / 1.6e8,
-            3.2e5 / 1.3e8,
-            2.5e5 / 1.0e8,
-        ],
-        scales: [0.1, 0.5, 2.0],
-    },
-];
-
-/// The specimens at floor 1: a linear spring–dashpot and a hysteretic (Bouc–Wen) damper.
-const SPECIMENS: [(&str, &str); 2] = [
-    (
-        "spring-dashpot",
-        "kind = \"linear_sdof\"\nstiffness = 5.0e7\ndamping = 2.0e5",
-    ),
-    (
-        "Bouc-Wen damper",
-        "kind = \"bouc_wen\"\nstiffness = 1.0e8\nalpha = 0.05\nyield_displacement = 0.002\ndamping = 2.0e5",
-    ),
-];
+mod common;
+use common::yielding::{SPECIMENS, STRUCTURES, Structure, write_record};
 
 fn config(s: &Structure, scale: f64, specimen: &str, k_sub: usize, duration: f64) -> String {
     format!(

@@ -39,12 +39,14 @@ pub struct BudgetProbe {
 /// with zero coupling forces, and time them. Stops early once the probe has taken more than a
 /// second (a model that slow fails the check anyway).
 pub fn probe(mut controller: SubstepController, mass_influence: &DVector<f64>, ground_accel: &[f64]) -> BudgetProbe {
+    if !controller.is_nonlinear() {
+        return probe_steps(controller, mass_influence, ground_accel);
+    }
     let k = controller.substeps();
     let n_c = controller.n_coupling();
     let zeros = vec![0.0; n_c];
     let mut command = vec![0.0; n_c];
     let mut load = DVector::zeros(mass_influence.len());
-    let nonlinear = controller.is_nonlinear();
     // The springs' coupling rows come from the runner's own code (its known part W is zero here:
     // only the time counts).
     let mut overlap = OverlapPredictor::new(&mut controller);
@@ -63,16 +65,11 @@ pub fn probe(mut controller: SubstepController, mass_influence: &DVector<f64>, g
         }
         command.copy_from_slice(controller.next_command());
         let t1 = Instant::now();
-        if nonlinear {
-            // What the pipeline does within the last sub-step.
-            controller.close_kinematics_with(&zeros, &command, true);
-            std::hint::black_box(overlap.deviation_coupling(&controller));
-            springs_times.push(t1.elapsed());
-            controller.close_with_last_force(&zeros);
-        } else {
-            controller.feedback(&zeros);
-            controller.finish_step();
-        }
+        // What the pipeline does within the last sub-step.
+        controller.close_kinematics_with(&zeros, &command, true);
+        std::hint::black_box(overlap.deviation_coupling(&controller));
+        springs_times.push(t1.elapsed());
+        controller.close_with_last_force(&zeros);
         step_times.push(t0.elapsed());
         if started.elapsed() > Duration::from_secs(1) {
             break;
@@ -81,15 +78,15 @@ pub fn probe(mut controller: SubstepController, mass_influence: &DVector<f64>, g
     BudgetProbe {
         steps: step_times.len(),
         step: median(&mut step_times),
-        springs: nonlinear.then(|| median(&mut springs_times)),
+        springs: Some(median(&mut springs_times)),
         dt: controller.dt(),
         k_sub: k,
     }
 }
 
 /// As [`probe`] for any controller whose whole step runs on the numerical thread within `Δt`
-/// (a CR / KR-α test, whose springs are evaluated at `u_α` during the step: no springs'
-/// budget): up to [`PROBE_STEPS`] steps with zero coupling forces, timed.
+/// (a linear sub-step test, or a CR / KR-α test, whose springs are evaluated at `u_α` during
+/// the step: no springs' budget): up to [`PROBE_STEPS`] steps with zero coupling forces, timed.
 pub fn probe_steps<C: CouplingController>(
     mut controller: C,
     mass_influence: &DVector<f64>,

@@ -67,6 +67,32 @@ struct Splitting {
     deviation: DVector<f64>,
 }
 
+/// Refuse an empty list of coupling DOFs (0-based), one out of range of `n` DOFs, or one listed
+/// twice (every controller checks its coupling DOFs with this).
+pub(crate) fn check_coupling_dofs(coupling_dofs: &[usize], n: usize) -> Result<()> {
+    if coupling_dofs.is_empty() {
+        return Err(Error::invalid(
+            "substructure.coupling_dofs",
+            "must list at least one DOF",
+        ));
+    }
+    for (k, &c) in coupling_dofs.iter().enumerate() {
+        if c >= n {
+            return Err(Error::invalid(
+                "substructure.coupling_dofs",
+                format!("DOF {} is out of range (the model has DOFs 1..={n})", c + 1),
+            ));
+        }
+        if coupling_dofs[..k].contains(&c) {
+            return Err(Error::invalid(
+                "substructure.coupling_dofs",
+                format!("DOF {} is listed twice", c + 1),
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl SubstepController {
     /// Set up for `model` at rest with initial load `load0 = f_l(0)` (initial coupling force 0).
     /// `model` is a `&StructuralModel`, `&SparseModel` or `&Model` (dense or sparse storage).
@@ -77,26 +103,7 @@ impl SubstepController {
             return Err(Error::invalid("substructure.substeps", "must be at least 1"));
         }
         let n_c = settings.coupling_dofs.len();
-        if n_c == 0 {
-            return Err(Error::invalid(
-                "substructure.coupling_dofs",
-                "must list at least one DOF",
-            ));
-        }
-        for (k, &c) in settings.coupling_dofs.iter().enumerate() {
-            if c >= n {
-                return Err(Error::invalid(
-                    "substructure.coupling_dofs",
-                    format!("DOF {} is out of range (the model has DOFs 1..={n})", c + 1),
-                ));
-            }
-            if settings.coupling_dofs[..k].contains(&c) {
-                return Err(Error::invalid(
-                    "substructure.coupling_dofs",
-                    format!("DOF {} is listed twice", c + 1),
-                ));
-            }
-        }
+        check_coupling_dofs(&settings.coupling_dofs, n)?;
         let mut core = NewmarkCore::new(model, settings.dt, settings.beta, settings.gamma)?;
         // Gain columns by n_c solves with the factorised K̂ (never the full inverse).
         let mut gain_columns = DMatrix::zeros(n, n_c);

@@ -24,6 +24,7 @@
 //! sub-step algorithm's gain `G_cc` feedback is absent). Error-force compensation does not
 //! apply; the error force `f^{(k)} − f^{(k−1)}` is still reported. None of the phases allocates.
 
+use super::controller::check_coupling_dofs;
 use super::test_run::CouplingController;
 use crate::error::{Error, Result};
 use crate::integrate::{Integrator, Kinematics, KrAlpha};
@@ -64,26 +65,7 @@ impl ExplicitController {
         if substeps == 0 {
             return Err(Error::invalid("substructure.substeps", "must be at least 1"));
         }
-        if coupling_dofs.is_empty() {
-            return Err(Error::invalid(
-                "substructure.coupling_dofs",
-                "must list at least one DOF",
-            ));
-        }
-        for (k, &c) in coupling_dofs.iter().enumerate() {
-            if c >= n {
-                return Err(Error::invalid(
-                    "substructure.coupling_dofs",
-                    format!("DOF {} is out of range (the model has DOFs 1..={n})", c + 1),
-                ));
-            }
-            if coupling_dofs[..k].contains(&c) {
-                return Err(Error::invalid(
-                    "substructure.coupling_dofs",
-                    format!("DOF {} is listed twice", c + 1),
-                ));
-            }
-        }
+        check_coupling_dofs(coupling_dofs, n)?;
         let n_c = coupling_dofs.len();
         let zeros = || vec![0.0; n_c];
         Ok(Self {
@@ -280,7 +262,7 @@ impl CouplingController for ExplicitController {
         }
     }
     fn read_state(&mut self, state: &[f64]) {
-        let n = self.scheme.predicted().u.len();
+        let n = self.scheme.state().u.len();
         let n_c = self.coupling.len();
         {
             let s = self.scheme.state_mut();

@@ -3,6 +3,8 @@
 
 #![allow(dead_code)]
 
+pub mod yielding;
+
 use nalgebra::{DMatrix, DVector};
 use std::f64::consts::PI;
 use substep::integrate::{Kinematics, Scheme};
