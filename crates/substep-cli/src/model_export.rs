@@ -3,7 +3,7 @@
 //! `C.mtx`, `K.mtx` (symmetric coordinate), `influence.mtx` (`n × 1` array) and `coupling.txt`
 //! (the coupling DOFs, 1-based, one per line; empty for a monolithic test).
 
-use crate::output::replace_atomic;
+use substep::output::files::replace_atomic;
 use anyhow::{Context, Result};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};

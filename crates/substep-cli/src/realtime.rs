@@ -7,7 +7,7 @@
 //! [`StopHandle`] (set on the writer thread, polled once per step by the real-time thread).
 
 use crate::RunArgs;
-use crate::output::{SubstepWriter, num, prepare_dir, write_atomic};
+use substep::output::files::{SubstepWriter, num, prepare_dir, write_atomic};
 use anyhow::{Context, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -2,7 +2,7 @@
 //! with a progress bar; writes `study.csv` (one row per run) and one figure per metric with a
 //! panel per varied parameter (`study_<metric>.png`).
 
-use crate::output::write_atomic;
+use substep::output::files::write_atomic;
 use crate::plots::{Curve, Figure, Panel};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};

@@ -11,15 +11,19 @@
 //! Equations and sign conventions are those of `docs/theory.md` (layers:
 //! `docs/architecture.md`); units are SI throughout.
 //! The numerical core does no I/O; readers for ground-motion files live in [`excitation`],
-//! MatrixMarket and TOML test definitions (and the runner for a defined test) in [`io`].
+//! MatrixMarket and TOML test definitions (and the runner for a defined test) in [`io`]. What a
+//! run leaves on disk (its output folder, figures) is made by [`output`] and [`figure`], so
+//! every front end writes the same files.
 
 pub mod error;
 pub mod excitation;
+pub mod figure;
 pub mod format;
 pub mod integrate;
 pub mod io;
 pub mod model;
 pub mod monitor;
+pub mod output;
 pub mod realtime;
 pub mod run;
 

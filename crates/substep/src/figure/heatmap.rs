@@ -168,8 +168,11 @@ fn draw_heatmap<DB: DrawingBackend>(
 
 /// A heat map of `ρ` over a rectangular grid (`rho[iy][ix]` at `(xs[ix], ys[iy])`) with a colour
 /// bar and the `ρ = 1` contour (marching squares on the grid values, linear interpolation).
+// The heat map's labels and grid, and the format: a struct would only rename them.
+#[allow(clippy::too_many_arguments)]
 pub fn rho_heatmap(
     path: &Path,
+    format: PlotFormat,
     title: &str,
     x_label: &str,
     y_label: &str,
@@ -178,9 +181,12 @@ pub fn rho_heatmap(
     rho: &[Vec<f64>],
 ) -> Result<()> {
     if xs.is_empty() || ys.is_empty() || rho.len() != ys.len() || rho.iter().any(|r| r.len() != xs.len()) {
-        return Err(anyhow!("cannot draw {}: the grid is empty or ragged", path.display()));
+        return Err(Error::file(
+            path.display().to_string(),
+            "cannot draw: the grid is empty or ragged",
+        ));
     }
-    render(path, (1000, 700), |s, target| {
+    render(path, format, (1000, 700), |s, target| {
         let scale = s(1.0);
         match target {
             RenderTarget::Bitmap(buf, size) => {

@@ -1,5 +1,5 @@
 //! Output files of `substep run`: `history.csv` and `substeps.csv` (written row by row through
-//! a `BufWriter`; the rows and the summary's statistics come from [`substep::run`]), and a
+//! a `BufWriter`; the rows and the summary's statistics come from [`crate::run`]), and a
 //! decimating recorder that keeps the series for the plots bounded in memory.
 //!
 //! The output directory: [`prepare_dir`] creates it and removes the files an earlier run wrote
@@ -11,8 +11,8 @@ use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use substep::run::StepRow;
-use substep::substructure::SubstepObserver;
+use crate::run::StepRow;
+use crate::substructure::SubstepObserver;
 
 /// Every file `substep run` (offline or `--realtime`) writes into its output directory. A run
 /// removes these (and their temporary files) before it writes anything; other files in the
@@ -33,7 +33,7 @@ pub const OWNED_OUTPUTS: &[&str] = &[
 
 /// The figures `substep run` draws (file stems, the names `[output.plots] figures` accepts), each
 /// in any of [`FIGURE_EXTENSIONS`]; a run removes all of them as it does [`OWNED_OUTPUTS`].
-pub use substep::io::config::PLOT_FIGURES as OWNED_FIGURES;
+pub use crate::io::config::PLOT_FIGURES as OWNED_FIGURES;
 
 /// The extensions of the plot formats (`--plot-format`).
 pub const FIGURE_EXTENSIONS: &[&str] = &["png", "svg", "pdf"];
@@ -96,10 +96,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
 /// [`OWNED_OUTPUTS`], [`OWNED_FIGURES`] and their temporary files). Errors are bad input (exit code 2): the
 /// directory cannot be created, a name is taken by something that is not a file, or a stale
 /// output cannot be removed.
-pub fn prepare_dir(dir: &Path) -> substep::Result<()> {
+pub fn prepare_dir(dir: &Path) -> crate::Result<()> {
     let name = dir.display().to_string();
     std::fs::create_dir_all(dir)
-        .map_err(|e| substep::Error::file(&name, format!("cannot create the output directory: {e}")))?;
+        .map_err(|e| crate::Error::file(&name, format!("cannot create the output directory: {e}")))?;
     for owned in owned_names() {
         let path = dir.join(owned);
         for p in [temp_path(&path), path] {
@@ -108,13 +108,13 @@ pub fn prepare_dir(dir: &Path) -> substep::Result<()> {
             };
             let shown = p.display().to_string();
             if meta.is_dir() {
-                return Err(substep::Error::file(
+                return Err(crate::Error::file(
                     shown,
                     "is a directory, but substep writes a file of that name here (choose another --out)",
                 ));
             }
             std::fs::remove_file(&p).map_err(|e| {
-                substep::Error::file(shown, format!("cannot remove this output of an earlier run: {e}"))
+                crate::Error::file(shown, format!("cannot remove this output of an earlier run: {e}"))
             })?;
         }
     }
@@ -122,7 +122,7 @@ pub fn prepare_dir(dir: &Path) -> substep::Result<()> {
 }
 
 /// A number for CSV: shortest round-trip form, exponent notation for very small or large values.
-pub use substep::run::push_number as num;
+pub use crate::run::push_number as num;
 
 fn row_group(out: &mut String, values: &[f64]) {
     for &x in values {
@@ -138,7 +138,7 @@ pub struct HistoryWriter {
 }
 
 impl HistoryWriter {
-    /// A file with the header `columns` ([`substep::run::Layout::history_columns`]).
+    /// A file with the header `columns` ([`crate::run::Layout::history_columns`]).
     pub fn create(path: &Path, columns: &[String]) -> io::Result<Self> {
         let mut w = BufWriter::new(File::create(path)?);
         let mut line = columns.join(",");
@@ -193,8 +193,8 @@ pub struct SubstepWriter {
 }
 
 impl SubstepWriter {
-    /// A file with the header [`substep::run::Layout::substep_columns`] (an error for a monolithic layout).
-    pub fn create(path: &Path, layout: &substep::run::Layout) -> io::Result<Self> {
+    /// A file with the header [`crate::run::Layout::substep_columns`] (an error for a monolithic layout).
+    pub fn create(path: &Path, layout: &crate::run::Layout) -> io::Result<Self> {
         let (Some(columns), Some(substeps)) = (layout.substep_columns(), layout.substeps) else {
             return Err(io::Error::other("a monolithic run has no sub-step rows"));
         };
@@ -231,7 +231,7 @@ impl SubstepWriter {
         let _ = write!(line, "{step},{j},");
         num(
             line,
-            substep::run::round_time(step.saturating_sub(1) as f64 * self.dt + j as f64 * self.dtau),
+            crate::run::round_time(step.saturating_sub(1) as f64 * self.dt + j as f64 * self.dtau),
         );
         row_group(line, command);
         row_group(line, force);
@@ -346,11 +346,11 @@ impl Decimated {
 /// — a write error, a full disk — ended the run before its summary was written) is replaced by
 /// one that says it failed and why, or removed when even that cannot be written. A summary never
 /// keeps saying "running" once the process has ended on its own (only a killed run leaves it).
-pub fn no_summary_left_running(path: &Path, result: anyhow::Result<()>) -> anyhow::Result<()> {
+pub fn no_summary_left_running<T, E: std::fmt::Display>(path: &Path, result: Result<T, E>) -> Result<T, E> {
     let Err(e) = &result else {
         return result;
     };
-    let Ok(text) = substep::io::limits::read_text(path, 1024.0 * 1024.0) else {
+    let Ok(text) = crate::io::limits::read_text(path, 1024.0 * 1024.0) else {
         return result;
     };
     let Ok(mut v) = serde_json::from_str::<serde_json::Value>(&text) else {
@@ -376,6 +376,11 @@ pub fn no_summary_left_running(path: &Path, result: anyhow::Result<()>) -> anyho
     result
 }
 
+/// A write error naming the file.
+pub fn cannot_write(path: &Path, e: impl std::fmt::Display) -> crate::Error {
+    crate::Error::file(path.display().to_string(), format!("cannot write: {e}"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -393,7 +398,7 @@ mod tests {
         std::fs::write(&path, running).unwrap();
         let r = no_summary_left_running(
             &path,
-            Err(anyhow::anyhow!("cannot write history.csv: No space left on device")),
+            Err::<(), _>("cannot write history.csv: No space left on device"),
         );
         assert!(r.is_err());
         let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
@@ -403,17 +408,17 @@ mod tests {
         assert_eq!(v["reason"], "cannot write history.csv: No space left on device");
         // success, or a summary already final: untouched
         std::fs::write(&path, running).unwrap();
-        no_summary_left_running(&path, Ok(())).unwrap();
+        no_summary_left_running(&path, Ok::<(), String>(())).unwrap();
         assert_eq!(std::fs::read_to_string(&path).unwrap(), running);
         let done = "{\"completed\": false, \"reason\": \"diverged\"}\n";
         std::fs::write(&path, done).unwrap();
-        let _ = no_summary_left_running(&path, Err(anyhow::anyhow!("diverged")));
+        let _ = no_summary_left_running(&path, Err::<(), _>("diverged"));
         assert_eq!(std::fs::read_to_string(&path).unwrap(), done);
         // when the replacement cannot be written, the lying summary goes: a directory in the
         // way of the temporary file stands in for a full disk
         std::fs::write(&path, running).unwrap();
         std::fs::create_dir_all(temp_path(&path)).unwrap();
-        let _ = no_summary_left_running(&path, Err(anyhow::anyhow!("disk full")));
+        let _ = no_summary_left_running(&path, Err::<(), _>("disk full"));
         assert!(!path.exists(), "a summary that cannot be corrected is removed");
         std::fs::remove_dir_all(&dir).ok();
     }

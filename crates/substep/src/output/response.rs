@@ -2,18 +2,18 @@
 //! and base shear, energy balance per step), `ground_motion.csv`, `fourier.csv` and
 //! `spectrum.csv` (the input record, its Fourier amplitude and 5 % response spectrum), their
 //! figures and the printed lines. The quantities are recorded by the library
-//! (`substep::run::EngineeringRecorder`, `substep::run::InputMotion`); this module only writes
+//! (`crate::run::EngineeringRecorder`, `crate::run::InputMotion`); this module only writes
 //! and plots.
 
-use crate::output::{Decimated, num};
-use crate::plots::{Curve, Figure, Panel};
-use anyhow::{Context, Result};
+use super::files::{Decimated, cannot_write, num};
+use crate::Result;
+use crate::figure::{Curve, Figure, Panel};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use substep::format::{percent, sig};
-use substep::io::TestDefinition;
-use substep::run::{EngineeringRow, EngineeringSummary, InputMotion, round_time};
+use crate::format::{percent, sig};
+use crate::io::TestDefinition;
+use crate::run::{EngineeringRow, EngineeringSummary, InputMotion, round_time};
 
 /// Rows kept for the figures.
 const PLOT_ROWS: usize = 4000;
@@ -39,9 +39,9 @@ impl ResponseWriter {
     /// `hysteretic_storeys`: the number of storeys of a nonlinear shear building (0: none).
     pub fn create(columns: &[String], dir: &Path, hysteretic_storeys: usize) -> Result<Self> {
         let path = dir.join("response.csv");
-        let mut w = BufWriter::new(File::create(&path).with_context(|| format!("cannot write {}", path.display()))?);
+        let mut w = BufWriter::new(File::create(&path).map_err(|e| cannot_write(&path, e))?);
         w.write_all((columns.join(",") + "\n").as_bytes())
-            .with_context(|| format!("cannot write {}", path.display()))?;
+            .map_err(|e| cannot_write(&path, e))?;
         Ok(Self {
             w,
             path,
@@ -66,7 +66,7 @@ impl ResponseWriter {
         line.push('\n');
         self.w
             .write_all(line.as_bytes())
-            .with_context(|| format!("cannot write {}", self.path.display()))?;
+            .map_err(|e| cannot_write(&self.path, e))?;
         let e = r.energy;
         self.table.push(&[
             r.t,
@@ -94,7 +94,7 @@ impl ResponseWriter {
     pub fn finish(&mut self) -> Result<PathBuf> {
         self.w
             .flush()
-            .with_context(|| format!("cannot write {}", self.path.display()))?;
+            .map_err(|e| cannot_write(&self.path, e))?;
         Ok(self.path.clone())
     }
 
@@ -215,7 +215,7 @@ pub fn lines(s: &EngineeringSummary) -> Vec<String> {
     out.push(format!(
         "  peak absolute acceleration {} m/s² ({} g, DOF {}, t = {:.3} s); peak base shear {} N (t = {:.3} s)",
         n(a.0),
-        n(a.0 / substep::excitation::G),
+        n(a.0 / crate::excitation::G),
         k + 1,
         a.1,
         n(s.peak_base_shear.peak),
@@ -257,7 +257,7 @@ pub fn ground_motion_outputs(
         num(&mut text, a);
         text.push('\n');
     }
-    std::fs::write(&gm, text).with_context(|| format!("cannot write {}", gm.display()))?;
+    std::fs::write(&gm, text).map_err(|e| cannot_write(&gm, e))?;
     files.push(gm);
     let fa = dir.join("fourier.csv");
     let mut text = String::from("f_hz,amplitude_m_s2\n");
@@ -267,7 +267,7 @@ pub fn ground_motion_outputs(
         num(&mut text, *a);
         text.push('\n');
     }
-    std::fs::write(&fa, text).with_context(|| format!("cannot write {}", fa.display()))?;
+    std::fs::write(&fa, text).map_err(|e| cannot_write(&fa, e))?;
     files.push(fa);
     let sp = dir.join("spectrum.csv");
     let mut text = String::from("period_s,sd_m,psv_m_s,psa_m_s2,sa_m_s2\n");
@@ -280,7 +280,7 @@ pub fn ground_motion_outputs(
         }
         text.push('\n');
     }
-    std::fs::write(&sp, text).with_context(|| format!("cannot write {}", sp.display()))?;
+    std::fs::write(&sp, text).map_err(|e| cannot_write(&sp, e))?;
     files.push(sp);
     let step = ag.len().div_ceil(PLOT_ROWS).max(1);
     let t: Vec<f64> = (0..ag.len()).step_by(step).map(|i| i as f64 * dt).collect();
@@ -292,7 +292,7 @@ pub fn ground_motion_outputs(
             Figure::new(&format!(
                 "Ground motion (PGA {:.3} m/s² = {:.3} g)",
                 pga,
-                pga / substep::excitation::G
+                pga / crate::excitation::G
             ))
             .panel(Panel::new("time t [s]", "a_g [m/s²]").curves(vec![Curve {
                 label: "a_g".into(),
@@ -342,3 +342,4 @@ pub fn ground_motion_outputs(
     ];
     Ok((files, figs))
 }
+

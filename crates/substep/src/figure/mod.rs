@@ -6,17 +6,16 @@
 //! A [`Figure`] is a title over one or more [`Panel`]s stacked vertically (or in columns); each
 //! panel has its own axes and its legend to the right of the data. [`line_chart`] and
 //! [`rho_heatmap`] are the one-panel shortcuts. The output format is chosen once per process
-//! with [`set_format`]; the functions replace the extension of the path they are given and
-//! return (or, for the shortcuts, use) the path actually written ([`output_path`]).
+//! by the caller and passed to every drawing function; the functions replace the extension of
+//! the path they are given and return the path actually written ([`output_path`]).
 //! The heat map, with its colour scale and contour, is in `heatmap.rs`.
 
-use anyhow::{Context, Result, anyhow};
+use crate::{Error, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
-use std::sync::atomic::{AtomicU8, Ordering};
 
 mod heatmap;
 
@@ -46,9 +45,10 @@ fn legend_width(p: &Panel) -> u32 {
     (50.0 + 8.6 * chars as f64).clamp(120.0, 380.0) as u32
 }
 
-/// Output format of every figure written by this process.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+/// Output format of a figure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PlotFormat {
+    #[default]
     Png,
     Svg,
     Pdf,
@@ -72,8 +72,6 @@ impl PlotFormat {
     }
 }
 
-static FORMAT: AtomicU8 = AtomicU8::new(0);
-
 /// How to get a build that writes PDF figures (the one-line refusal without it).
 pub const PDF_HINT: &str = "this build of substep has no PDF figures (they pull in a font and SVG stack that \
      doubles the build time): build with `--features pdf` (cargo install --path crates/substep-cli --features pdf), \
@@ -82,27 +80,14 @@ pub const PDF_HINT: &str = "this build of substep has no PDF figures (they pull 
 /// Refuse a format this build cannot draw, before any work: `what` names the option or key.
 pub fn check_format(f: PlotFormat, what: &str) -> Result<()> {
     if f == PlotFormat::Pdf && !cfg!(feature = "pdf") {
-        return Err(substep::Error::invalid(what, format!("format `pdf`: {PDF_HINT}")).into());
+        return Err(Error::invalid(what, format!("format `pdf`: {PDF_HINT}")));
     }
     Ok(())
 }
 
-/// Choose the format of all figures drawn from now on (default PNG).
-pub fn set_format(f: PlotFormat) {
-    FORMAT.store(f as u8, Ordering::Relaxed);
-}
-
-pub fn format() -> PlotFormat {
-    match FORMAT.load(Ordering::Relaxed) {
-        1 => PlotFormat::Svg,
-        2 => PlotFormat::Pdf,
-        _ => PlotFormat::Png,
-    }
-}
-
-/// `path` with the extension of the current format.
-pub fn output_path(path: &Path) -> PathBuf {
-    path.with_extension(format().extension())
+/// `path` with the extension of `format`.
+pub fn output_path(path: &Path, format: PlotFormat) -> PathBuf {
+    path.with_extension(format.extension())
 }
 
 fn register_font() -> Result<()> {
@@ -110,7 +95,7 @@ fn register_font() -> Result<()> {
     let mut result = Ok(());
     ONCE.call_once(|| {
         result = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
-            .map_err(|_| anyhow!("the bundled font DejaVuSans.ttf cannot be loaded"));
+            .map_err(|_| Error::numerical("figure", "the bundled font DejaVuSans.ttf cannot be loaded"));
     });
     result
 }
@@ -579,17 +564,19 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel, s: f
     Ok(())
 }
 
-/// Render with `draw` at `size` in the current format to `path` (extension replaced);
-/// returns the written path.
+/// Render with `draw` at `size` in `format` to `path` (extension replaced); returns the
+/// written path.
 fn render(
     path: &Path,
+    format: PlotFormat,
     size: (u32, u32),
     draw: impl Fn(&dyn Fn(f64) -> f64, RenderTarget) -> DrawResult,
 ) -> Result<PathBuf> {
     register_font()?;
-    let out = output_path(path);
-    let fail = |m: String| anyhow!("cannot draw {}: {m}", out.display());
-    match format() {
+    let out = output_path(path, format);
+    let fail = |m: String| Error::file(out.display().to_string(), format!("cannot draw: {m}"));
+    let cannot_write = |e: std::io::Error| Error::file(out.display().to_string(), format!("cannot write: {e}"));
+    match format {
         PlotFormat::Png => {
             // Twice the size, then a 2×2 box filter: anti-aliased lines and text.
             let (w, h) = (size.0 * 2, size.1 * 2);
@@ -606,7 +593,7 @@ fn render(
                 }
             }
             // Written to a temporary file and renamed: a killed run never leaves half a PNG.
-            crate::output::replace_atomic(&out, |tmp| {
+            crate::output::files::replace_atomic(&out, |tmp| {
                 image::save_buffer_with_format(
                     tmp,
                     &small,
@@ -617,17 +604,17 @@ fn render(
                 )
                 .map_err(std::io::Error::other)
             })
-            .with_context(|| format!("cannot write {}", out.display()))?;
+            .map_err(cannot_write)?;
         }
         PlotFormat::Svg | PlotFormat::Pdf => {
             let mut svg = String::new();
             draw(&|v| v, RenderTarget::Svg(&mut svg, size)).map_err(fail)?;
-            let bytes = if format() == PlotFormat::Svg {
+            let bytes = if format == PlotFormat::Svg {
                 svg.into_bytes()
             } else {
                 svg_to_pdf(&svg).map_err(fail)?
             };
-            crate::output::write_atomic(&out, &bytes).with_context(|| format!("cannot write {}", out.display()))?;
+            crate::output::files::write_atomic(&out, &bytes).map_err(cannot_write)?;
         }
     }
     Ok(out)
@@ -664,9 +651,9 @@ fn svg_to_pdf(svg: &str) -> std::result::Result<Vec<u8>, String> {
     .map_err(|e| format!("PDF: {e:?}"))
 }
 
-/// Draw `fig` to `path` (extension replaced by the current format); returns the written path.
-pub fn figure(path: &Path, fig: &Figure) -> Result<PathBuf> {
-    render(path, fig.size(), |s, target| {
+/// Draw `fig` to `path` (extension replaced by `format`'s); returns the written path.
+pub fn figure(path: &Path, fig: &Figure, format: PlotFormat) -> Result<PathBuf> {
+    render(path, format, fig.size(), |s, target| {
         let scale = s(1.0);
         match target {
             RenderTarget::Bitmap(buf, size) => {
@@ -683,14 +670,21 @@ pub fn figure(path: &Path, fig: &Figure) -> Result<PathBuf> {
     })
 }
 
-/// Draw `curves` into one panel at `path` (1100×560 px; the extension follows the current
-/// format, see [`output_path`]); returns the written path.
-pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, curves: &[Curve]) -> Result<PathBuf> {
+/// Draw `curves` into one panel at `path` (1100×560 px; the extension follows `format`, see
+/// [`output_path`]); returns the written path.
+pub fn line_chart(
+    path: &Path,
+    format: PlotFormat,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    curves: &[Curve],
+) -> Result<PathBuf> {
     let fig = Figure {
         size: Some((1100, 560)),
         ..Figure::new(title).panel(Panel::new(x_label, y_label).curves(curves.to_vec()))
     };
-    figure(path, &fig)
+    figure(path, &fig, format)
 }
 
 #[cfg(test)]
@@ -816,19 +810,18 @@ mod tests {
             &[PlotFormat::Png, PlotFormat::Svg]
         };
         for &fmt in formats {
-            set_format(fmt);
             let mut written = Vec::new();
             for (name, fig) in [("multi", &multi), ("log", &logf), ("cols", &cols)] {
                 written.push((
-                    figure(&dir.join(name), fig).unwrap(),
+                    figure(&dir.join(name), fig, fmt).unwrap(),
                     fig.size(),
                     fig.panels.iter().map(|p| p.curves.len()).max().unwrap(),
                 ));
             }
-            line_chart(&dir.join("line.png"), "one", "x", "y", &curves).unwrap();
-            written.push((output_path(&dir.join("line.png")), (1100, 560), 3));
-            rho_heatmap(&dir.join("map.png"), "ρ", "Ω", "ζ_s", &xs, &ys, &rho).unwrap();
-            written.push((output_path(&dir.join("map.png")), (1000, 700), 0));
+            line_chart(&dir.join("line.png"), fmt, "one", "x", "y", &curves).unwrap();
+            written.push((output_path(&dir.join("line.png"), fmt), (1100, 560), 3));
+            rho_heatmap(&dir.join("map.png"), fmt, "ρ", "Ω", "ζ_s", &xs, &ys, &rho).unwrap();
+            written.push((output_path(&dir.join("map.png"), fmt), (1000, 700), 0));
             for (path, size, series) in written {
                 assert_eq!(path.extension().unwrap(), fmt.extension());
                 let bytes = std::fs::read(&path).unwrap();
@@ -866,7 +859,6 @@ mod tests {
                 }
             }
         }
-        set_format(PlotFormat::Png);
         std::fs::remove_dir_all(&dir).ok();
     }
 
