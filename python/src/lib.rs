@@ -21,7 +21,9 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use substep::io::TestDefinition;
-use substep::run::{HistoryTable, Layout, RunObserver, StepRow, Table};
+use substep::io::results::Format;
+use substep::output::{FolderOptions, RunFolder};
+use substep::run::{HistoryTable, Layout, Run, RunObserver, StepRow, Table};
 use substep::substructure::SubstepObserver;
 
 create_exception!(
@@ -134,6 +136,74 @@ fn run<'py>(py: Python<'py>, kind: &str, text: &str, name: &str, base_dir: &str)
     if let Some(e) = collector.interrupted {
         return Err(e);
     }
+    run_tables(py, &summary, collector.table)
+}
+
+/// The output folder's observer and the in-memory tables, fed in turn.
+struct FolderAndTables<'a> {
+    folder: &'a mut RunFolder,
+    tables: &'a mut Collector,
+}
+
+impl SubstepObserver for FolderAndTables<'_> {
+    fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.folder.substep(step, j, command, force, displacement);
+        self.tables.substep(step, j, command, force, displacement);
+    }
+    fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
+        self.folder.phase_lag(tracking_error, correction);
+        self.tables.phase_lag(tracking_error, correction);
+    }
+    fn lab(&mut self, held: bool, strays: u64) {
+        self.folder.lab(held, strays);
+        self.tables.lab(held, strays);
+    }
+    fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
+        self.folder.ramp(step, j, s, command, force, displacement);
+        self.tables.ramp(step, j, s, command, force, displacement);
+    }
+}
+
+impl RunObserver for FolderAndTables<'_> {
+    fn start(&mut self, layout: &Layout) {
+        self.folder.start(layout);
+        self.tables.start(layout);
+    }
+    fn step(&mut self, row: &StepRow<'_>) -> ControlFlow<()> {
+        match self.folder.step(row) {
+            ControlFlow::Break(()) => ControlFlow::Break(()),
+            ControlFlow::Continue(()) => self.tables.step(row),
+        }
+    }
+}
+
+/// The figure options of a Python run: `plots` (None: the config's `[output] plots`) and
+/// `plot_format` (None: the config's `[output.plots] format`, else PNG).
+fn folder_options(def: &TestDefinition, plots: Option<bool>, plot_format: Option<&str>) -> substep::Result<FolderOptions> {
+    let plots = plots.unwrap_or(def.output.plots);
+    let options = match plot_format {
+        Some(name) => {
+            let plot_format = substep::figure::PlotFormat::from_name(name).ok_or_else(|| {
+                substep::Error::invalid("plot_format", format!("unknown format {name:?} (png, svg or pdf)"))
+            })?;
+            let options = FolderOptions { plots, plot_format };
+            options.check("plot_format")?;
+            options
+        }
+        None if plots => FolderOptions::of(def)?,
+        None => FolderOptions {
+            plots,
+            plot_format: substep::figure::PlotFormat::Png,
+        },
+    };
+    Ok(options)
+}
+
+fn run_tables<'py>(
+    py: Python<'py>,
+    summary: &substep::run::RunSummary,
+    table: HistoryTable,
+) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     out.set_item("summary", summary.to_json())?;
     out.set_item(
@@ -152,11 +222,88 @@ fn run<'py>(py: Python<'py>, kind: &str, text: &str, name: &str, base_dir: &str)
         substeps,
         response,
         ..
-    } = collector.table;
+    } = table;
     out.set_item("history", table_pair(py, history)?)?;
     out.set_item("substeps", substeps.map(|t| table_pair(py, t)).transpose()?)?;
     out.set_item("response", response.map(|t| table_pair(py, t)).transpose()?)?;
     Ok(out)
+}
+
+/// [`run`] into the output folder `out_dir` (what `substep run CONFIG --out DIR` writes:
+/// [`substep::output::RunFolder`], then `results.h5` / `results.mat` when the config's
+/// `[output] format` (or `format`) asks for it). The dict also has `outputs` (the files
+/// written).
+#[pyfunction]
+#[pyo3(signature = (kind, text, name, base_dir, out_dir, plots=None, plot_format=None, format=None))]
+// The config's four parts and the CLI's four output flags: a struct would only rename them.
+#[allow(clippy::too_many_arguments)]
+fn run_folder<'py>(
+    py: Python<'py>,
+    kind: &str,
+    text: &str,
+    name: &str,
+    base_dir: &str,
+    out_dir: &str,
+    plots: Option<bool>,
+    plot_format: Option<&str>,
+    format: Option<&str>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let dir = Path::new(out_dir);
+    let (def, options, container) = py
+        .detach(|| -> substep::Result<_> {
+            let def = definition(kind, text, name, base_dir)?;
+            let options = folder_options(&def, plots, plot_format)?;
+            let container = match format {
+                Some(f) => Format::parse("format", f)?,
+                None => def.output.format,
+            };
+            Ok((def, options, container))
+        })
+        .map_err(|e| to_py(&e))?;
+    let mut collector = Collector {
+        table: HistoryTable::default(),
+        last_check: Instant::now(),
+        interrupted: None,
+    };
+    let cancel = AtomicBool::new(false);
+    let result = py.detach(|| -> substep::Result<_> {
+        let mut run = Run::new(&def)?;
+        let layout = run.layout().clone();
+        let mut folder = RunFolder::create(&def, &layout, dir, options)?;
+        let mut both = FolderAndTables {
+            folder: &mut folder,
+            tables: &mut collector,
+        };
+        let mut summary = run.execute(&mut both, &cancel);
+        let finished = folder.finish(&def, run.input_motion(), &mut summary);
+        let finished = substep::output::files::no_summary_left_running(&dir.join("summary.json"), finished);
+        let mut outputs = finished?;
+        let ran = summary.failure.as_ref().is_none_or(|e| {
+            matches!(e, substep::Error::Diverged { .. } | substep::Error::Stopped { .. })
+        });
+        if ran && let Some(path) = substep::output::container::write(dir, container, config_text(kind, text))? {
+            outputs.push(path);
+        }
+        Ok((summary, outputs))
+    });
+    if let Some(e) = collector.interrupted.take() {
+        return Err(e);
+    }
+    let (summary, outputs) = result.map_err(|e| to_py(&e))?;
+    let out = run_tables(py, &summary, collector.table)?;
+    out.set_item(
+        "outputs",
+        outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+    )?;
+    Ok(out)
+}
+
+/// The test definition's text as a run read it (for the container's copy).
+fn config_text(kind: &str, text: &str) -> String {
+    match kind {
+        "path" => substep::io::limits::read_text(Path::new(text), substep::io::limits::CONFIG_MAX_BYTES).unwrap_or_default(),
+        _ => text.to_string(),
+    }
 }
 
 /// Write a table (`names`, a rows × columns array) as CSV in the format of `substep run`'s files
@@ -186,6 +333,7 @@ fn _substep(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ConfigError", m.py().get_type::<ConfigError>())?;
     m.add("RunError", m.py().get_type::<RunError>())?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(run_folder, m)?)?;
     m.add_function(wrap_pyfunction!(write_csv, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::stability, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::accuracy, m)?)?;

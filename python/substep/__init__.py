@@ -97,6 +97,8 @@ class Result:
         self.substeps: Optional[Table] = _table(raw["substeps"])
         self.response: Optional[Table] = _table(raw["response"])
         self.error: Optional[str] = raw["error"]
+        #: The files a run with ``out_dir`` wrote (``summary.json`` last; empty otherwise).
+        self.outputs: List[str] = list(raw.get("outputs") or [])
         h = self.history
         self.t = h["t"]
         self.u = h.group("u")
@@ -237,8 +239,23 @@ def _config_source(config: ConfigLike) -> Tuple[str, str, str]:
     raise _ConfigTypeError(f"config: must be a path, a TOML string or a dict, not {type(config).__name__}")
 
 
-def run(config: ConfigLike, *, raise_on_stop: bool = True) -> Result:
+def run(
+    config: ConfigLike,
+    *,
+    out_dir: Optional[Union[str, os.PathLike]] = None,
+    plots: Optional[bool] = None,
+    plot_format: Optional[str] = None,
+    format: Optional[str] = None,
+    raise_on_stop: bool = True,
+) -> Result:
     """Run a test definition and return its histories and summary.
+
+    With ``out_dir``, the run also writes its output folder exactly as
+    ``substep run CONFIG --out OUT_DIR`` does (the same files, the same bytes in every CSV
+    table and figure, ``summary.json``; ``Result.outputs`` lists them). ``plots`` (default: the
+    config's ``[output] plots``), ``plot_format`` (``"png"``, ``"svg"`` or ``"pdf"``, default:
+    ``[output.plots] format``) and ``format`` (``"csv"``, ``"hdf5"`` or ``"mat"``, default:
+    ``[output] format``) are the CLI's ``--no-plots``, ``--plot-format`` and ``--format``.
 
     ``config`` is a path to a TOML test definition (``docs/config.md``), the TOML text itself,
     or a dict with the same structure (``{"structure": {"sdof": {...}}, ...}``). Relative paths
@@ -255,7 +272,17 @@ def run(config: ConfigLike, *, raise_on_stop: bool = True) -> Result:
     and raises ``KeyboardInterrupt``.
     """
     kind, text, name = _config_source(config)
-    raw = _substep.run(kind, text, name, os.getcwd())
+    for key, value, kinds in (("plots", plots, bool), ("plot_format", plot_format, str), ("format", format, str)):
+        if value is not None and not isinstance(value, kinds):
+            raise _ConfigTypeError(f"{key}: must be a {kinds.__name__}, not {type(value).__name__}")
+    if out_dir is None:
+        if plots is not None or plot_format is not None or format is not None:
+            raise ConfigError("plots, plot_format, format: they choose what goes into out_dir; give out_dir too")
+        raw = _substep.run(kind, text, name, os.getcwd())
+    else:
+        if not isinstance(out_dir, (str, os.PathLike)):
+            raise _ConfigTypeError(f"out_dir: must be a path, not {type(out_dir).__name__}")
+        raw = _substep.run_folder(kind, text, name, os.getcwd(), os.fspath(out_dir), plots, plot_format, format)
     result = Result(raw)
     if raw["error"] is not None and raise_on_stop:
         cls = RunError if raw["error_kind"] == "run" else ConfigError

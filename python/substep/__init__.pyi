@@ -29,6 +29,7 @@ class Result:
     summary: Dict[str, Any]
     history: Table
     substeps: Optional[Table]
+    outputs: List[str]
     response: Optional[Table]
     error: Optional[str]
     t: np.ndarray
@@ -45,8 +46,17 @@ class Result:
     def to_pandas(self) -> pandas.DataFrame: ...
     def save(self, path: Union[str, os.PathLike[str]]) -> List[str]: ...
 
-def run(config: ConfigLike, *, raise_on_stop: bool = True) -> Result:
-    """Run a test definition (path, TOML text or dict) and return its histories and summary."""
+def run(
+    config: ConfigLike,
+    *,
+    out_dir: Optional[Union[str, os.PathLike[str]]] = None,
+    plots: Optional[bool] = None,
+    plot_format: Optional[str] = None,
+    format: Optional[str] = None,
+    raise_on_stop: bool = True,
+) -> Result:
+    """Run a test definition (path, TOML text or dict) and return its histories and summary;
+    with ``out_dir``, also write the output folder ``substep run --out`` writes."""
 
 def study(
     base: ConfigLike,
