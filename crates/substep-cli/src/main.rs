@@ -13,7 +13,6 @@ mod benchmark;
 mod benchmark_marths;
 mod lab;
 mod model_export;
-mod monitor;
 mod plots;
 mod realtime;
 mod run;

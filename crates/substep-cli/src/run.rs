@@ -3,7 +3,6 @@
 //! `substep.run(config, out_dir=...)` writes), with the progress bar, the live monitor and the
 //! printed summary around it; `--realtime` hands over to [`crate::realtime`].
 
-use crate::monitor::live::{Live, LiveObserver};
 use crate::{DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, RunArgs};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -12,6 +11,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use substep::format::percent;
 use substep::io::TestDefinition;
+use substep::session::live::{Live, LiveObserver, LiveOptions, StabilityChoice};
 use substep::io::results::Format;
 use substep::output::{FolderOptions, RunFolder};
 use substep::run::{Run, RunSummary, largest};
@@ -216,6 +216,22 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
 }
 
+/// The monitor's and the indicator's flags.
+pub(crate) fn live_options(args: &RunArgs) -> LiveOptions {
+    LiveOptions {
+        monitor: args.monitor.clone(),
+        monitor_public: args.monitor_public,
+        monitor_token: args.monitor_token.clone(),
+        monitor_linger: args.monitor_linger,
+        stability: args.stability.map(|s| match s {
+            crate::StabilityArg::Warn => StabilityChoice::Warn,
+            crate::StabilityArg::Stop => StabilityChoice::Stop,
+            crate::StabilityArg::Off => StabilityChoice::Off,
+        }),
+        pace: args.pace,
+    }
+}
+
 /// `--plot-format` over the config's `[output.plots] format`; `--no-plots` over `[output] plots`;
 /// a format this build cannot draw is refused (naming the flag or the key) when figures are drawn.
 fn folder_options(args: &RunArgs, def: &TestDefinition) -> Result<FolderOptions> {
@@ -249,7 +265,7 @@ fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> 
         return crate::realtime::run_realtime(args, &def, out_dir, name);
     }
     let config_name = def.source.clone();
-    let mut live = Live::start(args, &mut def, &config_name, false)?;
+    let mut live = Live::start(&live_options(args), &mut def, &config_name, false)?;
     let def = def;
     let mut run = Run::new(&def)?;
     run.set_stability(live.stability_settings.clone())?;

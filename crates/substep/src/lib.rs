@@ -15,6 +15,7 @@
 //! run leaves on disk (its output folder, figures) is made by [`output`] and [`figure`], so
 //! every front end writes the same files.
 
+pub mod atomic_file;
 pub mod error;
 pub mod excitation;
 pub mod figure;
@@ -26,6 +27,7 @@ pub mod monitor;
 pub mod output;
 pub mod realtime;
 pub mod run;
+pub mod session;
 
 pub use error::{Error, Result};
 pub mod analysis;

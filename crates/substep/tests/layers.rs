@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 
 /// The layers, bottom first. A module may import from layers strictly below its own.
 const LAYERS: &[&[&str]] = &[
-    &["error", "format", "latency", "linalg"],
-    &["ident", "limits", "material", "sparse"],
+    &["atomic_file", "error", "format", "latency", "linalg"],
+    &["figure", "ident", "limits", "material", "sparse"],
     &["model"],
     &["integrate"],
     &["excitation", "specimen", "substructure"],
@@ -23,7 +23,8 @@ const LAYERS: &[&[&str]] = &[
     &["analysis"],
     &["monitor", "benchmark"],
     &["run"],
-    &["study"],
+    &["output"],
+    &["session", "study"],
 ];
 
 type Module = Vec<String>;

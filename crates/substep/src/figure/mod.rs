@@ -1,12 +1,12 @@
-//! Figures with plotters: PNG (drawn at twice the size and averaged down, so lines and text are
-//! anti-aliased), SVG (plotters' SVG backend) or PDF (the SVG converted by svg2pdf, cargo feature
-//! `pdf`), all with the
-//! bundled DejaVu Sans, so no system fonts are needed.
+//! Figures with plotters, for every front end (the CLI's commands, Python's runs): PNG (drawn at
+//! twice the size and averaged down, so lines and text are anti-aliased), SVG (plotters' SVG
+//! backend) or PDF (the SVG converted by svg2pdf, cargo feature `pdf`), all with the bundled
+//! DejaVu Sans, so no system fonts are needed.
 //!
 //! A [`Figure`] is a title over one or more [`Panel`]s stacked vertically (or in columns); each
 //! panel has its own axes and its legend to the right of the data. [`line_chart`] and
-//! [`rho_heatmap`] are the one-panel shortcuts. The output format is chosen once per process
-//! by the caller and passed to every drawing function; the functions replace the extension of
+//! [`rho_heatmap`] are the one-panel shortcuts. The caller passes the output format
+//! ([`PlotFormat`]) to every drawing function; the functions replace the extension of
 //! the path they are given and return the path actually written ([`output_path`]).
 //! The heat map, with its colour scale and contour, is in `heatmap.rs`.
 
@@ -19,8 +19,6 @@ use std::sync::Once;
 
 mod heatmap;
 
-#[cfg(test)]
-use heatmap::contour_segments;
 pub use heatmap::rho_heatmap;
 
 const FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
@@ -593,7 +591,7 @@ fn render(
                 }
             }
             // Written to a temporary file and renamed: a killed run never leaves half a PNG.
-            crate::output::files::replace_atomic(&out, |tmp| {
+            crate::atomic_file::replace_atomic(&out, |tmp| {
                 image::save_buffer_with_format(
                     tmp,
                     &small,
@@ -614,7 +612,7 @@ fn render(
             } else {
                 svg_to_pdf(&svg).map_err(fail)?
             };
-            crate::output::files::write_atomic(&out, &bytes).map_err(cannot_write)?;
+            crate::atomic_file::write_atomic(&out, &bytes).map_err(cannot_write)?;
         }
     }
     Ok(out)
@@ -689,6 +687,7 @@ pub fn line_chart(
 
 #[cfg(test)]
 mod tests {
+    use super::heatmap::contour_segments;
     use super::*;
 
     #[test]

@@ -10,10 +10,13 @@
 //!   the step.
 //! * [`Controls`]: stop, hold and acknowledge as atomics, set by the monitor's thread and
 //!   checked by the stepping loop between steps (no lock on either side).
+//! * [`page`]: the HTTP server of the live page (std only, bounded, slow clients cannot stall
+//!   it); the run loop's side of page and indicator is `crate::session::live`.
 
 pub mod energy;
 pub mod http;
 mod indicator;
+pub mod page;
 pub mod model_view;
 
 pub use indicator::{

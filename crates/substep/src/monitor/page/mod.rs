@@ -1,4 +1,4 @@
-//! `substep run --monitor`: a small HTTP server (std only; requests read by one thread that
+//! The live monitor page (`substep run --monitor`, Python's `substep.run(..., monitor=ADDR)`): a small HTTP server (std only; requests read by one thread that
 //! slow clients cannot stall, everything bounded: [`server`]) that serves the live page
 //! (`page.html`, embedded), the frames of the run as server-sent events and the operator's
 //! controls (see docs/monitor.md).
@@ -7,11 +7,11 @@
 //! ring drops the frame) and reads [`Controls`] atomics; everything else (draining the ring,
 //! keeping the last window, JSON, sockets) runs on the monitor's own threads.
 
-pub mod live;
 mod server;
+mod shared;
 
-use anyhow::{Context, Result, bail};
-use serde_json::{Value, json};
+use crate::{Error, Result};
+use serde_json::Value;
 use std::collections::VecDeque;
 use std::net::{SocketAddr, TcpListener};
 use std::path::PathBuf;
@@ -19,15 +19,12 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
-use substep::monitor::{Controls, Frame, StopRequest, frame_ring};
-use substep::realtime::{OwnedConsumer, OwnedProducer};
+use crate::monitor::{Controls, Frame, frame_ring};
+use shared::{Shared, State};
+use crate::realtime::{OwnedConsumer, OwnedProducer};
 
-const PAGE: &str = include_str!("page.html");
 /// Frames kept for the page (the last window, decimated in run time).
 const HISTORY_FRAMES: usize = 2000;
-/// Why a real-time run has no hold (the page shows it on the disabled button; a POST gets it).
-const NO_HOLD: &str = "hold is not available in real-time runs: the specimen is rate-dependent and the \
-                       schedule is the test, so it cannot pause between steps (use the controlled stop)";
 /// Interval of the event stream (20 Hz).
 const TICK: Duration = Duration::from_millis(50);
 
@@ -42,31 +39,6 @@ pub struct MonitorOptions {
     pub info: Value,
 }
 
-struct State {
-    history: VecDeque<(u64, Frame)>,
-    seq: u64,
-    last_kept: f64,
-    latest: Option<Frame>,
-    warnings: Vec<String>,
-    finished: Option<Value>,
-    outputs: Vec<PathBuf>,
-}
-
-struct Shared {
-    state: Mutex<State>,
-    quit: AtomicBool,
-    /// Client addresses of the event streams being served.
-    streams: Mutex<Vec<std::net::IpAddr>>,
-    /// Output downloads being served.
-    downloads: AtomicUsize,
-    token: String,
-    window: f64,
-    hold_allowed: bool,
-    info: Value,
-    controls: Arc<Controls>,
-    dropped: std::sync::atomic::AtomicU64,
-}
-
 /// The running monitor: the producer end for the stepping loop, the controls, the threads.
 pub struct Monitor {
     producer: OwnedProducer<Frame>,
@@ -79,18 +51,18 @@ pub struct Monitor {
 impl Monitor {
     pub fn start(opts: MonitorOptions) -> Result<Self> {
         if !opts.addr.ip().is_loopback() && !opts.public {
-            bail!(substep::Error::invalid(
+            return Err(Error::invalid(
                 "--monitor",
                 format!(
                     "{} is not a loopback address; listening on other interfaces needs --monitor-public (controls stay behind the token)",
                     opts.addr
-                )
+                ),
             ));
         }
         let listener = TcpListener::bind(opts.addr)
-            .map_err(|e| substep::Error::invalid("--monitor", format!("cannot listen on {}: {e}", opts.addr)))?;
-        listener.set_nonblocking(true).context("monitor socket")?;
-        let addr = listener.local_addr().context("monitor socket")?;
+            .map_err(|e| Error::invalid("--monitor", format!("cannot listen on {}: {e}", opts.addr)))?;
+        listener.set_nonblocking(true).map_err(|e| Error::invalid("--monitor", format!("monitor socket: {e}")))?;
+        let addr = listener.local_addr().map_err(|e| Error::invalid("--monitor", format!("monitor socket: {e}")))?;
         let (producer, consumer) = frame_ring(4096);
         let controls = Arc::new(Controls::default());
         let shared = Arc::new(Shared {
@@ -117,12 +89,12 @@ impl Monitor {
         let drain = std::thread::Builder::new()
             .name("monitor-drain".into())
             .spawn(move || drain_loop(consumer, &s1))
-            .context("monitor thread")?;
+            .map_err(|e| Error::invalid("--monitor", format!("cannot start the monitor thread: {e}")))?;
         let s2 = shared.clone();
         let accept = std::thread::Builder::new()
             .name("monitor-http".into())
             .spawn(move || server::accept_loop(listener, &s2))
-            .context("monitor thread")?;
+            .map_err(|e| Error::invalid("--monitor", format!("cannot start the monitor thread: {e}")))?;
         Ok(Self {
             producer,
             controls,
@@ -189,27 +161,3 @@ fn drain_loop(mut rx: OwnedConsumer<Frame>, shared: &Shared) {
     }
 }
 
-fn frame_json(f: &Frame) -> Value {
-    let n = f.n_c;
-    let v = |a: &[f64; substep::monitor::FRAME_DOFS]| json!(a[..n].to_vec());
-    json!({
-        "step": f.step, "t": f.time, "cmd": v(&f.command), "meas": v(&f.measured),
-        "fc": v(&f.force), "fe": v(&f.error_force), "u": v(&f.test_u), "uref": v(&f.reference_u),
-        "eta": f.eta, "margin": f.margin, "k": v(&f.stiffness), "c": v(&f.damping), "lag": v(&f.lag),
-        "late": f.late_steps, "holds": f.hold_substeps, "alarm": f.alarm,
-    })
-}
-
-fn status_json(shared: &Shared, s: &State) -> Value {
-    let c = &shared.controls;
-    json!({
-        "latest": s.latest.as_ref().map(frame_json),
-        "warnings": s.warnings,
-        "acknowledged": c.acknowledgements(),
-        "held": c.held(),
-        "stop": c.stop_requested().map(|r| match r { StopRequest::Operator => "operator", StopRequest::Stability => "stability" }),
-        "finished": s.finished,
-        "outputs": s.outputs.iter().filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned())).collect::<Vec<_>>(),
-        "frames_dropped": shared.dropped.load(Ordering::Relaxed),
-    })
-}

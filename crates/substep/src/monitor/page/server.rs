@@ -2,7 +2,7 @@
 //! operator's stop cannot be locked out by clients that are slow on purpose.
 //!
 //! * **Requests** are read by the `monitor-http` thread from non-blocking sockets into a buffer of
-//!   at most `MAX_HEAD + MAX_BODY` bytes each ([`substep::monitor::http::parse_request`] after
+//!   at most `MAX_HEAD + MAX_BODY` bytes each ([`crate::monitor::http::parse_request`] after
 //!   every read). A request has [`REQUEST_DEADLINE`] from its connection to its last byte (head
 //!   and body together), whatever its pace; then it is answered 408 and closed.
 //! * **Admission never refuses a new connection**: at most [`MAX_PENDING`] requests are being
@@ -26,15 +26,15 @@
 //! build (measured for this project, research notes), +19 % of the 3 min `cargo run --release`
 //! from a clean clone. Five endpoints on loopback do not need a framework.
 
-use super::{NO_HOLD, PAGE, Shared, frame_json, status_json};
+use super::shared::{NO_HOLD, PAGE, Shared, frame_json, status_json};
 use serde_json::{Value, json};
 use std::io::{Read, Write};
 use std::net::{IpAddr, TcpListener, TcpStream};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-use substep::monitor::http::{MAX_BODY, MAX_HEAD, Parsed, parse_request};
-use substep::monitor::{StopRequest, token_matches};
+use crate::monitor::http::{MAX_BODY, MAX_HEAD, Parsed, parse_request};
+use crate::monitor::{StopRequest, token_matches};
 
 /// Time a request has from its connection to its last byte.
 pub const REQUEST_DEADLINE: Duration = Duration::from_secs(2);

@@ -1,24 +1,64 @@
 //! The run loop's side of the monitor and of the stability indicator: a few calls per step
-//! from `substep run` (offline) — read the indicator of the run (`substep::run` computes it),
+//! from `substep run` (offline) — read the indicator of the run (`crate::run` computes it),
 //! push a frame, obey the controls, pace. Real-time runs feed their own indicator here, from
 //! the writer thread.
 
-use super::{Monitor, MonitorOptions};
-use crate::RunArgs;
-use anyhow::Result;
+use crate::monitor::page::{Monitor, MonitorOptions};
+use crate::Result;
 use serde_json::{Value, json};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use substep::io::TestDefinition;
-use substep::monitor::{StabilityAction, StabilityMonitor, StabilitySettings, StopRequest, copy_into};
-use substep::run::{Layout, RunObserver, StepRow};
-use substep::substructure::{SafetyLimits, SubstepObserver};
+use crate::io::TestDefinition;
+use crate::monitor::{StabilityAction, StabilityMonitor, StabilitySettings, StopRequest, copy_into};
+use crate::run::{Layout, RunObserver, StepRow};
+use crate::substructure::{SafetyLimits, SubstepObserver};
 
 /// Ramp time used for operator and stability stops when the config sets no limits \[s\].
 pub const DEFAULT_STOP_RAMP: f64 = 1.0;
 /// Address of the page when neither `--monitor ADDR` nor `[monitor] address` gives one.
 pub const DEFAULT_ADDRESS: &str = "127.0.0.1:8080";
+
+/// `--stability`: the indicator's action whatever the config says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StabilityChoice {
+    Warn,
+    Stop,
+    Off,
+}
+
+/// A front end's choices for the monitor and the indicator (the CLI's `--monitor`,
+/// `--monitor-public`, `--monitor-token`, `--monitor-linger`, `--stability`, `--pace`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveOptions {
+    /// Serve the live page at this address (`""`: `[monitor] address`, else
+    /// [`DEFAULT_ADDRESS`]); `None`: no page.
+    pub monitor: Option<String>,
+    /// Allow an address that is not loopback (the controls still need the token).
+    pub monitor_public: bool,
+    /// The controls' token (default: `[monitor] token`, else a random one, printed at start).
+    pub monitor_token: Option<String>,
+    /// Seconds the page keeps showing the final state after the run.
+    pub monitor_linger: f64,
+    /// Overrides `[substructure.limits] stability` (`None`: the config's; offline the indicator
+    /// runs by default).
+    pub stability: Option<StabilityChoice>,
+    /// Pace an offline run at this multiple of real time (for watching it).
+    pub pace: Option<f64>,
+}
+
+impl Default for LiveOptions {
+    fn default() -> Self {
+        Self {
+            monitor: None,
+            monitor_public: false,
+            monitor_token: None,
+            monitor_linger: 30.0,
+            stability: None,
+            pace: None,
+        }
+    }
+}
 
 /// The last command of each coupling DOF (the step's last sub-step).
 #[derive(Debug, Default)]
@@ -78,7 +118,7 @@ impl<O: RunObserver> RunObserver for LiveObserver<'_, O> {
 pub struct Live {
     monitor: Option<Monitor>,
     /// The indicator's settings for the run (`--stability`, `--monitor` or the config); an
-    /// offline run hands them to [`substep::run::Run::set_stability`].
+    /// offline run hands them to [`crate::run::Run::set_stability`].
     pub stability_settings: Option<StabilitySettings>,
     /// Real-time runs: the indicator fed from the writer thread.
     stability: Option<StabilityMonitor>,
@@ -99,7 +139,7 @@ impl Live {
     /// Start the monitor (`--monitor`) and the indicator (`--monitor`, or
     /// `[substructure.limits] stability`). A test without limits gets a ramp-only
     /// [`SafetyLimits`] so that a stop from the page or the indicator can ramp.
-    pub fn start(args: &RunArgs, def: &mut TestDefinition, config: &str, realtime: bool) -> Result<Self> {
+    pub fn start(args: &LiveOptions, def: &mut TestDefinition, config: &str, realtime: bool) -> Result<Self> {
         let n_c = def.substructure.as_ref().map_or(0, |s| s.coupling_dofs.len());
         // Offline the indicator runs by default (`SubstructureDefinition::stability_settings`); a
         // real-time run gets it only when asked for (its writer thread shares the cores with
@@ -112,13 +152,13 @@ impl Live {
             }
         });
         // The command-line action overrides the config's (keeping its thresholds).
-        let off = args.stability == Some(crate::StabilityArg::Off);
+        let off = args.stability == Some(StabilityChoice::Off);
         let configured = match (args.stability, from_config) {
             (None, c) => c,
-            (Some(crate::StabilityArg::Off), _) => None,
+            (Some(StabilityChoice::Off), _) => None,
             (Some(a), c) => Some(StabilitySettings {
                 action: match a {
-                    crate::StabilityArg::Stop => StabilityAction::Stop,
+                    StabilityChoice::Stop => StabilityAction::Stop,
                     _ => StabilityAction::Warn,
                 },
                 ..c.unwrap_or_default()
@@ -169,17 +209,17 @@ impl Live {
                     (a, _) => (a, "--monitor"),
                 };
                 let addr = addr.parse().map_err(|e| {
-                    substep::Error::invalid(what, format!("'{addr}' is not an address host:port ({e})"))
+                    crate::Error::invalid(what, format!("'{addr}' is not an address host:port ({e})"))
                 })?;
                 // The command line's token overrides the config's; without either a random one.
                 let (token, shown) = match (&args.monitor_token, &def.monitor.token) {
                     (Some(t), _) => {
-                        substep::io::check_token("--monitor-token", t)?;
+                        crate::io::check_token("--monitor-token", t)?;
                         (t.clone(), "the token given with --monitor-token".to_string())
                     }
                     (None, Some(t)) => (t.clone(), format!("the token of [monitor] token in {config}")),
                     (None, None) => {
-                        let t = substep::monitor::new_token()?;
+                        let t = crate::monitor::new_token()?;
                         (t.clone(), format!("the token {t}"))
                     }
                 };
@@ -273,12 +313,12 @@ impl Live {
                 m.push(|f| {
                     f.step = i as u64;
                     f.time = t;
-                    f.n_c = coupling.len().min(substep::monitor::FRAME_DOFS);
+                    f.n_c = coupling.len().min(crate::monitor::FRAME_DOFS);
                     copy_into(&mut f.command, last);
                     copy_into(&mut f.measured, rec.measured_displacement);
                     copy_into(&mut f.force, rec.coupling_force);
                     copy_into(&mut f.error_force, rec.error_force);
-                    for (k, &c) in coupling.iter().take(substep::monitor::FRAME_DOFS).enumerate() {
+                    for (k, &c) in coupling.iter().take(crate::monitor::FRAME_DOFS).enumerate() {
                         f.test_u[k] = row.u[c];
                         f.reference_u[k] = row.reference.map_or(f64::NAN, |r| r[c]);
                     }
@@ -350,7 +390,7 @@ impl Live {
     /// which the caller hands to the runner's stop handle.
     pub fn record_realtime(
         &mut self,
-        r: &substep::realtime::StepRecordOwned,
+        r: &crate::realtime::StepRecordOwned,
         ag: f64,
         coupling: &[usize],
     ) -> Option<String> {
@@ -387,12 +427,12 @@ impl Live {
             m.push(|f| {
                 f.step = r.step as u64;
                 f.time = r.time;
-                f.n_c = coupling.len().min(substep::monitor::FRAME_DOFS);
+                f.n_c = coupling.len().min(crate::monitor::FRAME_DOFS);
                 copy_into(&mut f.command, &r.command);
                 copy_into(&mut f.measured, &r.measured_displacement);
                 copy_into(&mut f.force, &r.coupling_force);
                 copy_into(&mut f.error_force, &r.error_force);
-                for (k, &c) in coupling.iter().take(substep::monitor::FRAME_DOFS).enumerate() {
+                for (k, &c) in coupling.iter().take(crate::monitor::FRAME_DOFS).enumerate() {
                     f.test_u[k] = r.dofs.iter().position(|&d| d == c).map_or(f64::NAN, |i| r.u[i]);
                 }
                 f.late_steps = late;
