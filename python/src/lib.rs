@@ -23,6 +23,8 @@ use std::time::{Duration, Instant};
 use substep::io::TestDefinition;
 use substep::io::results::Format;
 use substep::output::{FolderOptions, RunFolder};
+use substep::session::live::{Live, LiveObserver, LiveOptions, StabilityChoice};
+use substep::session::realtime::{RealtimeOutcome, RealtimeRunOptions};
 use substep::run::{HistoryTable, Layout, Run, RunObserver, StepRow, Table};
 use substep::substructure::SubstepObserver;
 
@@ -85,6 +87,9 @@ impl SubstepObserver for Collector {
     fn phase_lag(&mut self, tracking_error: &[f64], correction: &[f64]) {
         self.table.phase_lag(tracking_error, correction);
     }
+    fn lab(&mut self, held: bool, strays: u64) {
+        self.table.lab(held, strays);
+    }
     fn ramp(&mut self, step: usize, j: usize, s: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
         self.table.ramp(step, j, s, command, force, displacement);
     }
@@ -119,10 +124,15 @@ fn table_pair<'py>(py: Python<'py>, t: Table) -> PyResult<(Vec<String>, Bound<'p
 /// (each `(column names, columns × rows array)` or None) and `error` (the one-line message of
 /// a run that did not complete, else None).
 #[pyfunction]
-#[pyo3(signature = (kind, text, name, base_dir))]
-fn run<'py>(py: Python<'py>, kind: &str, text: &str, name: &str, base_dir: &str) -> PyResult<Bound<'py, PyDict>> {
-    let def = py
-        .detach(|| definition(kind, text, name, base_dir))
+#[pyo3(signature = (kind, text, name, base_dir, live="{}"))]
+fn run<'py>(py: Python<'py>, kind: &str, text: &str, name: &str, base_dir: &str, live: &str) -> PyResult<Bound<'py, PyDict>> {
+    let (def, mut live) = py
+        .detach(|| -> substep::Result<_> {
+            let mut def = definition(kind, text, name, base_dir)?;
+            let config_name = def.source.clone();
+            let live = Live::start(&live_options(live)?, &mut def, &config_name, false)?;
+            Ok((def, live))
+        })
         .map_err(|e| to_py(&e))?;
     let mut collector = Collector {
         table: HistoryTable::default(),
@@ -131,12 +141,67 @@ fn run<'py>(py: Python<'py>, kind: &str, text: &str, name: &str, base_dir: &str)
     };
     let cancel = AtomicBool::new(false);
     let summary = py
-        .detach(|| substep::run::execute(&def, &mut collector, &cancel))
+        .detach(|| -> substep::Result<_> {
+            let mut run = Run::new(&def)?;
+            run.set_stability(live.stability_settings.clone())?;
+            let mut watched = LiveObserver {
+                inner: &mut collector,
+                live: &mut live,
+                quiet: true,
+            };
+            Ok(run.execute(&mut watched, &cancel))
+        })
         .map_err(|e| to_py(&e))?;
+    let final_state = serde_json::json!({
+        "completed": summary.completed, "reason": summary.reason, "stopped_by": summary.stopped_by,
+        "steps_done": summary.steps_done, "steps": summary.steps,
+    });
+    py.detach(|| live.finish(final_state, &[], false));
     if let Some(e) = collector.interrupted {
         return Err(e);
     }
     run_tables(py, &summary, collector.table)
+}
+
+/// The monitor's and the indicator's options from Python (`monitor`, `monitor_public`,
+/// `monitor_token`, `monitor_linger`, `stability`, `pace`; a JSON object made by the Python layer).
+fn live_options(json: &str) -> substep::Result<LiveOptions> {
+    let v: serde_json::Value =
+        serde_json::from_str(json).map_err(|e| substep::Error::invalid("monitor options", e.to_string()))?;
+    let text = |k: &str| v.get(k).and_then(|x| x.as_str()).map(str::to_string);
+    let number = |k: &str| v.get(k).and_then(serde_json::Value::as_f64);
+    let stability = match text("stability").as_deref() {
+        None => None,
+        Some("warn") => Some(StabilityChoice::Warn),
+        Some("stop") => Some(StabilityChoice::Stop),
+        Some("off") => Some(StabilityChoice::Off),
+        Some(other) => {
+            return Err(substep::Error::invalid(
+                "stability",
+                format!("unknown action {other:?} (warn, stop or off)"),
+            ));
+        }
+    };
+    let defaults = LiveOptions::default();
+    let linger = number("monitor_linger").unwrap_or(defaults.monitor_linger);
+    if !(linger.is_finite() && linger >= 0.0) {
+        return Err(substep::Error::invalid("monitor_linger", format!("{linger} is not a number of seconds ≥ 0")));
+    }
+    let pace = number("pace");
+    if let Some(p) = pace
+        && !(p.is_finite() && p > 0.0)
+    {
+        return Err(substep::Error::invalid("pace", format!("{p} is not a factor > 0")));
+    }
+    Ok(LiveOptions {
+        monitor: text("monitor"),
+        monitor_public: v.get("monitor_public").and_then(serde_json::Value::as_bool).unwrap_or(false),
+        monitor_token: text("monitor_token"),
+        monitor_linger: linger,
+        stability,
+        pace,
+        keyword_names: true,
+    })
 }
 
 /// The output folder's observer and the in-memory tables, fed in turn.
@@ -234,7 +299,7 @@ fn run_tables<'py>(
 /// `[output] format` (or `format`) asks for it). The dict also has `outputs` (the files
 /// written).
 #[pyfunction]
-#[pyo3(signature = (kind, text, name, base_dir, out_dir, plots=None, plot_format=None, format=None))]
+#[pyo3(signature = (kind, text, name, base_dir, out_dir, plots=None, plot_format=None, format=None, live="{}"))]
 // The config's four parts and the CLI's four output flags: a struct would only rename them.
 #[allow(clippy::too_many_arguments)]
 fn run_folder<'py>(
@@ -247,17 +312,21 @@ fn run_folder<'py>(
     plots: Option<bool>,
     plot_format: Option<&str>,
     format: Option<&str>,
+    live: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let dir = Path::new(out_dir);
-    let (def, options, container) = py
+    let (def, options, container, mut live) = py
         .detach(|| -> substep::Result<_> {
-            let def = definition(kind, text, name, base_dir)?;
+            let mut def = definition(kind, text, name, base_dir)?;
             let options = folder_options(&def, plots, plot_format)?;
             let container = match format {
                 Some(f) => Format::parse("format", f)?,
                 None => def.output.format,
             };
-            Ok((def, options, container))
+            // As the CLI: the indicator's settings and the monitor page (when asked for).
+            let config_name = def.source.clone();
+            let live = Live::start(&live_options(live)?, &mut def, &config_name, false)?;
+            Ok((def, options, container, live))
         })
         .map_err(|e| to_py(&e))?;
     let mut collector = Collector {
@@ -268,13 +337,19 @@ fn run_folder<'py>(
     let cancel = AtomicBool::new(false);
     let result = py.detach(|| -> substep::Result<_> {
         let mut run = Run::new(&def)?;
+        run.set_stability(live.stability_settings.clone())?;
         let layout = run.layout().clone();
         let mut folder = RunFolder::create(&def, &layout, dir, options)?;
         let mut both = FolderAndTables {
             folder: &mut folder,
             tables: &mut collector,
         };
-        let mut summary = run.execute(&mut both, &cancel);
+        let mut watched = LiveObserver {
+            inner: &mut both,
+            live: &mut live,
+            quiet: true,
+        };
+        let mut summary = run.execute(&mut watched, &cancel);
         let finished = folder.finish(&def, run.input_motion(), &mut summary);
         let finished = substep::output::files::no_summary_left_running(&dir.join("summary.json"), finished);
         let mut outputs = finished?;
@@ -286,15 +361,102 @@ fn run_folder<'py>(
         }
         Ok((summary, outputs))
     });
+    let (summary, outputs) = match result {
+        Ok((summary, outputs)) => {
+            let final_state = serde_json::json!({
+                "completed": summary.completed, "reason": summary.reason, "stopped_by": summary.stopped_by,
+                "steps_done": summary.steps_done, "steps": summary.steps,
+            });
+            // The page shows the final state for `monitor_linger` seconds.
+            py.detach(|| live.finish(final_state, &outputs, false));
+            (summary, outputs)
+        }
+        Err(e) => {
+            py.detach(|| live.finish(serde_json::json!({ "completed": false, "reason": e.to_string() }), &[], true));
+            return Err(to_py(&e));
+        }
+    };
     if let Some(e) = collector.interrupted.take() {
         return Err(e);
     }
-    let (summary, outputs) = result.map_err(|e| to_py(&e))?;
     let out = run_tables(py, &summary, collector.table)?;
     out.set_item(
         "outputs",
         outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
     )?;
+    Ok(out)
+}
+
+/// A real-time run into `out_dir` ([`substep::session::realtime::run_realtime`], what
+/// `substep run CONFIG --realtime --out DIR` does). `options` is a JSON object: `max_missed`,
+/// `late_policy`, `lock_memory`, `fifo_priority` and the monitor's options. Returns a dict with
+/// `summary` (the text of `summary.json`), `outputs`, `error` and `error_kind`; the tables are
+/// read from the folder by the Python layer.
+#[pyfunction]
+#[pyo3(signature = (kind, text, name, base_dir, out_dir=None, options="{}"))]
+fn run_realtime<'py>(
+    py: Python<'py>,
+    kind: &str,
+    text: &str,
+    name: &str,
+    base_dir: &str,
+    out_dir: Option<&str>,
+    options: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let outcome = py
+        .detach(|| -> substep::Result<_> {
+            let def = definition(kind, text, name, base_dir)?;
+            // As the CLI: `[output] dir`, else `results`.
+            let out_dir = out_dir
+                .map(std::path::PathBuf::from)
+                .or_else(|| def.output.dir.clone())
+                .unwrap_or_else(|| std::path::PathBuf::from("results"));
+            let v: serde_json::Value = serde_json::from_str(options)
+                .map_err(|e| substep::Error::invalid("real-time options", e.to_string()))?;
+            let fifo_priority = match v.get("fifo_priority").and_then(serde_json::Value::as_i64) {
+                None => None,
+                Some(p) => Some(i32::try_from(p).map_err(|_| {
+                    substep::Error::invalid("fifo_priority", format!("{p} is not a priority 1..99"))
+                })?),
+            };
+            let options = RealtimeRunOptions {
+                max_missed: v.get("max_missed").and_then(serde_json::Value::as_f64),
+                late_policy: v.get("late_policy").and_then(|x| x.as_str()).map(str::to_string),
+                lock_memory: v.get("lock_memory").and_then(serde_json::Value::as_bool).unwrap_or(false),
+                fifo_priority,
+                live: live_options(options)?,
+                keyword_names: true,
+            };
+            let source = def.source.clone();
+            let outcome = substep::session::realtime::run_realtime(&def, &out_dir, &source, &options)?;
+            let RealtimeOutcome {
+                summary,
+                outputs,
+                failure,
+                not_real_time,
+                live,
+                final_state,
+                ..
+            } = outcome;
+            live.finish(final_state, &outputs, false);
+            Ok((summary, outputs, failure, not_real_time, out_dir))
+        })
+        .map_err(|e| to_py(&e))?;
+    let (summary, outputs, failure, not_real_time, out_dir) = outcome;
+    let out = PyDict::new(py);
+    out.set_item("out_dir", out_dir.display().to_string())?;
+    out.set_item("summary", serde_json::to_string(&summary).unwrap_or_default())?;
+    out.set_item(
+        "outputs",
+        outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+    )?;
+    let (error, kind) = match (&failure, &not_real_time) {
+        (Some(e), _) => (Some(to_py(e).value(py).to_string()), Some("run")),
+        (None, Some(reason)) => (Some(reason.split_whitespace().collect::<Vec<_>>().join(" ")), Some("run")),
+        (None, None) => (None, None),
+    };
+    out.set_item("error", error)?;
+    out.set_item("error_kind", kind)?;
     Ok(out)
 }
 
@@ -334,6 +496,7 @@ fn _substep(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("RunError", m.py().get_type::<RunError>())?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(run_folder, m)?)?;
+    m.add_function(wrap_pyfunction!(run_realtime, m)?)?;
     m.add_function(wrap_pyfunction!(write_csv, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::stability, m)?)?;
     m.add_function(wrap_pyfunction!(analyze::accuracy, m)?)?;

@@ -239,6 +239,45 @@ def _config_source(config: ConfigLike) -> Tuple[str, str, str]:
     raise _ConfigTypeError(f"config: must be a path, a TOML string or a dict, not {type(config).__name__}")
 
 
+_LIVE_KEYS = {
+    "monitor": (str,),
+    "monitor_public": (bool,),
+    "monitor_token": (str,),
+    "monitor_linger": (int, float),
+    "stability": (str,),
+    "pace": (int, float),
+}
+_REALTIME_KEYS = {
+    "max_missed": (int, float),
+    "late_policy": (str,),
+    "lock_memory": (bool,),
+    "fifo_priority": (int,),
+}
+
+
+def _options(values: Dict[str, Any], kinds: Dict[str, tuple]) -> Dict[str, Any]:
+    out = {}
+    for key, value in values.items():
+        if value is None:
+            continue
+        allowed = kinds[key]
+        if isinstance(value, bool) and bool not in allowed or not isinstance(value, allowed):
+            names = " or ".join(k.__name__ for k in allowed)
+            raise _ConfigTypeError(f"{key}: must be a {names}, not {type(value).__name__}")
+        out[key] = value
+    return out
+
+
+def _read_table(path: Path):
+    """(names, columns × rows) of a CSV table written by a run."""
+    with open(path, newline="") as f:
+        names = f.readline().strip().split(",")
+    values = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    if values.size == 0:
+        values = np.zeros((0, len(names)))
+    return names, np.ascontiguousarray(values.T)
+
+
 def run(
     config: ConfigLike,
     *,
@@ -246,9 +285,26 @@ def run(
     plots: Optional[bool] = None,
     plot_format: Optional[str] = None,
     format: Optional[str] = None,
+    realtime: bool = False,
+    monitor: Optional[str] = None,
+    monitor_token: Optional[str] = None,
+    monitor_public: bool = False,
+    monitor_linger: Optional[float] = None,
+    stability: Optional[str] = None,
+    pace: Optional[float] = None,
+    max_missed: Optional[float] = None,
+    late_policy: Optional[str] = None,
+    lock_memory: bool = False,
+    fifo_priority: Optional[int] = None,
     raise_on_stop: bool = True,
 ) -> Result:
     """Run a test definition and return its histories and summary.
+
+    ``config`` is a path to a TOML test definition (``docs/config.md``), the TOML text itself,
+    or a dict with the same structure (``{"structure": {"sdof": {...}}, ...}``). Relative paths
+    inside a TOML string or dict start at the current directory; inside a file, at its folder.
+    A lab target (``[substructure.lab]``) or a remote site (``[substructure.remote]``) in the
+    definition is driven exactly as by the CLI.
 
     With ``out_dir``, the run also writes its output folder exactly as
     ``substep run CONFIG --out OUT_DIR`` does (the same files, the same bytes in every CSV
@@ -257,9 +313,16 @@ def run(
     ``[output.plots] format``) and ``format`` (``"csv"``, ``"hdf5"`` or ``"mat"``, default:
     ``[output] format``) are the CLI's ``--no-plots``, ``--plot-format`` and ``--format``.
 
-    ``config`` is a path to a TOML test definition (``docs/config.md``), the TOML text itself,
-    or a dict with the same structure (``{"structure": {"sdof": {...}}, ...}``). Relative paths
-    inside a TOML string or dict start at the current directory; inside a file, at its folder.
+    ``realtime=True`` is ``substep run --realtime`` (docs/realtime.md): the test against the
+    wall clock, into ``out_dir`` (default: the config's ``[output] dir``, else ``results``), with
+    ``max_missed``, ``late_policy``, ``lock_memory`` and ``fifo_priority`` as the CLI's flags; a
+    run that missed more deadlines than allowed raises :class:`RunError` ("not real time").
+
+    ``monitor="127.0.0.1:8080"`` (``""``: the config's ``[monitor] address``) serves the live
+    page during the run (docs/monitor.md) and prints its address and token;
+    ``monitor_token``, ``monitor_public``, ``monitor_linger`` (seconds the page stays after the
+    run, default 30), ``stability`` (``"warn"``, ``"stop"`` or ``"off"``) and ``pace`` are the
+    CLI's ``--monitor-*``, ``--stability`` and ``--pace``.
 
     Returns a :class:`Result` (numpy arrays ``t``, ``u``, ``v``, ``a``, ``coupling_force``,
     ``error_force``, ``measured_displacement``, ``reference``, ``substeps``; ``summary``, the
@@ -268,21 +331,46 @@ def run(
     Raises :class:`ConfigError` for bad input (the CLI's one-line message, its exit code 2) and
     :class:`RunError` for a run that diverged or stopped (a safety limit, a failing site; the
     CLI's exit code 1) unless ``raise_on_stop=False``; the exception's ``result`` attribute has
-    the steps done. The GIL is released while the test runs; Ctrl-C stops it between two steps
-    and raises ``KeyboardInterrupt``.
+    the steps done. The GIL is released while the test runs; offline, Ctrl-C stops it between
+    two steps and raises ``KeyboardInterrupt``.
     """
     kind, text, name = _config_source(config)
-    for key, value, kinds in (("plots", plots, bool), ("plot_format", plot_format, str), ("format", format, str)):
+    for key, value, kinds in (("plots", plots, bool), ("plot_format", plot_format, str), ("format", format, str),
+                              ("realtime", realtime, bool)):
         if value is not None and not isinstance(value, kinds):
             raise _ConfigTypeError(f"{key}: must be a {kinds.__name__}, not {type(value).__name__}")
-    if out_dir is None:
+    if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
+        raise _ConfigTypeError(f"out_dir: must be a path, not {type(out_dir).__name__}")
+    live = _options(
+        {"monitor": monitor, "monitor_token": monitor_token, "monitor_public": monitor_public or None,
+         "monitor_linger": monitor_linger, "stability": stability, "pace": pace},
+        _LIVE_KEYS,
+    )
+    rt = _options(
+        {"max_missed": max_missed, "late_policy": late_policy, "lock_memory": lock_memory or None,
+         "fifo_priority": fifo_priority},
+        _REALTIME_KEYS,
+    )
+    if rt and not realtime:
+        raise ConfigError(f"{', '.join(rt)}: options of a real-time run; give realtime=True too")
+    if realtime:
+        if pace is not None:
+            raise ConfigError("pace: paces an offline run; a real-time run keeps the wall clock")
+        if plots is not None or plot_format is not None or format is not None:
+            raise ConfigError("plots, plot_format, format: a real-time run writes no figures or containers")
+        raw = _substep.run_realtime(kind, text, name, os.getcwd(), None if out_dir is None else os.fspath(out_dir),
+                                    json.dumps({**rt, **live}))
+        folder = Path(raw["out_dir"])
+        raw["history"] = _read_table(folder / "history.csv")
+        raw["substeps"] = _read_table(folder / "substeps.csv") if (folder / "substeps.csv").exists() else None
+        raw["response"] = None
+    elif out_dir is None:
         if plots is not None or plot_format is not None or format is not None:
             raise ConfigError("plots, plot_format, format: they choose what goes into out_dir; give out_dir too")
-        raw = _substep.run(kind, text, name, os.getcwd())
+        raw = _substep.run(kind, text, name, os.getcwd(), json.dumps(live))
     else:
-        if not isinstance(out_dir, (str, os.PathLike)):
-            raise _ConfigTypeError(f"out_dir: must be a path, not {type(out_dir).__name__}")
-        raw = _substep.run_folder(kind, text, name, os.getcwd(), os.fspath(out_dir), plots, plot_format, format)
+        raw = _substep.run_folder(kind, text, name, os.getcwd(), os.fspath(out_dir), plots, plot_format, format,
+                                  json.dumps(live))
     result = Result(raw)
     if raw["error"] is not None and raise_on_stop:
         cls = RunError if raw["error_kind"] == "run" else ConfigError

@@ -53,10 +53,22 @@ def run(
     plots: Optional[bool] = None,
     plot_format: Optional[str] = None,
     format: Optional[str] = None,
+    realtime: bool = False,
+    monitor: Optional[str] = None,
+    monitor_token: Optional[str] = None,
+    monitor_public: bool = False,
+    monitor_linger: Optional[float] = None,
+    stability: Optional[str] = None,
+    pace: Optional[float] = None,
+    max_missed: Optional[float] = None,
+    late_policy: Optional[str] = None,
+    lock_memory: bool = False,
+    fifo_priority: Optional[int] = None,
     raise_on_stop: bool = True,
 ) -> Result:
     """Run a test definition (path, TOML text or dict) and return its histories and summary;
-    with ``out_dir``, also write the output folder ``substep run --out`` writes."""
+    with ``out_dir``, also write the output folder ``substep run --out`` writes; ``realtime=True``
+    runs against the wall clock; ``monitor=ADDR`` serves the live page."""
 
 def study(
     base: ConfigLike,

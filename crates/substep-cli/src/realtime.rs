@@ -14,6 +14,7 @@ pub fn run_realtime(args: &RunArgs, def: &TestDefinition, out_dir: PathBuf, conf
         lock_memory: args.lock_memory,
         fifo_priority: args.fifo_priority,
         live: crate::run::live_options(args),
+        keyword_names: false,
     };
     let outcome = run(def, &out_dir, &config_name, &options)?;
     let report = &outcome.report;

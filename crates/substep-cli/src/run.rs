@@ -229,6 +229,7 @@ pub(crate) fn live_options(args: &RunArgs) -> LiveOptions {
             crate::StabilityArg::Off => StabilityChoice::Off,
         }),
         pace: args.pace,
+        keyword_names: false,
     }
 }
 

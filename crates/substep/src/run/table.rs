@@ -106,6 +106,8 @@ pub struct HistoryTable {
     dtau: f64,
     /// Tracking error and correction of the current sub-step (phase-lag runs).
     phase_lag: Option<(Vec<f64>, Vec<f64>)>,
+    /// `held`, `strays` of the current sub-step (lab-target runs).
+    lab: Option<(bool, u64)>,
     ramp_column: bool,
 }
 
@@ -134,8 +136,16 @@ impl HistoryTable {
             .phase_lag
             .iter()
             .flat_map(|(te, du)| te.iter().chain(du).map(move |&x| if ramp == 0 { x } else { f64::NAN }));
+        // As substeps.csv: the lab's columns are NaN on the ramp's rows.
+        let lab = self.lab.into_iter().flat_map(|(held, strays)| {
+            if ramp == 0 {
+                [f64::from(u8::from(held)), strays as f64]
+            } else {
+                [f64::NAN; 2]
+            }
+        });
         let ramp_col = self.ramp_column.then_some(ramp as f64);
-        table.push(head.into_iter().chain(plain).chain(lag).chain(ramp_col));
+        table.push(head.into_iter().chain(plain).chain(lag).chain(lab).chain(ramp_col));
     }
 }
 
@@ -144,6 +154,11 @@ impl SubstepObserver for HistoryTable {
         if let Some((te, du)) = &mut self.phase_lag {
             te.copy_from_slice(tracking_error);
             du.copy_from_slice(correction);
+        }
+    }
+    fn lab(&mut self, held: bool, strays: u64) {
+        if let Some(l) = &mut self.lab {
+            *l = (held, strays);
         }
     }
     fn substep(&mut self, step: usize, j: usize, command: &[f64], force: &[f64], displacement: &[f64]) {
@@ -163,6 +178,7 @@ impl RunObserver for HistoryTable {
         self.dt = layout.dt;
         self.dtau = layout.dt / layout.substeps.unwrap_or(1) as f64;
         self.phase_lag = layout.phase_lag.then(|| (vec![0.0; n_c], vec![0.0; n_c]));
+        self.lab = layout.lab.then_some((false, 0));
         self.ramp_column = layout.ramp_column;
     }
 

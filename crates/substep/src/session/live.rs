@@ -45,6 +45,15 @@ pub struct LiveOptions {
     pub stability: Option<StabilityChoice>,
     /// Pace an offline run at this multiple of real time (for watching it).
     pub pace: Option<f64>,
+    /// Name the options in messages as Python's keywords (`monitor_token`) instead of the
+    /// CLI's flags (`--monitor-token`).
+    pub keyword_names: bool,
+}
+
+impl LiveOptions {
+    fn name(&self, flag: &'static str, keyword: &'static str) -> &'static str {
+        if self.keyword_names { keyword } else { flag }
+    }
 }
 
 impl Default for LiveOptions {
@@ -56,6 +65,7 @@ impl Default for LiveOptions {
             monitor_linger: 30.0,
             stability: None,
             pace: None,
+            keyword_names: false,
         }
     }
 }
@@ -205,8 +215,8 @@ impl Live {
             Some(addr) => {
                 let (addr, what) = match (addr.as_str(), &def.monitor.address) {
                     ("", Some(a)) => (a.as_str(), "monitor.address"),
-                    ("", None) => (DEFAULT_ADDRESS, "--monitor"),
-                    (a, _) => (a, "--monitor"),
+                    ("", None) => (DEFAULT_ADDRESS, args.name("--monitor", "monitor")),
+                    (a, _) => (a, args.name("--monitor", "monitor")),
                 };
                 let addr = addr.parse().map_err(|e| {
                     crate::Error::invalid(what, format!("'{addr}' is not an address host:port ({e})"))
@@ -214,8 +224,9 @@ impl Live {
                 // The command line's token overrides the config's; without either a random one.
                 let (token, shown) = match (&args.monitor_token, &def.monitor.token) {
                     (Some(t), _) => {
-                        crate::io::check_token("--monitor-token", t)?;
-                        (t.clone(), "the token given with --monitor-token".to_string())
+                        let option = args.name("--monitor-token", "monitor_token");
+                        crate::io::check_token(option, t)?;
+                        (t.clone(), format!("the token given with {option}"))
                     }
                     (None, Some(t)) => (t.clone(), format!("the token of [monitor] token in {config}")),
                     (None, None) => {
@@ -248,6 +259,8 @@ impl Live {
                 let m = Monitor::start(MonitorOptions {
                     addr,
                     public: args.monitor_public,
+                    option: args.name("--monitor", "monitor"),
+                    public_option: args.name("--monitor-public", "monitor_public=True"),
                     token: token.clone(),
                     window: 10.0,
                     hold_allowed: !realtime,

@@ -29,6 +29,15 @@ pub struct RealtimeRunOptions {
     pub lock_memory: bool,
     pub fifo_priority: Option<i32>,
     pub live: LiveOptions,
+    /// Name the options in messages as Python's keywords (`max_missed`) instead of the CLI's
+    /// flags (`--max-missed`).
+    pub keyword_names: bool,
+}
+
+impl RealtimeRunOptions {
+    fn name(&self, flag: &'static str, keyword: &'static str) -> &'static str {
+        if self.keyword_names { keyword } else { flag }
+    }
 }
 
 /// A finished real-time run: what the front end prints, and the monitor to close.
@@ -131,11 +140,11 @@ pub fn run_realtime(
     let accel = def.ground_motion.accel.clone();
     let load0 = -def.model.effective_mass_vector() * accel[0];
     let max_missed = match args.max_missed {
-        Some(x) => crate::io::config::check_max_missed("--max-missed", x)?,
+        Some(x) => crate::io::config::check_max_missed(args.name("--max-missed", "max_missed"), x)?,
         None => def.realtime.max_missed,
     };
     let late_policy = match &args.late_policy {
-        Some(name) => crate::io::config::parse_late_policy("--late-policy", name)?,
+        Some(name) => crate::io::config::parse_late_policy(args.name("--late-policy", "late_policy"), name)?,
         None => def.realtime.late_policy,
     };
     // Can this model keep the wall clock on this machine? Measured on a throwaway controller

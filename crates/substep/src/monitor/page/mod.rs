@@ -31,6 +31,10 @@ const TICK: Duration = Duration::from_millis(50);
 pub struct MonitorOptions {
     pub addr: SocketAddr,
     pub public: bool,
+    /// How messages name the address option and the one that allows a public address (the
+    /// CLI's `--monitor`, `--monitor-public`; Python's keywords).
+    pub option: &'static str,
+    pub public_option: &'static str,
     pub token: String,
     /// Window of the traces on the page \[s of run time\].
     pub window: f64,
@@ -52,17 +56,17 @@ impl Monitor {
     pub fn start(opts: MonitorOptions) -> Result<Self> {
         if !opts.addr.ip().is_loopback() && !opts.public {
             return Err(Error::invalid(
-                "--monitor",
+                opts.option,
                 format!(
-                    "{} is not a loopback address; listening on other interfaces needs --monitor-public (controls stay behind the token)",
-                    opts.addr
+                    "{} is not a loopback address; listening on other interfaces needs {} (controls stay behind the token)",
+                    opts.addr, opts.public_option
                 ),
             ));
         }
         let listener = TcpListener::bind(opts.addr)
-            .map_err(|e| Error::invalid("--monitor", format!("cannot listen on {}: {e}", opts.addr)))?;
-        listener.set_nonblocking(true).map_err(|e| Error::invalid("--monitor", format!("monitor socket: {e}")))?;
-        let addr = listener.local_addr().map_err(|e| Error::invalid("--monitor", format!("monitor socket: {e}")))?;
+            .map_err(|e| Error::invalid(opts.option, format!("cannot listen on {}: {e}", opts.addr)))?;
+        listener.set_nonblocking(true).map_err(|e| Error::invalid(opts.option, format!("monitor socket: {e}")))?;
+        let addr = listener.local_addr().map_err(|e| Error::invalid(opts.option, format!("monitor socket: {e}")))?;
         let (producer, consumer) = frame_ring(4096);
         let controls = Arc::new(Controls::default());
         let shared = Arc::new(Shared {
@@ -89,12 +93,12 @@ impl Monitor {
         let drain = std::thread::Builder::new()
             .name("monitor-drain".into())
             .spawn(move || drain_loop(consumer, &s1))
-            .map_err(|e| Error::invalid("--monitor", format!("cannot start the monitor thread: {e}")))?;
+            .map_err(|e| Error::invalid(opts.option, format!("cannot start the monitor thread: {e}")))?;
         let s2 = shared.clone();
         let accept = std::thread::Builder::new()
             .name("monitor-http".into())
             .spawn(move || server::accept_loop(listener, &s2))
-            .map_err(|e| Error::invalid("--monitor", format!("cannot start the monitor thread: {e}")))?;
+            .map_err(|e| Error::invalid(opts.option, format!("cannot start the monitor thread: {e}")))?;
         Ok(Self {
             producer,
             controls,
