@@ -73,6 +73,68 @@ def _table(pair) -> Optional[Table]:
     return Table(names, np.asarray(columns).T)
 
 
+_FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
+_MIME = {".png": "image/png", ".svg": "image/svg+xml", ".pdf": "application/pdf"}
+
+
+class Figure:
+    """One figure of a run (``displacement``, ``hysteresis``, ``reference``, ...): the bytes of
+    the PNG, SVG or PDF file ``substep run`` draws, shown inline by Jupyter."""
+
+    def __init__(self, name: str, suffix: str, data: bytes) -> None:
+        self.name, self.format, self.data = name, suffix.lstrip("."), data
+
+    def save(self, path: Union[str, "os.PathLike[str]"]) -> str:
+        """Write the figure's file to ``path``; returns it."""
+        Path(path).write_bytes(self.data)
+        return os.fspath(path)
+
+    def _repr_png_(self) -> Optional[bytes]:
+        return self.data if self.format == "png" else None
+
+    def _repr_svg_(self) -> Optional[str]:
+        return self.data.decode() if self.format == "svg" else None
+
+    def _repr_html_(self) -> str:
+        if self.format == "pdf":
+            return f"<p>{self.name}.pdf ({len(self.data)} bytes; save() it, or plot(format='png') to see it)</p>"
+        import base64
+
+        b64 = base64.b64encode(self.data).decode()
+        return f'<figure><img src="data:{_MIME["." + self.format]};base64,{b64}" alt="{self.name}" style="max-width:100%"/>' \
+               f"<figcaption>{self.name}</figcaption></figure>"
+
+    def __repr__(self) -> str:
+        return f"<substep.Figure {self.name}.{self.format}, {len(self.data)} bytes>"
+
+
+class Figures(list):
+    """The figures of a run in the order ``substep run`` draws them; ``figures["hysteresis"]``
+    picks one by name. Jupyter shows them all."""
+
+    def __getitem__(self, key):
+        if isinstance(key, str):
+            for f in self:
+                if f.name == key:
+                    return f
+            raise KeyError(f"{key!r}: no such figure (this run drew {', '.join(f.name for f in self) or 'none'})")
+        return super().__getitem__(key)
+
+    def names(self) -> List[str]:
+        return [f.name for f in self]
+
+    def _repr_html_(self) -> str:
+        return "".join(f._repr_html_() for f in self)
+
+
+def _figures_in(paths) -> Figures:
+    out = Figures()
+    for p in map(Path, paths):
+        if p.suffix in _FIGURE_SUFFIXES:
+            out.append(Figure(p.stem, p.suffix, p.read_bytes()))
+    return out
+
+
 class Result:
     """The outcome of :func:`run`.
 
@@ -110,6 +172,41 @@ class Result:
         self.compensation_force = h.group("fu") if sub else None
         self.measured_displacement = h.group("dm") if sub else None
         self.reference = h.group("uref") if "uref1" in h.names else None
+        # (kind, text, name, base_dir) of the config, for plot()
+        self._source: Optional[Tuple[str, str, str, str]] = None
+        self._realtime = self.summary.get("mode") == "realtime"
+
+    def plot(self, format: str = "png") -> "Figures":
+        """The figures ``substep run`` draws for this test (the same files, byte for byte:
+        displacement, acceleration, coupling force, error force, hysteresis, reference,
+        energy, ground motion, ... as ``[output.plots] figures`` chooses), as
+        :class:`Figure` objects that Jupyter shows inline; ``figure.save(path)`` writes one.
+
+        A run with ``out_dir`` and figures in that ``format`` already drew them: they are read
+        from there. Otherwise the test is run again into a temporary folder (a run is
+        deterministic: the same numbers to the bit) and drawn there. A real-time run draws no
+        figures (nor does the CLI's); its ``history`` has the data.
+        """
+        if self._realtime:
+            raise ConfigError("plot: a real-time run draws no figures (as substep run --realtime); "
+                              "plot its history, or run it offline")
+        if not isinstance(format, str) or format not in ("png", "svg", "pdf"):
+            raise ConfigError(f"plot: format: {format!r} is not png, svg or pdf")
+        drawn = [p for p in self.outputs if Path(p).suffix == "." + format and Path(p).exists()]
+        if drawn:
+            return _figures_in(drawn)
+        if self._source is None:
+            raise ConfigError("plot: this Result does not come from substep.run")
+        import shutil
+        import tempfile
+
+        tmp = tempfile.mkdtemp(prefix="substep-plot-")
+        try:
+            kind, text, name, base_dir = self._source
+            raw = _substep.run_folder(kind, text, name, base_dir, tmp, True, format, "csv", "{}")
+            return _figures_in(raw["outputs"])
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
 
     @property
     def completed(self) -> bool:
@@ -372,6 +469,7 @@ def run(
         raw = _substep.run_folder(kind, text, name, os.getcwd(), os.fspath(out_dir), plots, plot_format, format,
                                   json.dumps(live))
     result = Result(raw)
+    result._source = (kind, text, name, os.getcwd())
     if raw["error"] is not None and raise_on_stop:
         cls = RunError if raw["error_kind"] == "run" else ConfigError
         err = cls(raw["error"])

@@ -25,11 +25,21 @@ class Table:
     def group(self, prefix: str) -> np.ndarray: ...
     def to_pandas(self) -> pandas.DataFrame: ...
 
+class Figure:
+    name: str
+    format: str
+    data: bytes
+    def save(self, path: Union[str, os.PathLike[str]]) -> str: ...
+
+class Figures(List[Figure]):
+    def names(self) -> List[str]: ...
+
 class Result:
     summary: Dict[str, Any]
     history: Table
     substeps: Optional[Table]
     outputs: List[str]
+    def plot(self, format: str = "png") -> Figures: ...
     response: Optional[Table]
     error: Optional[str]
     t: np.ndarray

@@ -104,3 +104,40 @@ def test_bad_output_options_are_refused_naming_them(tmp_path):
     (tmp_path / "file").write_text("x")
     with pytest.raises(substep.ConfigError, match="cannot create the output directory"):
         substep.run(example, out_dir=tmp_path / "file" / "out")
+
+
+def test_result_plot_gives_the_cli_figures_and_jupyter_shows_them(cli, tmp_path):
+    example = ROOT / "examples" / "default.toml"
+    d_cli = tmp_path / "cli"
+    proc = run_cli(cli, "run", str(example), "--out", str(d_cli), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    cli_figures = sorted(p.name for p in d_cli.iterdir() if p.suffix == ".png")
+    assert {"displacement.png", "hysteresis.png", "reference.png"} <= set(cli_figures)
+
+    # without out_dir (drawn from a rerun) and with it (read from the folder): the CLI's bytes
+    for result in (substep.run(example), substep.run(example, out_dir=tmp_path / "py")):
+        figures = result.plot()
+        assert sorted(f + ".png" for f in figures.names()) == cli_figures
+        for f in figures:
+            assert f.data == (d_cli / f"{f.name}.png").read_bytes(), f.name
+    assert figures["hysteresis"].name == "hysteresis"
+    with pytest.raises(KeyError, match="no such figure"):
+        figures["nothing"]
+    svg = substep.run(example).plot(format="svg")["displacement"]
+    assert svg.data.startswith(b"<svg")
+    assert svg.save(tmp_path / "d.svg") and (tmp_path / "d.svg").read_bytes() == svg.data
+
+    # Jupyter's formatter: a PNG figure is an image/png bundle, SVG an image/svg+xml one, the
+    # list of figures an HTML page of inline images
+    from IPython.core.formatters import DisplayFormatter
+
+    fmt = DisplayFormatter()
+    bundle, _ = fmt.format(figures["reference"])
+    assert bundle["image/png"] == figures["reference"].data
+    bundle, _ = fmt.format(svg)
+    assert bundle["image/svg+xml"].startswith("<svg")
+    bundle, _ = fmt.format(figures)
+    assert bundle["text/html"].count("<img") == len(figures)
+
+    with pytest.raises(substep.ConfigError, match="format"):
+        figures = substep.run(example).plot(format="gif")
