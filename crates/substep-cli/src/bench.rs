@@ -7,20 +7,11 @@
 //! storage, per-step median/p99, peak RSS); `--sweep` runs it over sizes 10²…10⁵; `--compare`
 //! times the 5000-DOF chain against OpenSees and SciPy (`bench_compare.rs`).
 
-use anyhow::{Result, bail};
-use nalgebra::DVector;
-use serde::Serialize;
-use std::time::{Duration, Instant};
-use substep::integrate::Scheme;
-use substep::model::{DampingSpec, ShearBuilding, StructuralModel, shear_building};
-use substep::specimen::SpecimenSpec;
-use substep::substructure::{ErrorForceSpec, ExperimentalSubstructure, SubstepController, SubstepSettings};
-use substep::transfer::{ActuatorSpec, SensorSpec, VirtualLab};
+use anyhow::Result;
+use substep::bench::{STEP_BENCH_DT as DT, STEP_BENCH_ZETA as ZETA};
 
 use crate::bench_models::{self, BenchModel};
 
-const DT: f64 = 0.01;
-const ZETA: f64 = 0.05;
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct BenchArgs {
@@ -77,160 +68,6 @@ pub struct BenchArgs {
     pub rounds: usize,
 }
 
-#[derive(Debug, Serialize)]
-struct MonolithicResult {
-    stories: usize,
-    us_per_step: f64,
-}
-
-#[derive(Debug, Serialize)]
-struct SubstructureCase {
-    n_c: usize,
-    us_per_step: f64,
-    us_per_substep: f64,
-}
-
-#[derive(Debug, Serialize)]
-struct SubstructureResult {
-    stories: usize,
-    substeps: usize,
-    cases: Vec<SubstructureCase>,
-}
-
-#[derive(Debug, Serialize)]
-struct BenchResult {
-    scheme: &'static str,
-    dt: f64,
-    steps: usize,
-    repeats: usize,
-    monolithic: Vec<MonolithicResult>,
-    substructure: SubstructureResult,
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        0.5 * (v[m - 1] + v[m])
-    }
-}
-
-fn building(stories: usize) -> Result<StructuralModel> {
-    let b = ShearBuilding {
-        stories,
-        story_mass: 1.0e5,
-        first_period: (0.1 * stories as f64).max(0.1),
-    };
-    Ok(shear_building(&b)?.with_damping(&DampingSpec::Modal { zeta: vec![ZETA] })?)
-}
-
-/// Ground acceleration at step `i`: a 1 Hz harmonic of 1 m/s².
-fn ag(i: usize) -> f64 {
-    (2.0 * std::f64::consts::PI * i as f64 * DT).sin()
-}
-
-fn bench_monolithic(model: &StructuralModel, steps: usize, repeats: usize) -> Result<f64> {
-    let mi = model.effective_mass_vector();
-    let mut load = DVector::zeros(model.n_dofs());
-    let mut integ = Scheme::Newmark { beta: 0.25, gamma: 0.5 }.build(model, DT, &(-&mi * ag(0)))?;
-    let mut i = 0;
-    let mut samples = Vec::with_capacity(repeats);
-    for _ in 0..repeats {
-        let t0 = Instant::now();
-        for _ in 0..steps {
-            i += 1;
-            load.copy_from(&mi);
-            load.scale_mut(-ag(i));
-            integ.step(&load);
-        }
-        samples.push(t0.elapsed().as_secs_f64() * 1e6 / steps as f64);
-    }
-    if !integ.state().is_finite() {
-        bail!("the monolithic benchmark diverged");
-    }
-    Ok(median(samples))
-}
-
-/// `(µs per full step, µs per sub-step)` with `n_c` spring specimens on the top floors.
-fn bench_substructure(
-    model: &StructuralModel,
-    n_c: usize,
-    substeps: usize,
-    steps: usize,
-    repeats: usize,
-) -> Result<(f64, f64)> {
-    let n = model.n_dofs();
-    let coupling: Vec<usize> = (0..n_c).map(|k| n - 1 - k).collect();
-    let k_story = model.stiffness[(n - 1, n - 1)];
-    let specimens: Vec<SpecimenSpec> = coupling
-        .iter()
-        .map(|&dof| SpecimenSpec::LinearSdof {
-            dof,
-            mass: None,
-            stiffness: 0.1 * k_story,
-            damping: 0.0,
-        })
-        .collect();
-    let settings = SubstepSettings {
-        dt: DT,
-        beta: 0.25,
-        gamma: 0.5,
-        substeps,
-        coupling_dofs: coupling.clone(),
-        error_force: ErrorForceSpec::None,
-    };
-    let mi = model.effective_mass_vector();
-    let mut load = -&mi * ag(0);
-    let mut ctrl = SubstepController::new(model, &settings, &load)?;
-    let dtau = DT / substeps as f64;
-    let mut lab = VirtualLab::from_specs(
-        &coupling,
-        &specimens,
-        &vec![ActuatorSpec::ideal(); n_c],
-        &vec![SensorSpec::ideal(); n_c],
-        &vec![SensorSpec::ideal(); n_c],
-        dtau,
-        1,
-    )?;
-    let (mut force, mut disp) = (vec![0.0; n_c], vec![0.0; n_c]);
-    let mut i = 0;
-    let (mut per_step, mut per_substep) = (Vec::new(), Vec::new());
-    for _ in 0..repeats {
-        let (mut total, mut inner) = (Duration::ZERO, Duration::ZERO);
-        for _ in 0..steps {
-            let (a0, a1) = (ag(i), ag(i + 1));
-            i += 1;
-            let t0 = Instant::now();
-            load.copy_from(&mi);
-            load.scale_mut(-a1);
-            ctrl.begin_step(&load);
-            let t1 = Instant::now();
-            for j in 1..=substeps {
-                let command = ctrl.next_command();
-                lab.substep(
-                    command,
-                    substep::substructure::substep_ground_acceleration(a0, a1, j, substeps),
-                    dtau,
-                    &mut force,
-                    &mut disp,
-                )?;
-                ctrl.feedback(&force);
-            }
-            inner += t1.elapsed();
-            ctrl.finish_step();
-            total += t0.elapsed();
-        }
-        per_step.push(total.as_secs_f64() * 1e6 / steps as f64);
-        per_substep.push(inner.as_secs_f64() * 1e6 / (steps * substeps) as f64);
-    }
-    if !ctrl.state().is_finite() {
-        bail!("the substructure benchmark diverged");
-    }
-    Ok((median(per_step), median(per_substep)))
-}
-
 pub fn bench(args: &BenchArgs) -> Result<()> {
     if args.substeps == 0 {
         return Err(substep::Error::invalid("--substeps", "must be at least 1").into());
@@ -273,57 +110,13 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     if args.dofs.is_some() {
         return Err(substep::Error::invalid("--dofs", "needs --model chain|frame").into());
     }
-    if args.stories.contains(&0) {
-        return Err(substep::Error::invalid("--stories", "must be at least 1").into());
-    }
-    if args.steps == 0 {
-        return Err(substep::Error::invalid("--steps", "must be at least 1").into());
-    }
-    if args.repeats < 5 {
-        return Err(substep::Error::invalid("--repeats", format!("must be at least 5, got {}", args.repeats)).into());
-    }
-    let mut stories = args.stories.clone();
-    stories.sort_unstable();
-    stories.dedup();
-    let largest = *stories.last().expect("default list is not empty");
-
-    let mut monolithic = Vec::new();
-    let mut largest_model = None;
-    for &n in &stories {
-        let model = building(n)?;
-        let us = bench_monolithic(&model, args.steps, args.repeats)?;
-        monolithic.push(MonolithicResult {
-            stories: n,
-            us_per_step: us,
-        });
-        if n == largest {
-            largest_model = Some(model);
-        }
-    }
-    let model = largest_model.expect("largest model was built");
-    let mut cases = Vec::new();
-    for n_c in [1, 4] {
-        if n_c <= largest {
-            let (step, sub) = bench_substructure(&model, n_c, args.substeps, args.steps, args.repeats)?;
-            cases.push(SubstructureCase {
-                n_c,
-                us_per_step: step,
-                us_per_substep: sub,
-            });
-        }
-    }
-    let result = BenchResult {
-        scheme: "newmark average acceleration (beta = 1/4, gamma = 1/2)",
-        dt: DT,
+    let result = substep::bench::bench_steps(&substep::bench::StepBenchOptions {
+        stories: args.stories.clone(),
         steps: args.steps,
         repeats: args.repeats,
-        monolithic,
-        substructure: SubstructureResult {
-            stories: largest,
-            substeps: args.substeps,
-            cases,
-        },
-    };
+        substeps: args.substeps,
+    })?;
+    let largest = result.substructure.stories;
     if args.json {
         println!("{}", serde_json::to_string(&result).expect("bench result serialises"));
         return Ok(());
