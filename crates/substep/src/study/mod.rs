@@ -1,10 +1,10 @@
 //! Studies. Parameter studies (this module): every variant of a base test definition, run in
 //! parallel, one row of metrics per run (docs/theory.md §14, docs/config.md "Study files").
 //! Study drivers: a fixed set-up run over a set of methods or parameters, returning typed
-//! results (numbers and series, no files); front ends print, plot and write them:
+//! results (numbers and series); a report module writes their files, front ends print:
 //!
 //! * [`vst`]: the virtual substructure test study (every compensation method against the exact
-//!   reference, docs/vst.md).
+//!   reference, docs/vst.md; its files: [`vst::report`]).
 //!
 //! Parameter studies in detail:
 //! A [`Study`] is the base config (parsed TOML), a grid of dotted-key overrides (the cartesian

@@ -11,8 +11,9 @@
 //! Every method runs on the same set-up and noise sequence and is compared with the exact
 //! solution of the assembled model (`assemble_monolithic` + `Scheme::Exact`, through
 //! [`crate::run::Reference`]). [`run_study`] returns the numbers ([`Study`]: per-step series and
-//! error statistics per method, [`acceptance`] the verdicts); tables, CSV and plots are the
-//! front end's (`substep vst`, docs/vst.md).
+//! error statistics per method, [`acceptance`] the verdicts); [`report`] turns them into the
+//! files of `substep vst` (`vst.md`, `vst.csv`, the figures; the damper grid's
+//! `damper_grid.md`, `.csv`; docs/vst.md).
 //!
 //! ```
 //! use substep::study::vst::{VstSettings, run_study};
@@ -27,6 +28,7 @@
 //! ```
 
 pub mod grid;
+pub mod report;
 mod run;
 
 pub use run::{RunResult, Series, Study, acceptance, run_study};
