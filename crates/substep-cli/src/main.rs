@@ -141,7 +141,8 @@ pub enum StabilityArg {
 /// fails mid-run as `Error::Stopped`, so a killed site is 1 offline and in real time.
 fn exit_code(e: &anyhow::Error) -> u8 {
     match e.downcast_ref::<substep::Error>() {
-        Some(substep::Error::Diverged { .. } | substep::Error::Stopped { .. }) => 1,
+        // A run that diverged or stopped, and outputs that could not be written: runtime failures.
+        Some(substep::Error::Diverged { .. } | substep::Error::Stopped { .. } | substep::Error::Output { .. }) => 1,
         Some(_) => 2,
         None => 1,
     }

@@ -29,6 +29,12 @@ pub enum Error {
     /// A file could not be read or parsed.
     #[error("{path}: {reason}")]
     File { path: String, reason: String },
+
+    /// An output file could not be written while or after a run (a full disk, a folder that
+    /// turned read-only): a runtime failure, not bad input — the CLI exits 1, as for a run that
+    /// stopped. (An output folder that cannot be created before the run is [`Error::File`].)
+    #[error("{path}: cannot write: {reason}")]
+    Output { path: String, reason: String },
 }
 
 impl Error {
@@ -42,6 +48,13 @@ impl Error {
         Error::Numerical {
             what: one_line(what.into()),
             reason: one_line(reason.into()),
+        }
+    }
+    /// [`Error::Output`]: `path` could not be written (`reason`: the I/O error).
+    pub fn write(path: &std::path::Path, reason: impl std::fmt::Display) -> Self {
+        Error::Output {
+            path: one_line(path.display().to_string()),
+            reason: one_line(reason.to_string()),
         }
     }
     pub fn file(path: impl Into<String>, reason: impl Into<String>) -> Self {

@@ -573,7 +573,7 @@ fn render(
     register_font()?;
     let out = output_path(path, format);
     let fail = |m: String| Error::file(out.display().to_string(), format!("cannot draw: {m}"));
-    let cannot_write = |e: std::io::Error| Error::file(out.display().to_string(), format!("cannot write: {e}"));
+    let cannot_write = |e: std::io::Error| Error::write(&out, e);
     match format {
         PlotFormat::Png => {
             // Twice the size, then a 2×2 box filter: anti-aliased lines and text.

@@ -335,7 +335,7 @@ pub fn no_summary_left_running<T, E: std::fmt::Display>(path: &Path, result: Res
 
 /// A write error naming the file.
 pub fn cannot_write(path: &Path, e: impl std::fmt::Display) -> crate::Error {
-    crate::Error::file(path.display().to_string(), format!("cannot write: {e}"))
+    crate::Error::write(path, e)
 }
 
 #[cfg(test)]
