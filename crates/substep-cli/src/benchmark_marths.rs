@@ -1,15 +1,11 @@
 //! `substep benchmark marths`: the multi-axial RTHS benchmark (maRTHS) as a built-in. Thin: parse
-//! the flags, call `substep::benchmark::marths`, print the table or one JSON object, write the
-//! traces and `marths.md`.
+//! the flags, call `substep::benchmark::marths` (its `report` writes the traces and
+//! `marths.md`), print the table or one JSON object.
 
-use anyhow::{Context, Result};
-use serde_json::{Value, json};
-use std::fmt::Write as _;
+use crate::benchmark::{command, out};
+use anyhow::Result;
 use std::path::{Path, PathBuf};
-use substep::benchmark::marths::{
-    COMMAND_LIMIT_V, ControllerKind, MarthsInput, MarthsOptions, Record, RecordChoice, Study, Transfer, compare,
-    compare_markdown, criteria_json, names_a_record_file, reference, round1, run, run_with,
-};
+use substep::benchmark::marths::{MarthsOptions, RecordChoice, names_a_record_file, reference, report, run_with};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct MarthsArgs {
@@ -61,11 +57,6 @@ pub struct MarthsArgs {
     pub compare: bool,
 }
 
-fn out(text: &str) {
-    use std::io::Write;
-    let _ = std::io::stdout().lock().write_all(text.as_bytes());
-}
-
 /// The flags as the library's options (files read here, through the bounded readers).
 fn options<'a>(
     args: &'a MarthsArgs,
@@ -114,173 +105,15 @@ fn config_text(args: &MarthsArgs) -> Result<Option<(String, String)>> {
     })
 }
 
-const LABELS: [(&str, &str, &[&str]); 10] = [
-    ("J1", "delay [ms]", &["act. 1", "act. 2"]),
-    ("J2", "NRMS tracking [%]", &["act. 1", "act. 2"]),
-    ("J3", "peak tracking [%]", &["act. 1", "act. 2"]),
-    ("J4", "delay, as coded = J1 [ms]", &["act. 1", "act. 2"]),
-    ("J5", "NRMS frame vs numerical [%]", &["x", "θ"]),
-    ("J6", "peak frame vs numerical [%]", &["x", "θ"]),
-    ("J7", "NRMS frame vs reference [%]", &["x", "θ"]),
-    ("J8", "NRMS storeys 2, 3 [%]", &["x₂", "θ₂", "x₃", "θ₃"]),
-    ("J9", "peak frame vs reference [%]", &["x", "θ"]),
-    ("J10", "peak storeys 2, 3 [%]", &["x₂", "θ₂", "x₃", "θ₃"]),
-];
-
-fn describe(args: &MarthsArgs, input: &MarthsInput) -> String {
-    let transfer = match input.transfer {
-        Transfer::Ideal => "ideal transfer system".to_string(),
-        Transfer::Plant { noise_seed, .. } => format!(
-            "{} plant, {}",
-            if args.config.is_some() {
-                "configured"
-            } else {
-                "the toolset's"
-            },
-            noise_seed.map_or("no sensor noise".to_string(), |s| format!("sensor noise (seed {s})"))
-        ),
-    };
-    format!(
-        "maRTHS benchmark: {} × {}, controller {}, algorithm {}, {transfer}",
-        input.record.name,
-        input.intensity,
-        input.controller.name(),
-        args.algorithm
-    )
-}
-
-fn table(head: &str, study: &Study, trials: usize) -> String {
-    let mut s = String::new();
-    let _ = writeln!(s, "{head}");
-    let what = if trials == 0 {
-        "nominal plant".to_string()
-    } else {
-        format!("mean over {trials} uncertain plants (nominal excluded), rounded as the toolset reports")
-    };
-    let _ = writeln!(s, "J1–J10: {what}");
-    match study.reported() {
-        Some(c) => {
-            let c = c.map(round1);
-            for ((name, values), (_, label, parts)) in c.lists().iter().zip(LABELS) {
-                let cells: Vec<String> = values.iter().zip(parts).map(|(v, p)| format!("{p} {v:.1}")).collect();
-                let _ = writeln!(s, "  {name:<4} {label:<30} {}", cells.join("   "));
-            }
-        }
-        None => {
-            let _ = writeln!(s, "  no score: a run diverged");
-        }
-    }
-    let v = study.nominal.peak_volts;
-    let _ = writeln!(
-        s,
-        "realizable: {} (peak command, nominal: {:.2} / {:.2} V; limit {COMMAND_LIMIT_V} V on both actuators)",
-        if study.realizable() { "yes" } else { "NO" },
-        v[0],
-        v[1]
-    );
-    let diverged = study.diverged_runs();
-    let _ = writeln!(
-        s,
-        "runs: 1 nominal + {} uncertain, {}",
-        study.trials.len(),
-        if diverged == 0 {
-            "all stable".to_string()
-        } else {
-            format!("{diverged} DIVERGED")
-        }
-    );
-    s
-}
-
-fn trace(input: &MarthsInput, dir: &Path) -> Result<PathBuf> {
-    let mut one = input.clone();
-    one.keep_history = true;
-    let reference = reference(&one)?;
-    let result = run(&one, &reference)?;
-    let h = result.history.context("the run kept no history")?;
-    let n = h.len();
-    let mut text = String::with_capacity(n * 300);
-    text.push_str(
-        "t [s],target 1 [mm],target 2 [mm],measured 1 [mm],measured 2 [mm],command 1 [mm],command 2 [mm],x measured [mm],θ measured [rad],x numerical [mm],θ numerical [rad],x reference [mm],θ reference [rad]\n",
-    );
-    for k in 0..n {
-        let _ = writeln!(
-            text,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            k as f64 * substep::benchmark::marths::SAMPLE_TIME,
-            h.target[0][k],
-            h.target[1][k],
-            h.measured[0][k],
-            h.measured[1][k],
-            h.command[0][k],
-            h.command[1][k],
-            h.frame_measured[0][k],
-            h.frame_measured[1][k],
-            h.frame_numerical[0][k],
-            h.frame_numerical[1][k],
-            h.frame_reference[0][k],
-            h.frame_reference[1][k],
-        );
-    }
-    let path = dir.join("trace.csv");
-    std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(path)
-}
-
 fn comparison(args: &MarthsArgs) -> Result<()> {
     let trials = if args.trials == 0 { 20 } else { args.trials };
-    let controllers = ["rodeac", "arx", "arx_mimo"].map(|c| ControllerKind::parse(c).expect("a known controller"));
-    let t0 = std::time::Instant::now();
-    let rows = compare(&Record::all(), &controllers, trials, args.seed, !args.no_noise)?;
-    let elapsed = t0.elapsed().as_secs_f64();
-    let unstable: usize = rows
-        .iter()
-        .map(|r| r.trials - r.stable_trials + usize::from(r.nominal.is_none()))
-        .sum();
+    let comparison = report::comparison(trials, args.seed, !args.no_noise)?;
     if args.json {
-        let rows: Vec<Value> = rows
-            .iter()
-            .map(|r| {
-                json!({
-                    "record": r.record,
-                    "controller": r.controller,
-                    "nominal": r.nominal.as_ref().map_or(Value::Null, criteria_json),
-                    "mean": r.mean.as_ref().map_or(Value::Null, criteria_json),
-                    "worst_J2": r.worst_j2,
-                    "worst_J7": r.worst_j7,
-                    "stable_trials": r.stable_trials,
-                    "trials": r.trials,
-                    "backed_off": r.backed_off,
-                    "realizable": r.realizable,
-                })
-            })
-            .collect();
-        out(&format!(
-            "{}\n",
-            serde_json::to_string_pretty(&json!({ "rows": rows, "noise": !args.no_noise, "seed": args.seed }))?
-        ));
+        out(&format!("{}\n", serde_json::to_string_pretty(&comparison.json())?));
     } else {
-        out(&format!(
-            "maRTHS: controllers side by side, intensity 0.4, {}, {trials} uncertain plants (seed {})\n\n{}\n{} runs in {elapsed:.1} s\n",
-            if args.no_noise {
-                "no sensor noise"
-            } else {
-                "sensor noise"
-            },
-            args.seed,
-            compare_markdown(&rows),
-            rows.len() * (trials + 1)
-        ));
+        out(&comparison.text());
     }
-    if unstable > 0 {
-        return Err(substep::Error::Diverged {
-            step: 0,
-            time: 0.0,
-            reason: format!("benchmark marths --compare: {unstable} run(s) diverged"),
-        }
-        .into());
-    }
-    Ok(())
+    Ok(comparison.verdict()?)
 }
 
 pub fn marths(args: &MarthsArgs) -> Result<()> {
@@ -294,7 +127,6 @@ pub fn marths(args: &MarthsArgs) -> Result<()> {
     let reference = reference(&input)?;
     let study = run_with(&input, &reference, args.trials, args.seed)?;
     let elapsed = t0.elapsed().as_secs_f64();
-    let head = describe(args, &input);
     let verdict = || -> Result<()> {
         match study.divergence() {
             Some(e) => Err(e.into()),
@@ -308,22 +140,12 @@ pub fn marths(args: &MarthsArgs) -> Result<()> {
         ));
         return verdict();
     }
-    let text = table(&head, &study, args.trials);
+    let head = report::describe(&input, args.config.is_some(), &args.algorithm);
+    let text = report::table(&head, &study, args.trials);
     out(&text);
     out(&format!("{} run(s) in {elapsed:.2} s\n", 1 + study.trials.len()));
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let trace = trace(&input, dir)?;
-        let command = std::iter::once("substep".to_string())
-            .chain(std::env::args().skip(1))
-            .collect::<Vec<_>>()
-            .join(" ");
-        let md = format!(
-            "# maRTHS benchmark\n\nCommand: `{command}`\n\n```text\n{text}```\n\nTraces of the nominal run: `trace.csv` (every sample).\n"
-        );
-        let path = dir.join("marths.md");
-        std::fs::write(&path, md).with_context(|| format!("cannot write {}", path.display()))?;
-        out(&format!("wrote {} and {}\n", path.display(), trace.display()));
+        out(&report::write_run(&input, &text, dir, &command())?.summary());
     }
     verdict()
 }

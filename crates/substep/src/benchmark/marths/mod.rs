@@ -26,6 +26,7 @@ mod config;
 pub mod data;
 mod mimo_arx;
 mod options;
+pub mod report;
 mod rodeac;
 mod run;
 pub mod structure;

@@ -54,6 +54,7 @@ mod config;
 mod controller;
 mod options;
 mod perturb;
+pub mod report;
 mod run;
 mod study;
 
