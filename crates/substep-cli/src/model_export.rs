@@ -3,11 +3,9 @@
 //! `C.mtx`, `K.mtx` (symmetric coordinate), `influence.mtx` (`n × 1` array) and `coupling.txt`
 //! (the coupling DOFs, 1-based, one per line; empty for a monolithic test).
 
-use substep::output::files::replace_atomic;
-use anyhow::{Context, Result};
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
-use substep::io::{TestDefinition, write_matrix_market_symmetric, write_matrix_market_vector};
+use anyhow::Result;
+use std::path::PathBuf;
+use substep::io::TestDefinition;
 use substep::model::{Model, SparseModel};
 
 #[derive(Debug, Clone, clap::Args)]
@@ -38,7 +36,7 @@ pub fn model(args: &ModelArgs) -> Result<()> {
                 Model::Dense(m) => SparseModel::from_dense(m),
             };
             let what = format!("exported by substep from {}", config.display());
-            export(&sparse, coupling, mtx, &what)?;
+            substep::io::export_model(&sparse, coupling, mtx, &what)?;
             println!(
                 "wrote M.mtx, C.mtx, K.mtx, influence.mtx, coupling.txt ({} DOFs, {} coupling) to {}",
                 sparse.n_dofs(),
@@ -48,35 +46,4 @@ pub fn model(args: &ModelArgs) -> Result<()> {
             Ok(())
         }
     }
-}
-
-/// Write `model` and its coupling DOFs (0-based) into `dir` (each file atomically).
-pub fn export(model: &SparseModel, coupling: &[usize], dir: &Path, what: &str) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| substep::Error::file(dir.display().to_string(), format!("cannot create the directory: {e}")))?;
-    let write = |name: &str, f: &dyn Fn(&mut BufWriter<std::fs::File>) -> std::io::Result<()>| -> Result<()> {
-        let path = dir.join(name);
-        replace_atomic(&path, |tmp| {
-            let mut w = BufWriter::new(std::fs::File::create(tmp)?);
-            f(&mut w)?;
-            w.flush()
-        })
-        .with_context(|| format!("cannot write {}", path.display()))
-    };
-    for (name, m, label) in [
-        ("M.mtx", &model.mass, "mass M [kg]"),
-        ("C.mtx", &model.damping, "damping C [N s/m]"),
-        ("K.mtx", &model.stiffness, "stiffness K [N/m]"),
-    ] {
-        write(name, &|w| {
-            write_matrix_market_symmetric(w, m, &format!("{label}, {what}"))
-        })?;
-    }
-    write("influence.mtx", &|w| {
-        write_matrix_market_vector(w, model.influence.as_slice(), &format!("influence vector, {what}"))
-    })?;
-    write("coupling.txt", &|w| {
-        coupling.iter().try_for_each(|d| writeln!(w, "{}", d + 1))
-    })?;
-    Ok(())
 }

@@ -18,13 +18,13 @@ const LAYERS: &[&[&str]] = &[
     &["integrate"],
     &["excitation", "specimen", "substructure"],
     &["transfer", "lab"],
-    &["compensate", "realtime", "site", "bench"],
+    &["compensate", "realtime", "site"],
     &["io"],
     &["analysis"],
     &["monitor", "benchmark"],
     &["run"],
     &["output"],
-    &["session", "study"],
+    &["bench", "session", "study"],
 ];
 
 type Module = Vec<String>;

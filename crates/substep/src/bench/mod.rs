@@ -19,10 +19,12 @@
 
 mod compare;
 mod models;
+mod peers;
 mod stats;
 mod steps;
 
 pub use compare::{check_agreement, max_rel_difference};
+pub use peers::{AGREEMENT_TOLERANCE, BATCHES, CHECK_STEPS, CompareOptions, Comparison, ToolResult, compare};
 pub use models::{
     BenchModel, BuiltModel, DT, ModelBench, ModelBenchOptions, YIELD_DRIFT, YIELD_ROTATION, ZETA, ag,
     bench_frame_hinges, bench_model, build, build_hinged_frame, chain, monolithic_run, yielding_springs,
