@@ -455,3 +455,21 @@ fn no_two_library_files_import_each_other() {
         .collect();
     assert!(found.is_empty(), "import circles between files:\n{}", found.join("\n"));
 }
+
+/// The front ends stay thin (issue 41): everything a command produces is made by the library,
+/// so the `substep` binary is argument parsing, calls and printing — at most 3000 lines — and
+/// the stepping engine is not in `io`.
+#[test]
+fn the_command_line_front_end_stays_thin() {
+    let cli = Path::new(env!("CARGO_MANIFEST_DIR")).join("../substep-cli/src");
+    let mut files = Vec::new();
+    source_files(&cli, &mut files);
+    let lines: usize = files
+        .iter()
+        .map(|f| std::fs::read_to_string(f).unwrap().lines().count())
+        .sum();
+    assert!(files.len() > 10, "{} files under {}", files.len(), cli.display());
+    assert!(lines <= 3000, "crates/substep-cli/src has {lines} lines (limit 3000): move what it produces into the library");
+    let lib = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    assert!(!lib.join("io/run.rs").exists() && !lib.join("io/run").exists(), "the run loop belongs in run/, not io/");
+}
