@@ -7,14 +7,21 @@ use nalgebra::{Complex, DMatrix};
 /// `complex_eigenvalues` can loop forever on companion/shift matrices, see
 /// docs/theory.md §11.1). Returns `None` if the iteration does not converge.
 pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
-    let n = m.nrows();
-    if n == 0 {
-        return Some(Vec::new());
-    }
     if m.iter().any(|x| !x.is_finite()) {
         return None;
     }
-    let mut b = m.clone();
+    eigenvalues_owned(m.clone())
+}
+
+/// [`eigenvalues`] of a matrix the caller no longer needs (balanced in place, no copy).
+pub fn eigenvalues_owned(mut b: DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
+    let n = b.nrows();
+    if n == 0 {
+        return Some(Vec::new());
+    }
+    if b.iter().any(|x| !x.is_finite()) {
+        return None;
+    }
     balance(&mut b)?;
     let (_, t) = nalgebra::Schur::try_new(b, f64::EPSILON, 200 * n.max(10))?.unpack();
     let ev = quasi_triangular_eigenvalues(&t);
@@ -143,7 +150,16 @@ pub fn one_norm(a: &DMatrix<f64>) -> f64 {
 
 /// Spectral radius `max |λ|`, `NaN` if the eigenvalues could not be computed.
 pub fn spectral_radius(m: &DMatrix<f64>) -> f64 {
-    eigenvalues(m).map_or(f64::NAN, |ev| ev.iter().map(|z| z.norm()).fold(0.0, f64::max))
+    radius(eigenvalues(m))
+}
+
+/// [`spectral_radius`] of a matrix the caller no longer needs (no copy).
+pub fn spectral_radius_owned(m: DMatrix<f64>) -> f64 {
+    radius(eigenvalues_owned(m))
+}
+
+fn radius(ev: Option<Vec<Complex<f64>>>) -> f64 {
+    ev.map_or(f64::NAN, |ev| ev.iter().map(|z| z.norm()).fold(0.0, f64::max))
 }
 
 /// `a + w b` for the fixed-size states of small plants (the RK4 stages of the benchmark's

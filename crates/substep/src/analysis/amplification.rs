@@ -46,32 +46,30 @@ impl StepMap {
     /// accelerations from the zero state. The test's state is restored afterwards. Fails with
     /// a message naming the part if the experimental side is not linear.
     pub fn probe<C: CouplingController>(test: &mut SubstructureTest<C>) -> Result<Self> {
-        test.controller.is_linear()?;
-        test.site.is_linear()?;
         let n = test.state_len();
-        let mut saved = vec![0.0; n];
-        test.write_state(&mut saved);
-        let mut x = vec![0.0; n];
-        let column = |test: &mut SubstructureTest<C>, x: &[f64], ag: (f64, f64)| -> Result<DVector<f64>> {
-            test.read_state(x);
-            test.step(ag.0, ag.1, &mut ())
-                .map_err(|e| Error::numerical("amplification matrix", format!("probing step failed: {e}")))?;
-            let mut out = DVector::zeros(n);
-            test.write_state(out.as_mut_slice());
-            Ok(out)
-        };
         let mut a = DMatrix::zeros(n, n);
-        for k in 0..n {
-            x.iter_mut().for_each(|v| *v = 0.0);
-            x[k] = 1.0;
-            let col = column(test, &x, (0.0, 0.0))?;
-            a.set_column(k, &col);
-        }
-        x.iter_mut().for_each(|v| *v = 0.0);
-        let b0 = column(test, &x, (1.0, 0.0))?;
-        let b1 = column(test, &x, (0.0, 1.0))?;
+        let mut x = vec![0.0; n];
+        let mut saved = vec![0.0; n];
+        probe_transition(test, &mut a, &mut x, &mut saved)?;
+        let mut b0 = DVector::zeros(n);
+        let mut b1 = DVector::zeros(n);
+        // `x` is zero again after `probe_transition`.
+        let probed = probe_column(test, &x, (1.0, 0.0), b0.as_mut_slice())
+            .and_then(|()| probe_column(test, &x, (0.0, 1.0), b1.as_mut_slice()));
         test.read_state(&saved);
+        probed?;
         Ok(Self { a, b0, b1 })
+    }
+
+    /// Only the transition matrix `A` of [`Self::probe`] (the `n` unit-state probes, not the two
+    /// load probes): what the spectral radius needs, with the same arithmetic per column, so
+    /// `A` is bit for bit the one of [`Self::probe`].
+    pub fn probe_transition<C: CouplingController>(test: &mut SubstructureTest<C>) -> Result<DMatrix<f64>> {
+        let n = test.state_len();
+        let mut a = DMatrix::zeros(n, n);
+        let (mut x, mut saved) = (vec![0.0; n], vec![0.0; n]);
+        probe_transition(test, &mut a, &mut x, &mut saved)?;
+        Ok(a)
     }
 
     /// The part of `A` that carries dynamics: states that never influence anything (zero
@@ -95,7 +93,7 @@ impl StepMap {
 
     /// Spectral radius `ρ = max |λ|` (NaN if the eigenvalues could not be computed).
     pub fn spectral_radius(&self) -> f64 {
-        crate::linalg::spectral_radius(&self.reduced().0)
+        spectral_radius_of(&self.a)
     }
 
     /// Discrete frequency response of state `output` to a harmonic ground acceleration
@@ -113,6 +111,62 @@ impl StepMap {
             None => Complex::new(f64::NAN, f64::NAN),
         }
     }
+}
+
+/// Column `k` of `A` for `k = 0..n` into `a` (`n × n`, `n = test.state_len()`): one step from the
+/// unit state `e_k` at zero load. `x` and `saved` are `n`-long workspaces; `x` is left zero and
+/// the test's state is restored, also on failure.
+fn probe_transition<C: CouplingController>(
+    test: &mut SubstructureTest<C>,
+    a: &mut DMatrix<f64>,
+    x: &mut [f64],
+    saved: &mut [f64],
+) -> Result<()> {
+    test.controller.is_linear()?;
+    test.site.is_linear()?;
+    let n = test.state_len();
+    test.write_state(saved);
+    x.iter_mut().for_each(|v| *v = 0.0);
+    let mut result = Ok(());
+    for k in 0..n {
+        x[k] = 1.0;
+        // A column of a column-major matrix is contiguous: the step writes its state into it.
+        let col = &mut a.as_mut_slice()[k * n..(k + 1) * n];
+        result = probe_column(test, x, (0.0, 0.0), col);
+        x[k] = 0.0;
+        if result.is_err() {
+            break;
+        }
+    }
+    test.read_state(saved);
+    result
+}
+
+/// One probing step: state `x`, ground accelerations `ag = (a_g,i, a_g,i+1)`; the new state
+/// into `out`.
+fn probe_column<C: CouplingController>(
+    test: &mut SubstructureTest<C>,
+    x: &[f64],
+    ag: (f64, f64),
+    out: &mut [f64],
+) -> Result<()> {
+    test.read_state(x);
+    test.step(ag.0, ag.1, &mut ())
+        .map_err(|e| Error::numerical("amplification matrix", format!("probing step failed: {e}")))?;
+    test.write_state(out);
+    Ok(())
+}
+
+/// `ρ(A) = max |λ|` of a probed transition matrix: the states [`StepMap::reduced`] drops only add
+/// eigenvalues 0, so the eigenvalues are those of the kept block (NaN if they could not be
+/// computed). Without a dropped state the kept block is `A` itself and is not copied.
+pub fn spectral_radius_of(a: &DMatrix<f64>) -> f64 {
+    let keep = prune(a, |_, row_zero, col_zero| row_zero || col_zero);
+    if keep.len() == a.nrows() {
+        return crate::linalg::spectral_radius(a);
+    }
+    let m = DMatrix::from_fn(keep.len(), keep.len(), |r, c| a[(keep[r], keep[c])]);
+    crate::linalg::spectral_radius_owned(m)
 }
 
 /// The states of `a` kept after repeatedly dropping those for which `drop(i, zero row, zero

@@ -390,7 +390,13 @@ impl AnalysisCase {
         }
     }
 
+    /// `ρ` of the step map. Probes only `A` (the load vectors `B0`, `B1` do not enter `ρ`), so
+    /// it equals `self.step_map()?.spectral_radius()` exactly at two probing steps less.
     pub fn spectral_radius(&self) -> Result<f64> {
-        Ok(self.step_map()?.spectral_radius())
+        let a = match self.scheme {
+            AnalysisScheme::SubStep => StepMap::probe_transition(&mut self.build_test()?)?,
+            _ => StepMap::probe_transition(&mut self.build_explicit_test()?)?,
+        };
+        Ok(super::amplification::spectral_radius_of(&a))
     }
 }
