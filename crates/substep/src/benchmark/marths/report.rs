@@ -133,7 +133,7 @@ pub fn write_run(input: &MarthsInput, table: &str, dir: &Path, command: &str) ->
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic(path, bytes).map_err(|e| Error::file(path.display().to_string(), format!("cannot write: {e}")))
+    write_atomic(path, bytes).map_err(|e| Error::write(path, e))
 }
 
 /// `dir/trace.csv`: the nominal run of `input` at every sample (targets, measured strokes and

@@ -148,7 +148,7 @@ fn create_dir(dir: &Path) -> Result<()> {
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic(path, bytes).map_err(|e| Error::file(path.display().to_string(), format!("cannot write: {e}")))
+    write_atomic(path, bytes).map_err(|e| Error::write(path, e))
 }
 
 fn fmt_j(j: Option<[f64; 9]>) -> String {
