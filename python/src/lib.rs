@@ -23,9 +23,9 @@ use std::time::{Duration, Instant};
 use substep::io::TestDefinition;
 use substep::io::results::Format;
 use substep::output::{FolderOptions, RunFolder};
+use substep::run::{HistoryTable, Layout, Run, RunObserver, StepRow, Table};
 use substep::session::live::{Live, LiveObserver, LiveOptions, StabilityChoice};
 use substep::session::realtime::{RealtimeOutcome, RealtimeRunOptions};
-use substep::run::{HistoryTable, Layout, Run, RunObserver, StepRow, Table};
 use substep::substructure::SubstepObserver;
 
 create_exception!(
@@ -125,7 +125,14 @@ fn table_pair<'py>(py: Python<'py>, t: Table) -> PyResult<(Vec<String>, Bound<'p
 /// a run that did not complete, else None).
 #[pyfunction]
 #[pyo3(signature = (kind, text, name, base_dir, live="{}"))]
-fn run<'py>(py: Python<'py>, kind: &str, text: &str, name: &str, base_dir: &str, live: &str) -> PyResult<Bound<'py, PyDict>> {
+fn run<'py>(
+    py: Python<'py>,
+    kind: &str,
+    text: &str,
+    name: &str,
+    base_dir: &str,
+    live: &str,
+) -> PyResult<Bound<'py, PyDict>> {
     let (def, mut live) = py
         .detach(|| -> substep::Result<_> {
             let mut def = definition(kind, text, name, base_dir)?;
@@ -185,7 +192,10 @@ fn live_options(json: &str) -> substep::Result<LiveOptions> {
     let defaults = LiveOptions::default();
     let linger = number("monitor_linger").unwrap_or(defaults.monitor_linger);
     if !(linger.is_finite() && linger >= 0.0) {
-        return Err(substep::Error::invalid("monitor_linger", format!("{linger} is not a number of seconds ≥ 0")));
+        return Err(substep::Error::invalid(
+            "monitor_linger",
+            format!("{linger} is not a number of seconds ≥ 0"),
+        ));
     }
     let pace = number("pace");
     if let Some(p) = pace
@@ -195,7 +205,10 @@ fn live_options(json: &str) -> substep::Result<LiveOptions> {
     }
     Ok(LiveOptions {
         monitor: text("monitor"),
-        monitor_public: v.get("monitor_public").and_then(serde_json::Value::as_bool).unwrap_or(false),
+        monitor_public: v
+            .get("monitor_public")
+            .and_then(serde_json::Value::as_bool)
+            .unwrap_or(false),
         monitor_token: text("monitor_token"),
         monitor_linger: linger,
         stability,
@@ -244,7 +257,11 @@ impl RunObserver for FolderAndTables<'_> {
 
 /// The figure options of a Python run: `plots` (None: the config's `[output] plots`) and
 /// `plot_format` (None: the config's `[output.plots] format`, else PNG).
-fn folder_options(def: &TestDefinition, plots: Option<bool>, plot_format: Option<&str>) -> substep::Result<FolderOptions> {
+fn folder_options(
+    def: &TestDefinition,
+    plots: Option<bool>,
+    plot_format: Option<&str>,
+) -> substep::Result<FolderOptions> {
     let plots = plots.unwrap_or(def.output.plots);
     let options = match plot_format {
         Some(name) => {
@@ -353,9 +370,10 @@ fn run_folder<'py>(
         let finished = folder.finish(&def, run.input_motion(), &mut summary);
         let finished = substep::output::files::no_summary_left_running(&dir.join("summary.json"), finished);
         let mut outputs = finished?;
-        let ran = summary.failure.as_ref().is_none_or(|e| {
-            matches!(e, substep::Error::Diverged { .. } | substep::Error::Stopped { .. })
-        });
+        let ran = summary
+            .failure
+            .as_ref()
+            .is_none_or(|e| matches!(e, substep::Error::Diverged { .. } | substep::Error::Stopped { .. }));
         if ran && let Some(path) = substep::output::container::write(dir, container, config_text(kind, text))? {
             outputs.push(path);
         }
@@ -372,7 +390,13 @@ fn run_folder<'py>(
             (summary, outputs)
         }
         Err(e) => {
-            py.detach(|| live.finish(serde_json::json!({ "completed": false, "reason": e.to_string() }), &[], true));
+            py.detach(|| {
+                live.finish(
+                    serde_json::json!({ "completed": false, "reason": e.to_string() }),
+                    &[],
+                    true,
+                )
+            });
             return Err(to_py(&e));
         }
     };
@@ -413,16 +437,20 @@ fn run_realtime<'py>(
                 .unwrap_or_else(|| std::path::PathBuf::from("results"));
             let v: serde_json::Value = serde_json::from_str(options)
                 .map_err(|e| substep::Error::invalid("real-time options", e.to_string()))?;
-            let fifo_priority = match v.get("fifo_priority").and_then(serde_json::Value::as_i64) {
-                None => None,
-                Some(p) => Some(i32::try_from(p).map_err(|_| {
-                    substep::Error::invalid("fifo_priority", format!("{p} is not a priority 1..99"))
-                })?),
-            };
+            let fifo_priority =
+                match v.get("fifo_priority").and_then(serde_json::Value::as_i64) {
+                    None => None,
+                    Some(p) => Some(i32::try_from(p).map_err(|_| {
+                        substep::Error::invalid("fifo_priority", format!("{p} is not a priority 1..99"))
+                    })?),
+                };
             let options = RealtimeRunOptions {
                 max_missed: v.get("max_missed").and_then(serde_json::Value::as_f64),
                 late_policy: v.get("late_policy").and_then(|x| x.as_str()).map(str::to_string),
-                lock_memory: v.get("lock_memory").and_then(serde_json::Value::as_bool).unwrap_or(false),
+                lock_memory: v
+                    .get("lock_memory")
+                    .and_then(serde_json::Value::as_bool)
+                    .unwrap_or(false),
                 fifo_priority,
                 live: live_options(options)?,
                 keyword_names: true,
@@ -452,7 +480,10 @@ fn run_realtime<'py>(
     )?;
     let (error, kind) = match (&failure, &not_real_time) {
         (Some(e), _) => (Some(to_py(e).value(py).to_string()), Some("run")),
-        (None, Some(reason)) => (Some(reason.split_whitespace().collect::<Vec<_>>().join(" ")), Some("run")),
+        (None, Some(reason)) => (
+            Some(reason.split_whitespace().collect::<Vec<_>>().join(" ")),
+            Some("run"),
+        ),
         (None, None) => (None, None),
     };
     out.set_item("error", error)?;
@@ -463,7 +494,9 @@ fn run_realtime<'py>(
 /// The test definition's text as a run read it (for the container's copy).
 fn config_text(kind: &str, text: &str) -> String {
     match kind {
-        "path" => substep::io::limits::read_text(Path::new(text), substep::io::limits::CONFIG_MAX_BYTES).unwrap_or_default(),
+        "path" => {
+            substep::io::limits::read_text(Path::new(text), substep::io::limits::CONFIG_MAX_BYTES).unwrap_or_default()
+        }
         _ => text.to_string(),
     }
 }

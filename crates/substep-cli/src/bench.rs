@@ -12,7 +12,6 @@ use substep::bench::{STEP_BENCH_DT as DT, STEP_BENCH_ZETA as ZETA};
 
 use crate::bench_models::{self, BenchModel};
 
-
 #[derive(Debug, Clone, clap::Args)]
 pub struct BenchArgs {
     /// Stories of the shear buildings (repeat the option or give a list: 100,1000); the

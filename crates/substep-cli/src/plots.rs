@@ -62,7 +62,14 @@ pub fn figure(path: &Path, fig: &Figure) -> Result<PathBuf> {
 
 /// One panel of `curves` at `path` in the current format; returns the written path.
 pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, curves: &[Curve]) -> Result<PathBuf> {
-    Ok(substep::figure::line_chart(path, format(), title, x_label, y_label, curves)?)
+    Ok(substep::figure::line_chart(
+        path,
+        format(),
+        title,
+        x_label,
+        y_label,
+        curves,
+    )?)
 }
 
 /// The spectral-radius heat map ([`substep::figure::rho_heatmap`]) in the current format.
@@ -75,5 +82,14 @@ pub fn rho_heatmap(
     ys: &[f64],
     rho: &[Vec<f64>],
 ) -> Result<()> {
-    Ok(substep::figure::rho_heatmap(path, format(), title, x_label, y_label, xs, ys, rho)?)
+    Ok(substep::figure::rho_heatmap(
+        path,
+        format(),
+        title,
+        x_label,
+        y_label,
+        xs,
+        ys,
+        rho,
+    )?)
 }

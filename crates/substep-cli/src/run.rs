@@ -11,10 +11,10 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use substep::format::percent;
 use substep::io::TestDefinition;
-use substep::session::live::{Live, LiveObserver, LiveOptions, StabilityChoice};
 use substep::io::results::Format;
 use substep::output::{FolderOptions, RunFolder};
 use substep::run::{Run, RunSummary, largest};
+use substep::session::live::{Live, LiveObserver, LiveOptions, StabilityChoice};
 
 /// The summary's line on the error against the reference (offline and real-time runs).
 pub(crate) fn print_reference_error(scheme: &str, max_displacement_error: f64, max_force_error: f64) {

@@ -2,12 +2,12 @@
 //! with a progress bar; writes `study.csv` (one row per run) and one figure per metric with a
 //! panel per varied parameter (`study_<metric>.png`).
 
-use substep::output::files::write_atomic;
 use crate::plots::{Curve, Figure, Panel};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use substep::output::files::write_atomic;
 use substep::study::{Row, Study, summary_runner, to_csv};
 
 #[derive(Debug, Clone, clap::Args)]

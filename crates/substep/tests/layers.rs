@@ -469,7 +469,13 @@ fn the_command_line_front_end_stays_thin() {
         .map(|f| std::fs::read_to_string(f).unwrap().lines().count())
         .sum();
     assert!(files.len() > 10, "{} files under {}", files.len(), cli.display());
-    assert!(lines <= 3000, "crates/substep-cli/src has {lines} lines (limit 3000): move what it produces into the library");
+    assert!(
+        lines <= 3000,
+        "crates/substep-cli/src has {lines} lines (limit 3000): move what it produces into the library"
+    );
     let lib = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    assert!(!lib.join("io/run.rs").exists() && !lib.join("io/run").exists(), "the run loop belongs in run/, not io/");
+    assert!(
+        !lib.join("io/run.rs").exists() && !lib.join("io/run").exists(),
+        "the run loop belongs in run/, not io/"
+    );
 }

@@ -24,13 +24,13 @@ mod stats;
 mod steps;
 
 pub use compare::{check_agreement, max_rel_difference};
-pub use peers::{AGREEMENT_TOLERANCE, BATCHES, CHECK_STEPS, CompareOptions, Comparison, ToolResult, compare};
 pub use models::{
     BenchModel, BuiltModel, DT, ModelBench, ModelBenchOptions, YIELD_DRIFT, YIELD_ROTATION, ZETA, ag,
     bench_frame_hinges, bench_model, build, build_hinged_frame, chain, monolithic_run, yielding_springs,
 };
-pub use steps::{
-    MonolithicResult, STEP_BENCH_DT, STEP_BENCH_ZETA, StepBench, StepBenchOptions, SubstructureCase, SubstructureResult,
-    bench_steps,
-};
+pub use peers::{AGREEMENT_TOLERANCE, BATCHES, CHECK_STEPS, CompareOptions, Comparison, ToolResult, compare};
 pub use stats::{Spread, median, peak_rss_bytes, quantile, read_bandwidth_gbs, reset_peak_rss, thread_cpu_seconds};
+pub use steps::{
+    MonolithicResult, STEP_BENCH_DT, STEP_BENCH_ZETA, StepBench, StepBenchOptions, SubstructureCase,
+    SubstructureResult, bench_steps,
+};

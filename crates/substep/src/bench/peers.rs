@@ -174,11 +174,10 @@ pub fn compare(args: &CompareOptions, log: &mut dyn FnMut(&str)) -> Result<Compa
         return Err(Error::invalid(
             "--steps",
             format!("with --compare must be a multiple of {BATCHES} (the timed batches per round), got {steps}"),
-        )
-        .into());
+        ));
     }
     if args.rounds == 0 {
-        return Err(Error::invalid("--rounds", "must be at least 1").into());
+        return Err(Error::invalid("--rounds", "must be at least 1"));
     }
     let batch_steps = steps / BATCHES;
     let model = args.model;

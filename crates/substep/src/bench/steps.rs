@@ -42,7 +42,10 @@ pub fn bench_steps(o: &StepBenchOptions) -> Result<StepBench> {
         return Err(Error::invalid("--substeps", "must be at least 1"));
     }
     if o.repeats < 5 {
-        return Err(Error::invalid("--repeats", format!("must be at least 5, got {}", o.repeats)));
+        return Err(Error::invalid(
+            "--repeats",
+            format!("must be at least 5, got {}", o.repeats),
+        ));
     }
     let mut stories = o.stories.clone();
     stories.sort_unstable();
@@ -242,4 +245,3 @@ fn bench_substructure(
     }
     Ok((median_of(per_step), median_of(per_substep)))
 }
-

@@ -185,7 +185,7 @@ pub struct Figure {
     pub panels: Vec<Panel>,
     /// Panels per row (1: stacked).
     pub columns: usize,
-    /// Size at scale 1 [px]; the height grows with the panels unless set.
+    /// Size at scale 1 \[px\]; the height grows with the panels unless set.
     pub size: Option<(u32, u32)>,
 }
 

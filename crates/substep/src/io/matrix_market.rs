@@ -490,6 +490,40 @@ pub fn write_matrix_market_vector(out: &mut impl std::io::Write, v: &[f64], comm
     Ok(())
 }
 
+/// Write `model` and its coupling DOFs (0-based) into `dir` (each file atomically): `M.mtx`,
+/// `C.mtx`, `K.mtx` (symmetric coordinate), `influence.mtx` (`n × 1` array) and `coupling.txt`
+/// (1-based, one per line), so that another tool runs on exactly these matrices (`substep model
+/// export`, `substep bench --compare`). `what` goes into each file's comment.
+pub fn export_model(model: &crate::model::SparseModel, coupling: &[usize], dir: &Path, what: &str) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Error::file(dir.display().to_string(), format!("cannot create the directory: {e}")))?;
+    let write = |name: &str, f: &dyn Fn(&mut BufWriter<std::fs::File>) -> std::io::Result<()>| -> Result<()> {
+        let path = dir.join(name);
+        crate::atomic_file::replace_atomic(&path, |tmp| {
+            let mut w = BufWriter::new(std::fs::File::create(tmp)?);
+            f(&mut w)?;
+            w.flush()
+        })
+        .map_err(|e| Error::write(&path, e))
+    };
+    for (name, m, label) in [
+        ("M.mtx", &model.mass, "mass M [kg]"),
+        ("C.mtx", &model.damping, "damping C [N s/m]"),
+        ("K.mtx", &model.stiffness, "stiffness K [N/m]"),
+    ] {
+        write(name, &|w| {
+            write_matrix_market_symmetric(w, m, &format!("{label}, {what}"))
+        })?;
+    }
+    write("influence.mtx", &|w| {
+        write_matrix_market_vector(w, model.influence.as_slice(), &format!("influence vector, {what}"))
+    })?;
+    write("coupling.txt", &|w| {
+        coupling.iter().try_for_each(|d| writeln!(w, "{}", d + 1))
+    })?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -611,38 +645,4 @@ mod tests {
                 .starts_with("/nonexistent/M.mtx: cannot read file")
         );
     }
-}
-
-/// Write `model` and its coupling DOFs (0-based) into `dir` (each file atomically): `M.mtx`,
-/// `C.mtx`, `K.mtx` (symmetric coordinate), `influence.mtx` (`n × 1` array) and `coupling.txt`
-/// (1-based, one per line), so that another tool runs on exactly these matrices (`substep model
-/// export`, `substep bench --compare`). `what` goes into each file's comment.
-pub fn export_model(model: &crate::model::SparseModel, coupling: &[usize], dir: &Path, what: &str) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Error::file(dir.display().to_string(), format!("cannot create the directory: {e}")))?;
-    let write = |name: &str, f: &dyn Fn(&mut BufWriter<std::fs::File>) -> std::io::Result<()>| -> Result<()> {
-        let path = dir.join(name);
-        crate::atomic_file::replace_atomic(&path, |tmp| {
-            let mut w = BufWriter::new(std::fs::File::create(tmp)?);
-            f(&mut w)?;
-            w.flush()
-        })
-        .map_err(|e| Error::write(&path, e))
-    };
-    for (name, m, label) in [
-        ("M.mtx", &model.mass, "mass M [kg]"),
-        ("C.mtx", &model.damping, "damping C [N s/m]"),
-        ("K.mtx", &model.stiffness, "stiffness K [N/m]"),
-    ] {
-        write(name, &|w| {
-            write_matrix_market_symmetric(w, m, &format!("{label}, {what}"))
-        })?;
-    }
-    write("influence.mtx", &|w| {
-        write_matrix_market_vector(w, model.influence.as_slice(), &format!("influence vector, {what}"))
-    })?;
-    write("coupling.txt", &|w| {
-        coupling.iter().try_for_each(|d| writeln!(w, "{}", d + 1))
-    })?;
-    Ok(())
 }

@@ -17,7 +17,6 @@ pub use config::{
 };
 pub use limits::Limits;
 pub use matrix_market::{
-    export_model,
-    parse_matrix_market, parse_matrix_market_sparse, read_matrix_market, read_matrix_market_sparse,
+    export_model, parse_matrix_market, parse_matrix_market_sparse, read_matrix_market, read_matrix_market_sparse,
     read_matrix_market_sparse_with, read_matrix_market_with, write_matrix_market_symmetric, write_matrix_market_vector,
 };

@@ -16,8 +16,8 @@
 pub mod energy;
 pub mod http;
 mod indicator;
-pub mod page;
 pub mod model_view;
+pub mod page;
 
 pub use indicator::{
     Alarm, AlarmSummary, IdentifiedSummary, IndicatorView, StabilityAction, StabilityMonitor, StabilitySettings,

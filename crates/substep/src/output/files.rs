@@ -7,12 +7,12 @@
 //! small files (`summary.json`, `realtime.json`, plots) are replaced atomically
 //! ([`write_atomic`]), so a run killed at any moment leaves either the old or the new file.
 
+use crate::run::StepRow;
+use crate::substructure::SubstepObserver;
 use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::Path;
-use crate::run::StepRow;
-use crate::substructure::SubstepObserver;
 
 /// Every file `substep run` (offline or `--realtime`) writes into its output directory. A run
 /// removes these (and their temporary files) before it writes anything; other files in the
@@ -70,9 +70,8 @@ pub fn prepare_dir(dir: &Path) -> crate::Result<()> {
                     "is a directory, but substep writes a file of that name here (choose another --out)",
                 ));
             }
-            std::fs::remove_file(&p).map_err(|e| {
-                crate::Error::file(shown, format!("cannot remove this output of an earlier run: {e}"))
-            })?;
+            std::fs::remove_file(&p)
+                .map_err(|e| crate::Error::file(shown, format!("cannot remove this output of an earlier run: {e}")))?;
         }
     }
     Ok(())
@@ -353,10 +352,7 @@ mod tests {
         let running =
             "{\"config\": \"c.toml\", \"completed\": false, \"status\": \"running (a run that was killed ...)\"}\n";
         std::fs::write(&path, running).unwrap();
-        let r = no_summary_left_running(
-            &path,
-            Err::<(), _>("cannot write history.csv: No space left on device"),
-        );
+        let r = no_summary_left_running(&path, Err::<(), _>("cannot write history.csv: No space left on device"));
         assert!(r.is_err());
         let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
         assert_eq!(v["completed"], false);

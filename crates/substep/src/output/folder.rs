@@ -25,7 +25,12 @@ const MAX_CURVES: usize = 4;
 
 /// `compensation_force.png` (with error-force compensation: f_u and its ideal value, DOF of the
 /// first coupling) and `tracking_error.png` (with phase-lag compensation).
-fn compensation_charts(def: &TestDefinition, table: &Decimated, dir: &Path, format: PlotFormat) -> Result<Vec<PathBuf>> {
+fn compensation_charts(
+    def: &TestDefinition,
+    table: &Decimated,
+    dir: &Path,
+    format: PlotFormat,
+) -> Result<Vec<PathBuf>> {
     let Some(s) = &def.substructure else {
         return Ok(Vec::new());
     };
@@ -393,11 +398,13 @@ impl RunFolder {
         // old `completed: true`, nor substeps.csv or plots it did not write).
         prepare_dir(dir)?;
         let history_path = dir.join("history.csv");
-        let history =
-            HistoryWriter::create(&history_path, &layout.history_columns()).map_err(|e| cannot_write(&history_path, e))?;
+        let history = HistoryWriter::create(&history_path, &layout.history_columns())
+            .map_err(|e| cannot_write(&history_path, e))?;
         let substeps_path = dir.join("substeps.csv");
         let substeps = match layout.substeps {
-            Some(_) => Some(SubstepWriter::create(&substeps_path, layout).map_err(|e| cannot_write(&substeps_path, e))?),
+            Some(_) => {
+                Some(SubstepWriter::create(&substeps_path, layout).map_err(|e| cannot_write(&substeps_path, e))?)
+            }
             None => None,
         };
         let response = match &layout.response_columns {
@@ -481,7 +488,12 @@ impl RunFolder {
     /// After the run that ended with `summary`: close the tables, write the ground-motion
     /// tables of `motion`, the figures and `summary.json` (with the list of outputs, also
     /// returned, `summary.json` last). A write error during the run is returned here.
-    pub fn finish(self, def: &TestDefinition, motion: Option<&InputMotion>, summary: &mut RunSummary) -> Result<Vec<PathBuf>> {
+    pub fn finish(
+        self,
+        def: &TestDefinition,
+        motion: Option<&InputMotion>,
+        summary: &mut RunSummary,
+    ) -> Result<Vec<PathBuf>> {
         if let Some(e) = self.error {
             return Err(e);
         }

@@ -8,12 +8,12 @@
 use super::files::{Decimated, cannot_write, num};
 use crate::Result;
 use crate::figure::{Curve, Figure, Panel};
-use std::fs::File;
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
 use crate::format::{percent, sig};
 use crate::io::TestDefinition;
 use crate::run::{EngineeringRow, EngineeringSummary, InputMotion, round_time};
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
 
 /// Rows kept for the figures.
 const PLOT_ROWS: usize = 4000;
@@ -92,9 +92,7 @@ impl ResponseWriter {
     }
 
     pub fn finish(&mut self) -> Result<PathBuf> {
-        self.w
-            .flush()
-            .map_err(|e| cannot_write(&self.path, e))?;
+        self.w.flush().map_err(|e| cannot_write(&self.path, e))?;
         Ok(self.path.clone())
     }
 
@@ -342,4 +340,3 @@ pub fn ground_motion_outputs(
     ];
     Ok((files, figs))
 }
-

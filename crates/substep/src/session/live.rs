@@ -3,16 +3,16 @@
 //! push a frame, obey the controls, pace. Real-time runs feed their own indicator here, from
 //! the writer thread.
 
-use crate::monitor::page::{Monitor, MonitorOptions};
 use crate::Result;
+use crate::io::TestDefinition;
+use crate::monitor::page::{Monitor, MonitorOptions};
+use crate::monitor::{StabilityAction, StabilityMonitor, StabilitySettings, StopRequest, copy_into};
+use crate::run::{Layout, RunObserver, StepRow};
+use crate::substructure::{SafetyLimits, SubstepObserver};
 use serde_json::{Value, json};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use crate::io::TestDefinition;
-use crate::monitor::{StabilityAction, StabilityMonitor, StabilitySettings, StopRequest, copy_into};
-use crate::run::{Layout, RunObserver, StepRow};
-use crate::substructure::{SafetyLimits, SubstepObserver};
 
 /// Ramp time used for operator and stability stops when the config sets no limits \[s\].
 pub const DEFAULT_STOP_RAMP: f64 = 1.0;
@@ -218,9 +218,9 @@ impl Live {
                     ("", None) => (DEFAULT_ADDRESS, args.name("--monitor", "monitor")),
                     (a, _) => (a, args.name("--monitor", "monitor")),
                 };
-                let addr = addr.parse().map_err(|e| {
-                    crate::Error::invalid(what, format!("'{addr}' is not an address host:port ({e})"))
-                })?;
+                let addr = addr
+                    .parse()
+                    .map_err(|e| crate::Error::invalid(what, format!("'{addr}' is not an address host:port ({e})")))?;
                 // The command line's token overrides the config's; without either a random one.
                 let (token, shown) = match (&args.monitor_token, &def.monitor.token) {
                     (Some(t), _) => {

@@ -186,7 +186,7 @@ pub struct Comparison {
     pub trials: usize,
     pub seed: u64,
     pub noise: bool,
-    /// Wall-clock time of the runs [s].
+    /// Wall-clock time of the runs \[s\].
     pub elapsed: f64,
 }
 

@@ -152,7 +152,10 @@ impl DataProducer for ColumnProducer {
 
 /// A MATLAB struct of column vectors per table, `summary` and `config` as char variables.
 pub(super) fn write_mat(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
-    let io = |e: std::io::Error| Error::Output { path: shown.to_string(), reason: e.to_string() };
+    let io = |e: std::io::Error| Error::Output {
+        path: shown.to_string(),
+        reason: e.to_string(),
+    };
     let path = tmp.with_extension("columns.tmp");
     let scratch_file = File::options()
         .read(true)

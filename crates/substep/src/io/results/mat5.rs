@@ -45,7 +45,10 @@ enum Value {
 }
 
 pub(super) fn write_file(tmp: &Path, tables: &[(&str, PathBuf)], meta: &Metadata, shown: &str) -> Result<()> {
-    let io = |e: std::io::Error| Error::Output { path: shown.to_string(), reason: e.to_string() };
+    let io = |e: std::io::Error| Error::Output {
+        path: shown.to_string(),
+        reason: e.to_string(),
+    };
     let file = std::fs::File::create(tmp).map_err(io)?;
     let mut out = BufWriter::new(file);
     out.write_all(&header(&created_on())).map_err(io)?;
@@ -212,7 +215,10 @@ fn write_table<W: Write + Seek>(out: &mut W, name: &str, csv: &Path, shown: &str
         ));
     }
     head[4..8].copy_from_slice(&((total - 8) as u32).to_le_bytes());
-    let io = |e: std::io::Error| Error::Output { path: shown.to_string(), reason: e.to_string() };
+    let io = |e: std::io::Error| Error::Output {
+        path: shown.to_string(),
+        reason: e.to_string(),
+    };
     let base = out.stream_position().map_err(io)?;
     out.write_all(&head).map_err(io)?;
     let data_at = |k: usize| base + head.len() as u64 + field_bytes * k as u64 + 8 + FIELD_HEAD;

@@ -1,5 +1,5 @@
 //! The live monitor page (`substep run --monitor`, Python's `substep.run(..., monitor=ADDR)`): a small HTTP server (std only; requests read by one thread that
-//! slow clients cannot stall, everything bounded: [`server`]) that serves the live page
+//! slow clients cannot stall, everything bounded: `server`) that serves the live page
 //! (`page.html`, embedded), the frames of the run as server-sent events and the operator's
 //! controls (see docs/monitor.md).
 //!
@@ -10,8 +10,11 @@
 mod server;
 mod shared;
 
+use crate::monitor::{Controls, Frame, frame_ring};
+use crate::realtime::{OwnedConsumer, OwnedProducer};
 use crate::{Error, Result};
 use serde_json::Value;
+use shared::{Shared, State};
 use std::collections::VecDeque;
 use std::net::{SocketAddr, TcpListener};
 use std::path::PathBuf;
@@ -19,9 +22,6 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
-use crate::monitor::{Controls, Frame, frame_ring};
-use shared::{Shared, State};
-use crate::realtime::{OwnedConsumer, OwnedProducer};
 
 /// Frames kept for the page (the last window, decimated in run time).
 const HISTORY_FRAMES: usize = 2000;
@@ -65,8 +65,12 @@ impl Monitor {
         }
         let listener = TcpListener::bind(opts.addr)
             .map_err(|e| Error::invalid(opts.option, format!("cannot listen on {}: {e}", opts.addr)))?;
-        listener.set_nonblocking(true).map_err(|e| Error::invalid(opts.option, format!("monitor socket: {e}")))?;
-        let addr = listener.local_addr().map_err(|e| Error::invalid(opts.option, format!("monitor socket: {e}")))?;
+        listener
+            .set_nonblocking(true)
+            .map_err(|e| Error::invalid(opts.option, format!("monitor socket: {e}")))?;
+        let addr = listener
+            .local_addr()
+            .map_err(|e| Error::invalid(opts.option, format!("monitor socket: {e}")))?;
         let (producer, consumer) = frame_ring(4096);
         let controls = Arc::new(Controls::default());
         let shared = Arc::new(Shared {
@@ -164,4 +168,3 @@ fn drain_loop(mut rx: OwnedConsumer<Frame>, shared: &Shared) {
         std::thread::sleep(Duration::from_millis(10));
     }
 }
-

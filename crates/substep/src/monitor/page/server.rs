@@ -27,14 +27,14 @@
 //! from a clean clone. Five endpoints on loopback do not need a framework.
 
 use super::shared::{NO_HOLD, PAGE, Shared, frame_json, status_json};
+use crate::monitor::http::{MAX_BODY, MAX_HEAD, Parsed, parse_request};
+use crate::monitor::{StopRequest, token_matches};
 use serde_json::{Value, json};
 use std::io::{Read, Write};
 use std::net::{IpAddr, TcpListener, TcpStream};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-use crate::monitor::http::{MAX_BODY, MAX_HEAD, Parsed, parse_request};
-use crate::monitor::{StopRequest, token_matches};
 
 /// Time a request has from its connection to its last byte.
 pub const REQUEST_DEADLINE: Duration = Duration::from_secs(2);
