@@ -183,6 +183,10 @@ pub fn rths(args: &RthsArgs) -> Result<()> {
     if args.compare {
         return comparison(args);
     }
+    // A figure format this build cannot draw is refused before the benchmark runs.
+    if !args.no_plots && !args.json {
+        crate::plots::check_format(args.plot_format, "--plot-format")?;
+    }
     let (setup, config) = setup(args)?;
     let t0 = std::time::Instant::now();
     let rows = setup.run()?;

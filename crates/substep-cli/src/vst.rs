@@ -44,6 +44,10 @@ pub fn vst(args: &VstArgs) -> Result<()> {
             println!("{line}");
         }
     };
+    // A figure format this build cannot draw is refused before the study runs.
+    if !args.no_plots && !args.damper_grid {
+        crate::plots::check_format(args.plot_format, "--plot-format")?;
+    }
     let t0 = Instant::now();
     if args.damper_grid {
         let done = report::damper_grid_in_folder(&args.out, &mut progress)?;

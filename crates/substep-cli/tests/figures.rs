@@ -63,20 +63,30 @@ fn every_figure_is_written_in_every_format() {
     let formats: &[&str] = if cfg!(feature = "pdf") {
         &["png", "svg", "pdf"]
     } else {
-        // Without the `pdf` feature PDF figures are refused up front: one line, exit 2.
+        // Without the `pdf` feature PDF figures are refused up front, before any work and
+        // before any file: one line, exit 2 (a run, the VST study, the RTHS benchmark).
         let dir = temp_dir("nopdf");
-        let out = Command::new(env!("CARGO_BIN_EXE_substep"))
-            .args(["run", "--out", dir.to_str().unwrap(), "--quiet", "--plot-format", "pdf"])
-            .output()
-            .unwrap();
-        let e = String::from_utf8_lossy(&out.stderr).to_string();
-        assert_eq!(out.status.code(), Some(2), "{e}");
-        assert_eq!(e.lines().count(), 1, "{e}");
-        assert!(
-            e.starts_with("error: --plot-format: format `pdf`: this build of substep has no PDF figures"),
-            "{e}"
-        );
-        assert!(e.contains("--features pdf"), "{e}");
+        let d = dir.join("out");
+        for command in [
+            &["run", "--quiet"][..],
+            &["vst", "--quick", "--quiet"],
+            &["benchmark", "rths"],
+        ] {
+            let out = Command::new(env!("CARGO_BIN_EXE_substep"))
+                .args(command)
+                .args(["--out", d.to_str().unwrap(), "--plot-format", "pdf"])
+                .output()
+                .unwrap();
+            let e = String::from_utf8_lossy(&out.stderr).to_string();
+            assert_eq!(out.status.code(), Some(2), "{command:?}: {e}");
+            assert_eq!(e.lines().count(), 1, "{e}");
+            assert!(
+                e.starts_with("error: --plot-format: format `pdf`: this build of substep has no PDF figures"),
+                "{e}"
+            );
+            assert!(e.contains("--features pdf"), "{e}");
+            assert!(!d.exists(), "{command:?} wrote {} before refusing", d.display());
+        }
         &["png", "svg"]
     };
     for &fmt in formats {
