@@ -80,6 +80,15 @@ fn compensation_charts(
     Ok(out)
 }
 
+/// The test as the reference figure names it: its scheme, and k_sub for a substructure test
+/// (`average_acceleration, k_sub = 4`; `cr, k_sub = 10`).
+fn test_label(def: &TestDefinition) -> String {
+    match &def.substructure {
+        Some(s) => format!("{}, k_sub = {}", def.integrator.name, s.substeps),
+        None => def.integrator.name.clone(),
+    }
+}
+
 /// DOFs (0-based) shown in the displacement and acceleration charts: coupling DOFs, the last
 /// DOF (roof), DOF 1; at most [`MAX_CURVES`].
 fn plotted_dofs(n: usize, coupling: &[usize]) -> Vec<usize> {
@@ -148,7 +157,8 @@ impl PlotRecorder {
 
     /// The figures of the run (`reference`: the reference's scheme name, if there is one;
     /// `window`: the `[output.plots] window` for the hysteresis and the zoom panel).
-    fn charts(&self, reference: Option<&str>, window: Option<(f64, f64)>) -> Vec<Chart> {
+    /// `test`: how the reference figure names the test (its scheme and k_sub).
+    fn charts(&self, reference: Option<&str>, test: &str, window: Option<(f64, f64)>) -> Vec<Chart> {
         let time = self.table.column(0);
         let duration = time.last().copied().unwrap_or(0.0);
         let dof_curves = |col: &dyn Fn(usize) -> usize| -> Vec<Curve> {
@@ -286,7 +296,7 @@ impl PlotRecorder {
             charts.push(Chart {
                 file: "reference",
                 figure: Figure::new(&format!(
-                    "DOF {}: substructure test vs reference ({scheme}); peak error {:.2} % of the peak reference",
+                    "DOF {}: test ({test}) vs reference ({scheme}): peak error {:.2} % of its peak",
                     c + 1,
                     100.0 * err.get(i_max).map_or(0.0, |e| e.abs()) / peak_r.max(f64::MIN_POSITIVE)
                 ))
@@ -529,7 +539,7 @@ impl RunFolder {
         if options.plots && plot.table.rows() > 1 {
             let scheme = summary.reference.as_ref().map(|r| r.scheme);
             let mut figures: Vec<(&str, Figure)> = plot
-                .charts(scheme, plot_opts.window)
+                .charts(scheme, &test_label(def), plot_opts.window)
                 .into_iter()
                 .map(|c| (c.file, c.figure))
                 .collect();
