@@ -88,7 +88,7 @@ def test_realtime_options_are_checked(tmp_path):
     mono = tmp_path / "mono.toml"
     mono.write_text((ROOT / "examples" / "monolithic_tmd.toml").read_text().replace(
         'file = "', f'file = "{ROOT / "examples"}/'))
-    with pytest.raises(substep.ConfigError, match="needs a \\[substructure\\]"):
+    with pytest.raises(substep.ConfigError, match="realtime=True: needs a \\[substructure\\]"):
         substep.run(mono, realtime=True, out_dir=tmp_path / "c")
     assert not any((tmp_path / d).exists() for d in "abc")
 

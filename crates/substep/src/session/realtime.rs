@@ -129,7 +129,7 @@ pub fn run_realtime(
 ) -> Result<RealtimeOutcome> {
     let Some(_) = &def.substructure else {
         return Err(Error::invalid(
-            "--realtime",
+            args.name("--realtime", "realtime=True"),
             "needs a [substructure] (a monolithic run has no real-time part)",
         ));
     };
@@ -163,7 +163,8 @@ pub fn run_realtime(
         // CR / KR-α (docs/theory.md §2.9): the whole step runs on the numerical thread.
         let model = def.model.dense("a cr or kr_alpha substructure test")?;
         let probe = sub.explicit_controller(&model, def.integrator.dt, springs()?, &load0)?;
-        crate::realtime::budget::probe_steps(probe, &mass_influence, &accel).check("--realtime")?;
+        crate::realtime::budget::probe_steps(probe, &mass_influence, &accel)
+            .check(args.name("--realtime", "realtime=True"))?;
         let test = sub.build_explicit_test(&model, def.integrator.dt, springs()?, &load0)?;
         AnyRunner::Explicit(Box::new(
             RealtimeRunner::new(&def.model, test, accel.clone(), options)?.with_stop_handle(stop.clone()),
@@ -174,7 +175,8 @@ pub fn run_realtime(
         if let Some(s) = springs()? {
             probe.set_springs(s);
         }
-        crate::realtime::budget::probe(probe, &mass_influence, &accel).check("--realtime")?;
+        crate::realtime::budget::probe(probe, &mass_influence, &accel)
+            .check(args.name("--realtime", "realtime=True"))?;
         let mut test = sub.build_test(&def.model, def.integrator.dt, &load0)?;
         if let Some(s) = springs()? {
             test.controller.set_springs(s);
