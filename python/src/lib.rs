@@ -262,23 +262,16 @@ fn folder_options(
     plots: Option<bool>,
     plot_format: Option<&str>,
 ) -> substep::Result<FolderOptions> {
-    let plots = plots.unwrap_or(def.output.plots);
-    let options = match plot_format {
-        Some(name) => {
-            let plot_format = substep::figure::PlotFormat::from_name(name).ok_or_else(|| {
-                substep::Error::invalid("plot_format", format!("unknown format {name:?} (png, svg or pdf)"))
-            })?;
-            let options = FolderOptions { plots, plot_format };
-            options.check("plot_format")?;
-            options
-        }
-        None if plots => FolderOptions::of(def)?,
-        None => FolderOptions {
-            plots,
-            plot_format: substep::figure::PlotFormat::Png,
-        },
-    };
-    Ok(options)
+    let plot_format = plot_format
+        .map(|name| {
+            substep::figure::PlotFormat::from_name(name)
+                .map(|f| (f, "plot_format"))
+                .ok_or_else(|| {
+                    substep::Error::invalid("plot_format", format!("unknown format {name:?} (png, svg or pdf)"))
+                })
+        })
+        .transpose()?;
+    FolderOptions::resolve(def, plots.unwrap_or(def.output.plots), plot_format)
 }
 
 fn run_tables<'py>(
@@ -370,11 +363,9 @@ fn run_folder<'py>(
         let finished = folder.finish(&def, run.input_motion(), &mut summary);
         let finished = substep::output::files::no_summary_left_running(&dir.join("summary.json"), finished);
         let mut outputs = finished?;
-        let ran = summary
-            .failure
-            .as_ref()
-            .is_none_or(|e| matches!(e, substep::Error::Diverged { .. } | substep::Error::Stopped { .. }));
-        if ran && let Some(path) = substep::output::container::write(dir, container, config_text(kind, text))? {
+        if substep::output::container::ran(summary.failure.as_ref())
+            && let Some(path) = substep::output::container::write(dir, container, config_text(kind, text))?
+        {
             outputs.push(path);
         }
         Ok((summary, outputs))

@@ -189,10 +189,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     // error stays the result, a container that cannot be written is a runtime failure.
     let ran = match &result {
         Ok(()) => true,
-        Err(e) => matches!(
-            e.downcast_ref::<substep::Error>(),
-            Some(substep::Error::Diverged { .. } | substep::Error::Stopped { .. })
-        ),
+        Err(e) => e
+            .downcast_ref::<substep::Error>()
+            .is_some_and(|e| substep::output::container::ran(Some(e))),
     };
     if !ran {
         return result;
@@ -233,30 +232,12 @@ pub(crate) fn live_options(args: &RunArgs) -> LiveOptions {
     }
 }
 
-/// `--plot-format` over the config's `[output.plots] format`; `--no-plots` over `[output] plots`;
-/// a format this build cannot draw is refused (naming the flag or the key) when figures are drawn.
-fn folder_options(args: &RunArgs, def: &TestDefinition) -> Result<FolderOptions> {
-    let plots = def.output.plots && !args.no_plots;
-    let options = match args.plot_format {
-        Some(f) => {
-            let options = FolderOptions {
-                plots,
-                plot_format: f.library(),
-            };
-            options.check("--plot-format")?;
-            options
-        }
-        None if plots => FolderOptions::of(def)?,
-        None => FolderOptions {
-            plots,
-            plot_format: substep::figure::PlotFormat::Png,
-        },
-    };
-    Ok(options)
-}
-
 fn run_definition(args: &RunArgs, mut def: TestDefinition, out_dir: PathBuf) -> Result<()> {
-    let options = folder_options(args, &def)?;
+    let options = FolderOptions::resolve(
+        &def,
+        def.output.plots && !args.no_plots,
+        args.plot_format.map(|f| (f.library(), "--plot-format")),
+    )?;
     crate::plots::set_library_format(options.plot_format);
     if args.realtime {
         let name = args

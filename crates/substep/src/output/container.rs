@@ -8,14 +8,11 @@ use std::path::{Path, PathBuf};
 /// `summary.json` is small (peaks and errors per DOF); more than this is not ours.
 const SUMMARY_MAX_BYTES: f64 = 256.0 * 1024.0 * 1024.0;
 
-/// Whether a run that ended with `result` got as far as writing its outputs: it completed,
-/// diverged or stopped (not when its input was refused, which leaves an earlier run's files in
-/// place). Only then is a container gathered.
-pub fn ran(result: &Result<()>) -> bool {
-    match result {
-        Ok(()) => true,
-        Err(e) => matches!(e, Error::Diverged { .. } | Error::Stopped { .. }),
-    }
+/// Whether a run that ended with `failure` (`None`: it completed) got as far as writing its
+/// outputs: it completed, diverged or stopped (not when its input was refused, which leaves an
+/// earlier run's files in place). Only then is a container gathered.
+pub fn ran(failure: Option<&Error>) -> bool {
+    failure.is_none_or(|e| matches!(e, Error::Diverged { .. } | Error::Stopped { .. }))
 }
 
 /// The container of `format` from the CSV tables and `summary.json` in `dir`, with the test

@@ -364,6 +364,25 @@ impl FolderOptions {
         Ok(options)
     }
 
+    /// A front end's figure options over the definition's: `plots` (the CLI's `--no-plots`
+    /// turns them off; Python's `plots=`), `plot_format` with the name of the option that gave
+    /// it (`--plot-format`, `plot_format`) over `[output.plots] format`. A format this build
+    /// cannot draw is refused, naming that option or the key, when figures are drawn.
+    pub fn resolve(def: &TestDefinition, plots: bool, plot_format: Option<(PlotFormat, &str)>) -> Result<Self> {
+        match plot_format {
+            Some((plot_format, option)) => {
+                let options = Self { plots, plot_format };
+                options.check(option)?;
+                Ok(options)
+            }
+            None if plots => Self::of(def),
+            None => Ok(Self {
+                plots,
+                plot_format: PlotFormat::Png,
+            }),
+        }
+    }
+
     /// Refuse a figure format this build cannot draw (`what` names the option).
     pub fn check(&self, what: &str) -> Result<()> {
         if self.plots {
