@@ -10,6 +10,7 @@ mod frame;
 mod frame3d;
 mod hysteretic;
 mod modal;
+mod reduction;
 mod sparse;
 mod sparse_modes;
 
@@ -24,10 +25,11 @@ pub use frame::{
 pub use frame3d::{Frame3d, Frame3dDof, Section3d, frame_3d};
 pub use hysteretic::{Hysteresis, PDeltaSpec, SpringSpec, Springs};
 pub use modal::{Modes, modes};
+pub use reduction::{MAX_MODES, ModeCount, Reduction, ReductionSpec};
 pub use sparse::{
     AUTO_SPARSE_MAX_DENSITY, AUTO_SPARSE_MIN_DOFS, DENSE_MAX_DOFS, Model, ModelRef, SparseModel, Storage,
 };
-pub use sparse_modes::lowest_frequencies;
+pub use sparse_modes::{SparseModes, lowest_frequencies, lowest_modes};
 
 use crate::error::{Error, Result};
 use nalgebra::{DMatrix, DVector};

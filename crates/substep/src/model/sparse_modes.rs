@@ -16,12 +16,26 @@ pub fn lowest_frequencies(mass: &CscMatrix, stiffness: &CscMatrix, count: usize)
             format!("mode number {count} is outside 1..={n}"),
         ));
     }
+    lowest_modes(mass, stiffness, count, "structure.stiffness (modal analysis needs a supported structure)")
+        .map(|m| m.omega)
+}
+
+/// The lowest modes of a sparse model: circular frequencies [rad/s] and mass-normalised shapes
+/// (`n × count`, `φᵀ M φ = I`).
+#[derive(Debug, Clone)]
+pub struct SparseModes {
+    pub omega: Vec<f64>,
+    pub shapes: DMatrix<f64>,
+}
+
+/// The lowest `count ≤ n` modes of `K φ = ω² M φ` (`K` positive definite, `M` positive
+/// semi-definite with at least `count` DOFs of mass; its massless DOFs follow statically).
+/// `what` names `K` in the error when it cannot be factorised.
+pub fn lowest_modes(mass: &CscMatrix, stiffness: &CscMatrix, count: usize, what: &str) -> Result<SparseModes> {
+    let n = mass.n();
+    assert!(count >= 1 && count <= n, "lowest_modes: count {count} outside 1..={n}");
     let p = n.min((2 * count).max(count + 8));
-    let mut k_fac = SymmetricFactor::new(
-        stiffness,
-        FactorKind::Auto,
-        "structure.stiffness (modal analysis needs a supported structure)",
-    )?;
+    let mut k_fac = SymmetricFactor::new(stiffness, FactorKind::Auto, what)?;
     // Start vectors: the diagonal of M (a ground-motion-like load) and smooth deterministic
     // patterns of increasing wave number.
     let md = mass.diagonal();
@@ -35,7 +49,7 @@ pub fn lowest_frequencies(mass: &CscMatrix, stiffness: &CscMatrix, count: usize)
     let mut y = DMatrix::zeros(n, p);
     let mut ky = DMatrix::zeros(n, p);
     let mut lambda_old = vec![f64::INFINITY; count];
-    for _ in 0..200 {
+    for _ in 0..MAX_ITERATIONS {
         // Y = K⁻¹ M X
         for j in 0..p {
             let (xj, mut yj) = (x.column(j), y.column_mut(j));
@@ -62,15 +76,21 @@ pub fn lowest_frequencies(mass: &CscMatrix, stiffness: &CscMatrix, count: usize)
             .zip(&lambda_old)
             .all(|(l, o)| (l - o).abs() <= 1e-12 * l.abs().max(f64::MIN_POSITIVE));
         if converged {
-            return Ok(lambda.iter().map(|l| l.sqrt()).collect());
+            return Ok(SparseModes {
+                omega: lambda.iter().map(|l| l.sqrt()).collect(),
+                shapes: x.columns(0, count).into_owned(),
+            });
         }
         lambda_old = lambda;
     }
     Err(Error::numerical(
         "modal analysis (subspace iteration)",
-        format!("the lowest {count} frequencies did not converge in 200 iterations"),
+        format!("the lowest {count} frequencies did not converge in {MAX_ITERATIONS} iterations"),
     ))
 }
+
+/// Subspace iterations before a modal analysis gives up.
+pub const MAX_ITERATIONS: usize = 200;
 
 fn symmetrise(a: DMatrix<f64>) -> DMatrix<f64> {
     (&a + a.transpose()) * 0.5

@@ -305,6 +305,35 @@ impl CscMatrix {
         }
     }
 
+    /// The principal submatrix `A[keep, keep]`; `keep` is strictly increasing (the rows and
+    /// columns of the result follow its order).
+    pub fn principal(&self, keep: &[usize]) -> Self {
+        let mut new_index = vec![usize::MAX; self.n];
+        for (k, &i) in keep.iter().enumerate() {
+            new_index[i] = k;
+        }
+        let mut col_ptr = Vec::with_capacity(keep.len() + 1);
+        let mut row_idx = Vec::new();
+        let mut values = Vec::new();
+        col_ptr.push(0);
+        for &j in keep {
+            let (rows, vals) = self.col(j);
+            for (&r, &v) in rows.iter().zip(vals) {
+                if new_index[r] != usize::MAX {
+                    row_idx.push(new_index[r]);
+                    values.push(v);
+                }
+            }
+            col_ptr.push(row_idx.len());
+        }
+        Self {
+            n: keep.len(),
+            col_ptr,
+            row_idx,
+            values,
+        }
+    }
+
     /// Error unless every entry is finite and `A` is symmetric to `1e-9 · max|A|`; `name` is the
     /// config key used in messages (1-based entry numbers, as for dense matrices).
     pub fn check_symmetric(&self, name: &str) -> Result<()> {

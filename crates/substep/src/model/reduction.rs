@@ -1,0 +1,368 @@
+//! Craig–Bampton reduction of a large linear numerical substructure (`[structure.reduction]`,
+//! theory §12).
+//!
+//! The DOFs split into the kept set `B` (the coupling DOFs and any DOF the user wants to see,
+//! e.g. the roof) and the interior `I`. The displacement is approximated in the basis
+//!
+//! ```text
+//!        ⎡ I            0     0 ⎤ ⎡ u_B ⎤
+//!   u ≈  ⎣ −K_II⁻¹ K_IB  Φ_I   r ⎦ ⎢  η  ⎥ = T q,
+//!                                  ⎣  ρ  ⎦
+//! ```
+//!
+//! * the constraint modes `Ψ = −K_II⁻¹ K_IB`: the static shape of a unit motion of one kept DOF
+//!   with the others held; they keep `u_B` physical, so the sub-step controller, the specimens,
+//!   the actuators and the lab see the reduced model's first `|B|` DOFs as the structure's own;
+//! * `N` fixed-interface modes `K_II φ = ω² M_II φ` (mass-normalised, lowest first), found by
+//!   subspace iteration on the sparse factor of `K_II` ([`lowest_modes`]);
+//! * the static correction `r = K_II⁻¹ (M ι)_I`: the interior's static response to the ground
+//!   load with `B` held, so the static response to the earthquake load is exact whatever `N`
+//!   (as it is for loads at `B` through `Ψ`). Dropped when the modes already span it.
+//!
+//! The reduced matrices are `M_r = Tᵀ M T`, `C_r = Tᵀ C T`, `K_r = Tᵀ K T` (Rayleigh damping
+//! `a M + b K` stays `a M_r + b K_r`), the load `Tᵀ M ι a_g` is kept exactly by the influence
+//! `ι_r = M_r⁻¹ Tᵀ M ι`. More modes than asked are computed (twice as many, at most the
+//! interior's massive DOFs): the nested bases with fewer modes give the error estimate of the
+//! truncation (`run::reduction`).
+
+use super::{Model, StructuralModel, lowest_modes};
+use crate::error::{Error, Result};
+use crate::sparse::{CscMatrix, FactorKind, SymmetricFactor};
+use nalgebra::{DMatrix, DVector};
+
+/// How many fixed-interface modes a reduction keeps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ModeCount {
+    /// Exactly this many.
+    Modes(usize),
+    /// Every mode up to this frequency \[Hz\] (at least one).
+    FrequencyMax(f64),
+}
+
+/// The largest number of fixed-interface modes a reduction computes.
+pub const MAX_MODES: usize = 1000;
+
+/// What to reduce to: the modes and the kept DOFs (0-based, strictly increasing).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReductionSpec {
+    pub modes: ModeCount,
+    pub kept: Vec<usize>,
+}
+
+/// A computed Craig–Bampton basis: the reduced matrices of the largest nested basis (kept DOFs,
+/// then [`computed_modes`](Self::computed_modes) modes, then the static correction), from which
+/// [`model`](Self::model) takes the one with fewer modes.
+#[derive(Debug, Clone)]
+pub struct Reduction {
+    /// DOFs of the full model.
+    pub n_full: usize,
+    /// The kept DOFs of the full model (0-based, ascending); DOF `k` of the reduced model is
+    /// `kept[k]` for `k < kept.len()`.
+    pub kept: Vec<usize>,
+    /// The number of modes the reduced model of the test keeps (`N`).
+    pub modes: usize,
+    /// Natural frequencies \[Hz\] of the computed fixed-interface modes (`≥ modes` of them; the
+    /// extra ones serve the error estimate).
+    pub frequencies_hz: Vec<f64>,
+    /// The basis ends with the static correction of the ground load.
+    pub residual: bool,
+    mass: DMatrix<f64>,
+    damping: DMatrix<f64>,
+    stiffness: DMatrix<f64>,
+    /// `Tᵀ M ι`.
+    load: DVector<f64>,
+}
+
+impl Reduction {
+    /// Reduce `model` (linear, `K` positive definite with the kept DOFs held) by `spec`.
+    /// `max_bytes` bounds the dense basis (`n × (|B| + 2N + 1)` values), checked before it is
+    /// allocated. Errors name `structure.reduction.*`.
+    pub fn compute(model: &Model, spec: &ReductionSpec, max_bytes: f64) -> Result<Self> {
+        let n = model.n_dofs();
+        let kept = &spec.kept;
+        if let Some(w) = kept.windows(2).find(|w| w[0] >= w[1]) {
+            return Err(Error::invalid(
+                "structure.reduction.keep",
+                format!("DOF {} is given twice", w[1] + 1),
+            ));
+        }
+        if let Some(&d) = kept.iter().find(|&&d| d >= n) {
+            return Err(Error::invalid(
+                "structure.reduction.keep",
+                format!("DOF {} is out of range (the model has DOFs 1..={n})", d + 1),
+            ));
+        }
+        let (mass, damping, stiffness) = match model {
+            Model::Sparse(m) => (m.mass.clone(), m.damping.clone(), m.stiffness.clone()),
+            Model::Dense(m) => (
+                CscMatrix::from_dense(&m.mass),
+                CscMatrix::from_dense(&m.damping),
+                CscMatrix::from_dense(&m.stiffness),
+            ),
+        };
+        let mass_diagonal = mass.diagonal();
+        if let Some(&d) = kept.iter().find(|&&d| mass_diagonal[d] <= 0.0) {
+            return Err(Error::invalid(
+                "structure.reduction",
+                format!(
+                    "kept DOF {} has no mass: the reduced model cannot represent a massless coupling or \
+                     kept DOF (keep translational DOFs with mass)",
+                    d + 1
+                ),
+            ));
+        }
+        let mut is_kept = vec![false; n];
+        for &d in kept {
+            is_kept[d] = true;
+        }
+        let interior: Vec<usize> = (0..n).filter(|&i| !is_kept[i]).collect();
+        let n_i = interior.len();
+        if n_i == 0 {
+            return Err(Error::invalid(
+                "structure.reduction",
+                format!("keeps all {n} DOFs: there is nothing to reduce"),
+            ));
+        }
+        let k_ii = stiffness.principal(&interior);
+        let m_ii = mass.principal(&interior);
+        // DOFs of the interior that carry mass bound the number of finite frequencies.
+        let massive = if m_ii.is_diagonal() {
+            m_ii.diagonal().iter().filter(|&&d| d > 0.0).count()
+        } else {
+            n_i
+        };
+        match spec.modes {
+            ModeCount::Modes(0) => {
+                return Err(Error::invalid("structure.reduction.modes", "must be at least 1"));
+            }
+            ModeCount::Modes(m) if m > massive || m > MAX_MODES => {
+                return Err(Error::invalid(
+                    "structure.reduction.modes",
+                    format!(
+                        "{m} modes asked, but the model has {} (its {n} DOFs less the {} kept, {} of them \
+                         with mass; at most {MAX_MODES} here)",
+                        massive.min(MAX_MODES),
+                        kept.len(),
+                        massive
+                    ),
+                ));
+            }
+            ModeCount::Modes(_) => {}
+            ModeCount::FrequencyMax(f) if !(f.is_finite() && f > 0.0) => {
+                return Err(Error::invalid(
+                    "structure.reduction.frequency_max",
+                    format!("must be a positive frequency in Hz, got {f}"),
+                ));
+            }
+            ModeCount::FrequencyMax(_) => {} // the count is found below
+        }
+        let cap = massive.min(MAX_MODES);
+        let check_basis = |modes: usize| -> Result<()> {
+            let bytes = 8.0 * n as f64 * (kept.len() + modes + 1) as f64 * 4.0;
+            if bytes > max_bytes {
+                return Err(Error::invalid(
+                    "structure.reduction",
+                    format!(
+                        "a basis of {modes} modes for {n} DOFs needs {:.3} GB, more than [limits] max_memory \
+                         ({:.3} GB): ask for fewer modes",
+                        bytes / 1e9,
+                        max_bytes / 1e9
+                    ),
+                ));
+            }
+            Ok(())
+        };
+        let what = "structure.reduction (the structure with its kept DOFs held)";
+        let solve = |count: usize| -> Result<super::SparseModes> {
+            check_basis(count)?;
+            lowest_modes(&m_ii, &k_ii, count, what).map_err(|e| match e {
+                Error::Numerical { reason, .. } => Error::invalid(
+                    "structure.reduction",
+                    format!("the eigen-solve for {count} fixed-interface modes failed: {reason}"),
+                ),
+                other => other,
+            })
+        };
+        // The modes of the test and as many again for the error estimate.
+        let (modes, found) = match spec.modes {
+            ModeCount::Modes(m) => (m, solve((2 * m).min(cap))?),
+            ModeCount::FrequencyMax(f) => {
+                let omega_max = 2.0 * std::f64::consts::PI * f;
+                let mut count = 8.min(cap);
+                loop {
+                    let found = solve(count)?;
+                    let below = found.omega.iter().filter(|&&w| w <= omega_max).count().max(1);
+                    if count == MAX_MODES && below == count {
+                        return Err(Error::invalid(
+                            "structure.reduction.frequency_max",
+                            format!("{f} Hz takes more than {MAX_MODES} modes: lower it or give modes"),
+                        ));
+                    }
+                    if 2 * below <= count || count == cap {
+                        break (below, found);
+                    }
+                    count = (2 * count).max(2 * below).min(cap);
+                }
+            }
+        };
+        let m = found.omega.len();
+
+        // The basis T, n × (|B| + m + 1).
+        let nb = kept.len();
+        let mut k_fac = SymmetricFactor::new(&k_ii, FactorKind::Auto, what)?;
+        let cols = nb + m + 1;
+        let mut t = DMatrix::<f64>::zeros(n, cols);
+        let mut rhs = vec![0.0; n_i];
+        let mut interior_index = vec![usize::MAX; n];
+        for (k, &i) in interior.iter().enumerate() {
+            interior_index[i] = k;
+        }
+        for (c, &b) in kept.iter().enumerate() {
+            rhs.iter_mut().for_each(|x| *x = 0.0);
+            let (rows, vals) = stiffness.col(b);
+            for (&r, &v) in rows.iter().zip(vals) {
+                if interior_index[r] != usize::MAX {
+                    rhs[interior_index[r]] = -v;
+                }
+            }
+            k_fac.solve_in_place(&mut rhs);
+            for (k, &i) in interior.iter().enumerate() {
+                t[(i, c)] = rhs[k];
+            }
+            t[(b, c)] = 1.0;
+        }
+        for j in 0..m {
+            for (k, &i) in interior.iter().enumerate() {
+                t[(i, nb + j)] = found.shapes[(k, j)];
+            }
+        }
+        // Static correction of the ground load.
+        let ground = model.effective_mass_vector();
+        for (k, &i) in interior.iter().enumerate() {
+            rhs[k] = ground[i];
+        }
+        k_fac.solve_in_place(&mut rhs);
+        let residual = {
+            let r = DVector::from_column_slice(&rhs);
+            let m_norm = |v: &DVector<f64>| {
+                let mut mv = vec![0.0; n_i];
+                m_ii.sym_mul_add(1.0, v.as_slice(), 0.0, &mut mv);
+                v.iter().zip(&mv).map(|(a, b)| a * b).sum::<f64>().max(0.0).sqrt()
+            };
+            let norm = m_norm(&r);
+            // What of r the modes do not span (M-orthogonal complement, two passes).
+            let mut left = r.clone();
+            for _ in 0..2 {
+                let mut mv = vec![0.0; n_i];
+                m_ii.sym_mul_add(1.0, left.as_slice(), 0.0, &mut mv);
+                let coeff: Vec<f64> = (0..m)
+                    .map(|j| found.shapes.column(j).iter().zip(&mv).map(|(a, b)| a * b).sum())
+                    .collect();
+                for (j, c) in coeff.iter().enumerate() {
+                    left.axpy(-c, &found.shapes.column(j), 1.0);
+                }
+            }
+            if norm > 0.0 && m_norm(&left) > 1e-6 * norm {
+                for (k, &i) in interior.iter().enumerate() {
+                    t[(i, nb + m)] = r[k] / norm;
+                }
+                true
+            } else {
+                false
+            }
+        };
+        let t = if residual { t } else { t.columns(0, cols - 1).into_owned() };
+        let project = |a: &CscMatrix| -> DMatrix<f64> {
+            let mut at = DMatrix::<f64>::zeros(n, t.ncols());
+            for j in 0..t.ncols() {
+                a.sym_mul_add(1.0, t.column(j).as_slice(), 0.0, at.column_mut(j).as_mut_slice());
+            }
+            let p = t.transpose() * at;
+            (&p + p.transpose()) * 0.5
+        };
+        Ok(Self {
+            n_full: n,
+            kept: kept.clone(),
+            modes,
+            frequencies_hz: found.omega.iter().map(|w| w / (2.0 * std::f64::consts::PI)).collect(),
+            residual,
+            mass: project(&mass),
+            damping: project(&damping),
+            stiffness: project(&stiffness),
+            load: t.transpose() * ground,
+        })
+    }
+
+    /// Modes computed (`≥` [`Self::modes`]).
+    pub fn computed_modes(&self) -> usize {
+        self.frequencies_hz.len()
+    }
+
+    /// DOFs of the reduced model with `modes` modes.
+    pub fn size(&self, modes: usize) -> usize {
+        self.kept.len() + modes + usize::from(self.residual)
+    }
+
+    /// The reduced model with the first `modes ≤ computed_modes()` modes (the test's is
+    /// `model(self.modes)`).
+    pub fn model(&self, modes: usize) -> Result<StructuralModel> {
+        assert!(modes <= self.computed_modes(), "reduction: {modes} modes of {}", self.computed_modes());
+        let nb = self.kept.len();
+        let mut index: Vec<usize> = (0..nb + modes).collect();
+        if self.residual {
+            index.push(nb + self.computed_modes());
+        }
+        let pick = |a: &DMatrix<f64>| DMatrix::from_fn(index.len(), index.len(), |i, j| a[(index[i], index[j])]);
+        let mass = pick(&self.mass);
+        let load = DVector::from_iterator(index.len(), index.iter().map(|&i| self.load[i]));
+        let influence = mass.clone().cholesky().map(|c| c.solve(&load)).ok_or_else(|| {
+            Error::invalid(
+                "structure.reduction",
+                "the reduced mass matrix is not positive definite (a kept DOF without mass?)",
+            )
+        })?;
+        StructuralModel::new(mass, pick(&self.damping), pick(&self.stiffness), Some(influence))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{ShearBuilding, shear_building_sparse};
+
+    #[test]
+    fn keeping_all_modes_reproduces_the_full_frequencies() {
+        // With every interior mode in the basis the reduction is a change of basis: the reduced
+        // model's frequencies are the full model's.
+        let full = shear_building_sparse(&ShearBuilding {
+            stories: 8,
+            story_mass: 2.0e5,
+            first_period: 0.8,
+        })
+        .unwrap();
+        let model: Model = full.clone().into();
+        let spec = ReductionSpec {
+            modes: ModeCount::Modes(6),
+            kept: vec![2, 7],
+        };
+        let r = Reduction::compute(&model, &spec, 1e9).unwrap();
+        assert_eq!(r.computed_modes(), 6);
+        let reduced = r.model(6).unwrap();
+        let exact = model.dense("test").unwrap().modes().unwrap().omega;
+        let got = reduced.modes().unwrap().omega;
+        assert_eq!(got.len(), 8);
+        for (a, b) in got.iter().zip(exact.iter()) {
+            assert!((a - b).abs() < 1e-8 * b, "{a} vs {b}");
+        }
+        // The kept DOFs stay physical: a static load there gives the full model's deflection.
+        let k = model.dense("test").unwrap().stiffness.clone();
+        let mut f = DVector::zeros(8);
+        f[7] = 1.0e5;
+        let u_full = k.cholesky().unwrap().solve(&f);
+        let mut f_r = DVector::zeros(reduced.n_dofs());
+        f_r[1] = 1.0e5;
+        let u_r = reduced.stiffness.clone().cholesky().unwrap().solve(&f_r);
+        assert!((u_r[0] - u_full[2]).abs() < 1e-12 * u_full[7].abs());
+        assert!((u_r[1] - u_full[7]).abs() < 1e-12 * u_full[7].abs());
+    }
+}
