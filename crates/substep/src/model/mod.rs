@@ -25,7 +25,7 @@ pub use frame::{
 pub use frame3d::{Frame3d, Frame3dDof, Section3d, frame_3d};
 pub use hysteretic::{Hysteresis, PDeltaSpec, SpringSpec, Springs};
 pub use modal::{Modes, modes};
-pub use reduction::{MAX_MODES, ModeCount, Reduction, ReductionSpec};
+pub use reduction::{ENRICHMENT as REDUCTION_ENRICHMENT, MAX_MODES, ModeCount, Reduction, ReductionSpec};
 pub use sparse::{
     AUTO_SPARSE_MAX_DENSITY, AUTO_SPARSE_MIN_DOFS, DENSE_MAX_DOFS, Model, ModelRef, SparseModel, Storage,
 };

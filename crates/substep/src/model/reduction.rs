@@ -21,9 +21,9 @@
 //!
 //! The reduced matrices are `M_r = Tᵀ M T`, `C_r = Tᵀ C T`, `K_r = Tᵀ K T` (Rayleigh damping
 //! `a M + b K` stays `a M_r + b K_r`), the load `Tᵀ M ι a_g` is kept exactly by the influence
-//! `ι_r = M_r⁻¹ Tᵀ M ι`. More modes than asked are computed (twice as many, at most the
-//! interior's massive DOFs): the nested bases with fewer modes give the error estimate of the
-//! truncation (`run::reduction`).
+//! `ι_r = M_r⁻¹ Tᵀ M ι`. More modes than asked are computed (every mode up to twice the first
+//! dropped frequency, at most the interior's massive DOFs): the nested basis with all of them
+//! gives the error estimate of the truncation (`run::reduction`).
 
 use super::{Model, StructuralModel, lowest_modes};
 use crate::error::{Error, Result};
@@ -38,6 +38,9 @@ pub enum ModeCount {
     /// Every mode up to this frequency \[Hz\] (at least one).
     FrequencyMax(f64),
 }
+
+/// The estimate's basis reaches this multiple of the first dropped frequency.
+pub const ENRICHMENT: f64 = 2.0;
 
 /// The largest number of fixed-interface modes a reduction computes.
 pub const MAX_MODES: usize = 1000;
@@ -66,6 +69,8 @@ pub struct Reduction {
     pub frequencies_hz: Vec<f64>,
     /// The basis ends with the static correction of the ground load.
     pub residual: bool,
+    /// Interior DOFs with mass (the most fixed-interface modes there are).
+    pub massive_interior: usize,
     mass: DMatrix<f64>,
     damping: DMatrix<f64>,
     stiffness: DMatrix<f64>,
@@ -184,7 +189,7 @@ impl Reduction {
             })
         };
         // The modes of the test and as many again for the error estimate.
-        let (modes, found) = match spec.modes {
+        let (modes, mut found) = match spec.modes {
             ModeCount::Modes(m) => (m, solve((2 * m).min(cap))?),
             ModeCount::FrequencyMax(f) => {
                 let omega_max = 2.0 * std::f64::consts::PI * f;
@@ -205,6 +210,15 @@ impl Reduction {
                 }
             }
         };
+        // Enrich the estimate's basis up to twice the first dropped frequency.
+        let mut count = found.omega.len();
+        while count < cap
+            && found.omega.len() > modes
+            && found.omega[count - 1] < ENRICHMENT * found.omega[modes]
+        {
+            count = (2 * count).min(cap);
+            found = solve(count)?;
+        }
         let m = found.omega.len();
 
         // The basis T, n × (|B| + m + 1).
@@ -286,6 +300,7 @@ impl Reduction {
             modes,
             frequencies_hz: found.omega.iter().map(|w| w / (2.0 * std::f64::consts::PI)).collect(),
             residual,
+            massive_interior: massive,
             mass: project(&mass),
             damping: project(&damping),
             stiffness: project(&stiffness),

@@ -21,6 +21,7 @@
 //! ```
 
 mod engineering;
+pub mod reduction;
 mod simulation;
 mod stats;
 mod summary;
@@ -468,6 +469,9 @@ pub struct Run<'d> {
     /// [`Self::set_stability`]).
     stability: Option<StabilityMonitor>,
     layout: Layout,
+    /// `[structure.reduction]`: its estimate (computed in [`Run::new`]) and, filled during the
+    /// run, the kept DOFs' displacements for the check against the full model.
+    reduction: Option<(reduction::ReductionSummary, Vec<Vec<f64>>)>,
 }
 
 /// The indicator of `settings` for the test `def` (`None` without a substructure).
@@ -499,6 +503,10 @@ impl<'d> Run<'d> {
             ramp_column: sub.is_some_and(|s| s.limits.is_some()),
             response_columns: engineering.as_ref().map(EngineeringRecorder::columns),
         };
+        let reduction = reduction::estimate(def)?.map(|r| {
+            let kept = vec![Vec::with_capacity(def.integrator.steps + 1); r.kept_dofs.len()];
+            (r, kept)
+        });
         Ok(Self {
             def,
             sim,
@@ -508,6 +516,7 @@ impl<'d> Run<'d> {
             input_motion: None,
             stability,
             layout,
+            reduction,
         })
     }
 
@@ -547,6 +556,7 @@ impl<'d> Run<'d> {
             input_motion,
             stability,
             layout,
+            reduction,
         } = self;
         let def: &TestDefinition = def;
         observer.start(layout);
@@ -617,6 +627,11 @@ impl<'d> Run<'d> {
                 indicator: stability.as_ref(),
             });
             recorder.record(sim, reference.as_ref());
+            if let Some((_, kept)) = reduction.as_mut() {
+                for (k, h) in kept.iter_mut().enumerate() {
+                    h.push(s.u[k]);
+                }
+            }
             if let (Some(same), Some(r)) = (same_integrator.as_mut(), reference.as_ref()) {
                 same.record(s.u.as_slice(), r.u());
             }
@@ -742,6 +757,24 @@ impl<'d> Run<'d> {
         let lab = summary::lab_summary(sim, &mut warnings);
         warnings.extend(indicator_warnings);
         let sub = def.substructure.as_ref();
+        let reduction_summary = reduction.take().map(|(mut r, kept)| {
+            if failure.is_none() && !cancelled && kept.first().is_some_and(|h| h.len() == steps + 1) {
+                match reduction::check(def, &kept) {
+                    Ok(c) => r.check = c,
+                    Err(e) => warnings.push(format!("the check of the reduction against the full model failed: {e}")),
+                }
+            }
+            if let Some(c) = &r.check
+                && c.max_error > r.error_estimate
+            {
+                warnings.push(format!(
+                    "the reduced model's error against the full model ({}) exceeds its estimate ({})",
+                    crate::format::sig(c.max_error, 3),
+                    crate::format::sig(r.error_estimate, 3)
+                ));
+            }
+            r
+        });
         RunSummary {
             config: def.source.clone(),
             scheme: def.integrator.name.clone(),
@@ -804,6 +837,7 @@ impl<'d> Run<'d> {
             warnings,
             input_motion: motion_summary,
             engineering: engineering.as_ref().map(EngineeringRecorder::summary),
+            reduction: reduction_summary,
             outputs: Vec::new(),
             failure,
         }

@@ -156,6 +156,10 @@ pub struct RunSummary {
     /// Energy balance, base shear, drifts, absolute accelerations (dense models up to 200 DOFs).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub engineering: Option<EngineeringSummary>,
+    /// `[structure.reduction]`: the reduced model, its error estimate and the check against the
+    /// full model (`seconds` and `full_run_seconds` are timings).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reduction: Option<super::reduction::ReductionSummary>,
     /// The files a front end wrote (paths as it names them; empty when nothing was written).
     pub outputs: Vec<String>,
     /// Why the run did not complete (the error behind `stopped_at_step` and `reason`).

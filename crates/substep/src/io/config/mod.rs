@@ -36,6 +36,7 @@ mod lab_target;
 mod monitor;
 mod output;
 mod realtime;
+mod reduction;
 mod remote;
 mod safety_limits;
 mod sensors;
@@ -62,6 +63,7 @@ pub use monitor::{MAX_TOKEN_CHARS, MIN_TOKEN_CHARS, MonitorSettings, check_token
 use output::{Format, RawOutput};
 pub use output::{OutputSettings, PLOT_FIGURES, PlotOptions};
 use realtime::RawRealtime;
+pub use reduction::ReducedStructure;
 pub use realtime::{DEFAULT_MAX_MISSED, RealtimeSettings, check_max_missed, parse_late_policy, too_many_missed};
 pub use remote::{RemoteDefinition, RemoteProtocol};
 pub(crate) use sensors::RawSensors;
@@ -95,6 +97,10 @@ pub struct TestDefinition {
     pub monitor: MonitorSettings,
     /// `[realtime]`: the share of missed deadlines a `--realtime` run accepts.
     pub realtime: RealtimeSettings,
+    /// `[structure.reduction]`: `model` is the reduced numerical substructure (its first DOFs
+    /// are the kept ones, [`crate::model::Reduction::kept`]), and the test on the full model
+    /// for the check.
+    pub reduction: Option<ReducedStructure>,
 }
 
 impl TestDefinition {
@@ -151,6 +157,30 @@ impl TestDefinition {
             },
             other => other,
         })
+    }
+
+    fn with_reduction(
+        mut self,
+        info: Option<(crate::model::Reduction, Option<String>, f64)>,
+        full: Option<(Model, Option<SubstructureDefinition>)>,
+    ) -> Self {
+        let Some((reduction, no_check, seconds)) = info else {
+            return self;
+        };
+        let full = full.map(|(model, substructure)| {
+            Box::new(TestDefinition {
+                model,
+                substructure,
+                ..self.clone()
+            })
+        });
+        self.reduction = Some(ReducedStructure {
+            reduction,
+            full,
+            no_check,
+            seconds,
+        });
+        self
     }
 
     /// Step time `t_i = i·dt` \[s\].
@@ -241,7 +271,7 @@ impl RawRunLimits {
 }
 
 impl RawConfig {
-    pub(crate) fn build(self, name: &str, base: &Path) -> Result<TestDefinition> {
+    pub(crate) fn build(mut self, name: &str, base: &Path) -> Result<TestDefinition> {
         let limits = self
             .limits
             .as_ref()
@@ -292,10 +322,52 @@ impl RawConfig {
         if shape.is_none() {
             self.check_run(&limits, ModelShape::of(&model), steps as f64, dt)?;
         }
-        let substructure = match self.substructure {
+        let mut substructure = match &self.substructure {
             None => None,
             Some(s) => Some(s.build(&model, &name_s, scheme, dt, base, &limits)?),
         };
+        let mut model = model;
+        // The reduced model replaces the full one; the full one stays for the check.
+        let mut full_parts = None;
+        let mut reduction_info = None;
+        if let Some(r) = &self.structure.reduction {
+            if hysteresis.is_some() {
+                return Err(Error::invalid(
+                    "structure.reduction",
+                    "reduces linear structures only: this one has hysteretic springs",
+                ));
+            }
+            if static_load.is_some() {
+                return Err(Error::invalid(
+                    "structure.reduction",
+                    "cannot be combined with structure.frame.gravity",
+                ));
+            }
+            let coupling: Vec<usize> = self.substructure.as_ref().map_or_else(Vec::new, |s| s.coupling_dofs.clone());
+            let spec = r.spec(model.n_dofs(), &coupling)?;
+            let (reduction, seconds) = r.compute(&model, &spec, limits.max_memory)?;
+            let reduced: Model = reduction.model(reduction.modes)?.into();
+            let in_lab = substructure
+                .as_ref()
+                .is_some_and(|s| s.lab_target.is_some() || s.remote.is_some());
+            let no_check = if !r.check() {
+                Some("structure.reduction.check = false".to_string())
+            } else if in_lab {
+                Some("the specimen is in a lab or at a remote site: run the definition as a virtual test to check".into())
+            } else {
+                None
+            };
+            let full_sub = substructure.take();
+            if let Some(raw) = self.substructure.as_mut() {
+                reduction::renumber(raw, &reduction.kept);
+                substructure = Some(raw.build(&reduced, &name_s, scheme, dt, base, &limits)?);
+            }
+            let full_model = std::mem::replace(&mut model, reduced);
+            if no_check.is_none() {
+                full_parts = Some((full_model, full_sub));
+            }
+            reduction_info = Some((reduction, no_check, seconds));
+        }
         check_exact_range(&self.structure, &model, substructure.as_ref(), scheme, dt)?;
         if let Some(sub) = &substructure {
             // A delay longer than the test leaves the specimen at rest for the whole run (and
@@ -339,7 +411,9 @@ impl RawConfig {
             },
             monitor: self.monitor.build()?,
             realtime: self.realtime.build()?,
-        })
+            reduction: None,
+        }
+        .with_reduction(reduction_info, full_parts))
     }
 }
 

@@ -39,6 +39,7 @@ pub(crate) struct RawStructure {
     pub(crate) tmd: Option<RawTmd>,
     pub(crate) frame: Option<RawFrame>,
     pub(crate) storage: Option<String>,
+    pub(crate) reduction: Option<super::reduction::RawReduction>,
 }
 
 /// `[structure.frame]`; every key has the default of [`Frame2d::default`].

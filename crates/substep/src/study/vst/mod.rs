@@ -293,5 +293,6 @@ pub(crate) fn definition(s: &VstSettings, sigma: f64, method: &Method) -> Result
         },
         monitor: Default::default(),
         realtime: Default::default(),
+        reduction: None,
     })
 }
