@@ -45,21 +45,43 @@ pub(crate) fn print_time_step_share(scheme: &str, reference: &str, split: &subst
 
 /// The peaks of the summary on stdout.
 fn print_peaks(s: &RunSummary) {
+    // A reduced model's DOFs past the kept ones are modal coordinates, not displacements.
+    let kept = s.reduction.as_ref().map(|r| r.kept_dofs.as_slice());
+    let peaks = &s.peaks[..kept.map_or(s.peaks.len(), |k| k.len().min(s.peaks.len()))];
     let show = |name: &str, unit: &str, (k, peak): (usize, substep::run::Peak)| {
+        let full = kept.map_or_else(String::new, |kept| format!(", DOF {} of the full model", kept[k]));
         println!(
-            "  peak {name} = {} {unit} (DOF {}, t = {:.3} s)",
+            "  peak {name} = {} {unit} (DOF {}{full}, t = {:.3} s)",
             fixed(peak.max_abs),
             k + 1,
             peak.t
         );
     };
-    show("relative displacement |u|", "m", largest(s.peaks.iter().map(|p| p.u)));
-    show("relative velocity |u̇|", "m/s", largest(s.peaks.iter().map(|p| p.v)));
-    show(
-        "relative acceleration |ü|",
-        "m/s²",
-        largest(s.peaks.iter().map(|p| p.a)),
-    );
+    if !peaks.is_empty() {
+        show("relative displacement |u|", "m", largest(peaks.iter().map(|p| p.u)));
+        show("relative velocity |u̇|", "m/s", largest(peaks.iter().map(|p| p.v)));
+        show("relative acceleration |ü|", "m/s²", largest(peaks.iter().map(|p| p.a)));
+    }
+    if let Some(r) = &s.reduction {
+        let check = match (&r.check, &r.no_check) {
+            (Some(c), _) => format!(
+                "; measured against the full model: {} ({:.2} s)",
+                substep::format::sig(c.max_error, 3),
+                c.full_run_seconds
+            ),
+            (None, Some(why)) => format!("; not checked against the full model: {why}"),
+            (None, None) => String::new(),
+        };
+        println!(
+            "  reduction error (peak |u − u_full| of a kept DOF over its peak): estimated {}{}{check}",
+            substep::format::sig(r.error_estimate, 3),
+            if r.estimate_unreliable {
+                " (unreliable: the estimate's basis was cut short)"
+            } else {
+                ""
+            }
+        );
+    }
     if let Some(c) = s.coupling_peaks.as_ref().filter(|c| !c.is_empty()) {
         let (k, p) = largest(c.iter().map(|p| p.force));
         let (ke, pe) = largest(c.iter().map(|p| p.error_force));
@@ -110,6 +132,24 @@ fn print_header(args: &RunArgs, def: &TestDefinition) {
         def.model.n_dofs(),
         def.model.storage_name()
     );
+    if let Some(red) = &def.reduction {
+        let r = &red.reduction;
+        println!(
+            "  reduced from {} DOFs by Craig–Bampton in {:.2} s: u1..u{} are DOFs {:?} of the full model, then {} \
+             fixed-interface modes (up to {:.3} Hz){}",
+            r.n_full,
+            red.seconds,
+            r.kept.len(),
+            r.kept.iter().map(|d| d + 1).collect::<Vec<_>>(),
+            r.modes,
+            r.frequencies_hz.get(r.modes.max(1) - 1).copied().unwrap_or(f64::NAN),
+            if r.residual {
+                " and the static correction of the ground load"
+            } else {
+                ""
+            }
+        );
+    }
     if let Some(t) = def.substructure.as_ref().and_then(|s| s.lab_target.as_ref()) {
         println!(
             "  experimental side: lab target at {} ({} over {}, exchange timeout {} ms, up to {} held sub-steps in a row)",

@@ -96,12 +96,24 @@ fn the_estimate_bounds_the_measured_error_on_three_frames() {
                 "{name}, {modes} modes: estimate {:.3e}, measured {:.3e} (coupling {:.3e}, roof {:.3e}), enriched to {} modes",
                 r.error_estimate, worst, m[0], m[1], r.estimate_modes
             );
-            assert!(r.error_estimate >= worst, "{name}, {modes} modes: estimate {} < measured {worst}", r.error_estimate);
+            assert!(
+                r.error_estimate >= worst,
+                "{name}, {modes} modes: estimate {} < measured {worst}",
+                r.error_estimate
+            );
             // Not a bound by a mile: within 20x of the error.
-            assert!(r.error_estimate <= 20.0 * worst.max(1e-6), "{name}, {modes} modes: estimate {} vs {worst}", r.error_estimate);
+            assert!(
+                r.error_estimate <= 20.0 * worst.max(1e-6),
+                "{name}, {modes} modes: estimate {} vs {worst}",
+                r.error_estimate
+            );
             // The library's own check against the full model measures the same error.
             let c = r.check.as_ref().unwrap();
-            assert!((c.max_error - worst).abs() <= 1e-9 * worst.max(1e-12), "check {} vs {worst}", c.max_error);
+            assert!(
+                (c.max_error - worst).abs() <= 1e-9 * worst.max(1e-12),
+                "check {} vs {worst}",
+                c.max_error
+            );
             assert!(worst < last, "{name}: more modes must not be worse");
             last = worst;
         }
@@ -143,14 +155,32 @@ fn refused(structure: &str, reduction: &str) -> String {
 fn bad_reduction_settings_are_refused_in_one_line() {
     let frame = "[structure.frame]\nbays = 1\nstories = 2\n"; // 12 DOFs
     let cases = [
-        ("modes = 12", "structure.reduction.modes: 12 modes asked, but the model has 11"),
+        (
+            "modes = 12",
+            "structure.reduction.modes: 12 modes asked, but the model has 11",
+        ),
         ("modes = 0", "structure.reduction.modes: must be at least 1"),
         ("", "structure.reduction: give modes"),
-        ("modes = 2\nfrequency_max = 10.0", "structure.reduction.frequency_max: cannot be combined"),
-        ("frequency_max = -1.0", "structure.reduction.frequency_max: must be a positive frequency"),
-        ("modes = 2\nkeep = [13]", "structure.reduction.keep: DOF 13 is out of range"),
-        ("modes = 2\nmethod = \"guyan\"", "structure.reduction.method: unknown method 'guyan'"),
-        ("modes = 2\nkeep = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]", "structure.reduction: keeps all 12 DOFs"),
+        (
+            "modes = 2\nfrequency_max = 10.0",
+            "structure.reduction.frequency_max: cannot be combined",
+        ),
+        (
+            "frequency_max = -1.0",
+            "structure.reduction.frequency_max: must be a positive frequency",
+        ),
+        (
+            "modes = 2\nkeep = [13]",
+            "structure.reduction.keep: DOF 13 is out of range",
+        ),
+        (
+            "modes = 2\nmethod = \"guyan\"",
+            "structure.reduction.method: unknown method 'guyan'",
+        ),
+        (
+            "modes = 2\nkeep = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]",
+            "structure.reduction: keeps all 12 DOFs",
+        ),
     ];
     for (reduction, expected) in cases {
         let m = refused(frame, reduction);

@@ -212,10 +212,7 @@ impl Reduction {
         };
         // Enrich the estimate's basis up to twice the first dropped frequency.
         let mut count = found.omega.len();
-        while count < cap
-            && found.omega.len() > modes
-            && found.omega[count - 1] < ENRICHMENT * found.omega[modes]
-        {
+        while count < cap && found.omega.len() > modes && found.omega[count - 1] < ENRICHMENT * found.omega[modes] {
             count = (2 * count).min(cap);
             found = solve(count)?;
         }
@@ -285,7 +282,11 @@ impl Reduction {
                 false
             }
         };
-        let t = if residual { t } else { t.columns(0, cols - 1).into_owned() };
+        let t = if residual {
+            t
+        } else {
+            t.columns(0, cols - 1).into_owned()
+        };
         let project = |a: &CscMatrix| -> DMatrix<f64> {
             let mut at = DMatrix::<f64>::zeros(n, t.ncols());
             for j in 0..t.ncols() {
@@ -321,7 +322,11 @@ impl Reduction {
     /// The reduced model with the first `modes ≤ computed_modes()` modes (the test's is
     /// `model(self.modes)`).
     pub fn model(&self, modes: usize) -> Result<StructuralModel> {
-        assert!(modes <= self.computed_modes(), "reduction: {modes} modes of {}", self.computed_modes());
+        assert!(
+            modes <= self.computed_modes(),
+            "reduction: {modes} modes of {}",
+            self.computed_modes()
+        );
         let nb = self.kept.len();
         let mut index: Vec<usize> = (0..nb + modes).collect();
         if self.residual {

@@ -16,8 +16,13 @@ pub fn lowest_frequencies(mass: &CscMatrix, stiffness: &CscMatrix, count: usize)
             format!("mode number {count} is outside 1..={n}"),
         ));
     }
-    lowest_modes(mass, stiffness, count, "structure.stiffness (modal analysis needs a supported structure)")
-        .map(|m| m.omega)
+    lowest_modes(
+        mass,
+        stiffness,
+        count,
+        "structure.stiffness (modal analysis needs a supported structure)",
+    )
+    .map(|m| m.omega)
 }
 
 /// The lowest modes of a sparse model: circular frequencies [rad/s] and mass-normalised shapes

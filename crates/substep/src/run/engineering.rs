@@ -116,6 +116,9 @@ pub struct EngineeringSummary {
 impl EngineeringRecorder {
     /// `None` for models that are sparse or larger than [`MAX_DOFS`].
     pub fn new(def: &TestDefinition) -> Option<Self> {
+        if def.reduction.is_some() {
+            return None; // a reduced model's DOFs past the kept ones are modal coordinates
+        }
         let model = def.model.as_dense()?;
         let n = model.n_dofs();
         if n > MAX_DOFS {

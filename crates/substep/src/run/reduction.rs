@@ -130,7 +130,9 @@ pub fn estimate(def: &TestDefinition) -> Result<Option<ReductionSummary>> {
     } else {
         let test = kept_history(def, r.model(n)?.into(), nb)?;
         let fine = kept_history(def, r.model(rich)?.into(), nb)?;
-        let d = relative_peaks(&test, &fine, &fine).iter().fold(0.0_f64, |m, e| m.max(e.0));
+        let d = relative_peaks(&test, &fine, &fine)
+            .iter()
+            .fold(0.0_f64, |m, e| m.max(e.0));
         let q = if cut_short { RATIO_CUT_SHORT } else { RATIO };
         d / (1.0 - q)
     };
@@ -176,7 +178,11 @@ pub fn check(def: &TestDefinition, reduced: &[Vec<f64>]) -> Result<Option<Reduct
     let dofs: Vec<KeptError> = per
         .iter()
         .zip(kept)
-        .map(|(&(error, peak), &d)| KeptError { dof: d + 1, error, peak })
+        .map(|(&(error, peak), &d)| KeptError {
+            dof: d + 1,
+            error,
+            peak,
+        })
         .collect();
     Ok(Some(ReductionCheck {
         max_error: dofs.iter().fold(0.0, |m, e| m.max(e.error)),

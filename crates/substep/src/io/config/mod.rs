@@ -63,8 +63,8 @@ pub use monitor::{MAX_TOKEN_CHARS, MIN_TOKEN_CHARS, MonitorSettings, check_token
 use output::{Format, RawOutput};
 pub use output::{OutputSettings, PLOT_FIGURES, PlotOptions};
 use realtime::RawRealtime;
-pub use reduction::ReducedStructure;
 pub use realtime::{DEFAULT_MAX_MISSED, RealtimeSettings, check_max_missed, parse_late_policy, too_many_missed};
+pub use reduction::ReducedStructure;
 pub use remote::{RemoteDefinition, RemoteProtocol};
 pub(crate) use sensors::RawSensors;
 use serde::Deserialize;
@@ -343,7 +343,10 @@ impl RawConfig {
                     "cannot be combined with structure.frame.gravity",
                 ));
             }
-            let coupling: Vec<usize> = self.substructure.as_ref().map_or_else(Vec::new, |s| s.coupling_dofs.clone());
+            let coupling: Vec<usize> = self
+                .substructure
+                .as_ref()
+                .map_or_else(Vec::new, |s| s.coupling_dofs.clone());
             let spec = r.spec(model.n_dofs(), &coupling)?;
             let (reduction, seconds) = r.compute(&model, &spec, limits.max_memory)?;
             let reduced: Model = reduction.model(reduction.modes)?.into();
@@ -353,7 +356,10 @@ impl RawConfig {
             let no_check = if !r.check() {
                 Some("structure.reduction.check = false".to_string())
             } else if in_lab {
-                Some("the specimen is in a lab or at a remote site: run the definition as a virtual test to check".into())
+                Some(
+                    "the specimen is in a lab or at a remote site: run the definition as a virtual test to check"
+                        .into(),
+                )
             } else {
                 None
             };

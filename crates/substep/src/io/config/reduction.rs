@@ -1,9 +1,9 @@
 //! `[structure.reduction]`: the numerical substructure reduced by Craig–Bampton before the test
 //! (`model::Reduction`, docs/config.md "Model reduction", theory §12).
 
+use super::TestDefinition;
 use super::specimens::RawSpecimen;
 use super::substructure::RawSubstructure;
-use super::TestDefinition;
 use crate::error::{Error, Result};
 use crate::model::{ModeCount, Reduction, ReductionSpec};
 use serde::Deserialize;
@@ -86,7 +86,12 @@ impl RawReduction {
         self.check.unwrap_or(true)
     }
 
-    pub(crate) fn compute(&self, model: &crate::model::Model, spec: &ReductionSpec, max_bytes: f64) -> Result<(Reduction, f64)> {
+    pub(crate) fn compute(
+        &self,
+        model: &crate::model::Model,
+        spec: &ReductionSpec,
+        max_bytes: f64,
+    ) -> Result<(Reduction, f64)> {
         let start = std::time::Instant::now();
         let r = Reduction::compute(model, spec, max_bytes)?;
         Ok((r, start.elapsed().as_secs_f64()))
