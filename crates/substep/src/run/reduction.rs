@@ -85,7 +85,7 @@ fn kept_history(def: &TestDefinition, model: Model, nb: usize) -> Result<Vec<Vec
             o.push(u[k]);
         }
     };
-    if let Some(mut r) = super::Reference::same_integrator(&def)? {
+    if let Some(mut r) = super::simulation::Reference::same_integrator(&def)? {
         push(r.u(), &mut out);
         for &a in &ag[1..] {
             r.step(a)?;
@@ -94,7 +94,7 @@ fn kept_history(def: &TestDefinition, model: Model, nb: usize) -> Result<Vec<Vec
         return Ok(out);
     }
     def.substructure = None;
-    let mut sim = super::Simulation::new(&def)?;
+    let mut sim = super::simulation::Simulation::new(&def)?;
     push(sim.state().u.as_slice(), &mut out);
     for _ in 1..ag.len() {
         sim.step(&mut ())?;
@@ -162,7 +162,7 @@ pub fn check(def: &TestDefinition, reduced: &[Vec<f64>]) -> Result<Option<Reduct
     let Some(full) = &red.full else { return Ok(None) };
     let start = std::time::Instant::now();
     let kept = &red.reduction.kept;
-    let mut sim = super::Simulation::new(full)?;
+    let mut sim = super::simulation::Simulation::new(full)?;
     let mut out = vec![Vec::with_capacity(full.integrator.steps + 1); kept.len()];
     let push = |u: &[f64], out: &mut Vec<Vec<f64>>| {
         for (o, &d) in out.iter_mut().zip(kept) {

@@ -64,7 +64,6 @@ use output::{Format, RawOutput};
 pub use output::{OutputSettings, PLOT_FIGURES, PlotOptions};
 use realtime::RawRealtime;
 pub use realtime::{DEFAULT_MAX_MISSED, RealtimeSettings, check_max_missed, parse_late_policy, too_many_missed};
-pub use reduction::ReducedStructure;
 pub use remote::{RemoteDefinition, RemoteProtocol};
 pub(crate) use sensors::RawSensors;
 use serde::Deserialize;
@@ -101,6 +100,20 @@ pub struct TestDefinition {
     /// are the kept ones, [`crate::model::Reduction::kept`]), and the test on the full model
     /// for the check.
     pub reduction: Option<ReducedStructure>,
+}
+
+/// A test on a reduced numerical substructure: the reduction and, for the check against the full
+/// model after an offline run, the same test on the full model.
+#[derive(Debug, Clone)]
+pub struct ReducedStructure {
+    pub reduction: crate::model::Reduction,
+    /// The test on the full model (`None` when the check is off or the specimen is in a lab or
+    /// at a remote site, which a second run must not drive).
+    pub full: Option<Box<TestDefinition>>,
+    /// Why there is no check (`None`: there is one).
+    pub no_check: Option<String>,
+    /// Seconds the eigen-solve and the projection took.
+    pub seconds: f64,
 }
 
 impl TestDefinition {

@@ -1,7 +1,6 @@
 //! `[structure.reduction]`: the numerical substructure reduced by Craig–Bampton before the test
 //! (`model::Reduction`, docs/config.md "Model reduction", theory §12).
 
-use super::TestDefinition;
 use super::specimens::RawSpecimen;
 use super::substructure::RawSubstructure;
 use crate::error::{Error, Result};
@@ -22,20 +21,6 @@ pub(crate) struct RawReduction {
     pub(crate) keep: Vec<usize>,
     /// After an offline virtual test, run the full model too and put the error in the summary.
     pub(crate) check: Option<bool>,
-}
-
-/// A test on a reduced numerical substructure: the reduction and, for the check against the full
-/// model after an offline run, the same test on the full model.
-#[derive(Debug, Clone)]
-pub struct ReducedStructure {
-    pub reduction: Reduction,
-    /// The test on the full model (`None` when the check is off or the specimen is in a lab or
-    /// at a remote site, which a second run must not drive).
-    pub full: Option<Box<TestDefinition>>,
-    /// Why there is no check (`None`: there is one).
-    pub no_check: Option<String>,
-    /// Seconds the eigen-solve and the projection took.
-    pub seconds: f64,
 }
 
 impl RawReduction {
