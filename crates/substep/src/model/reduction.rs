@@ -69,8 +69,9 @@ pub struct Reduction {
     pub frequencies_hz: Vec<f64>,
     /// The basis ends with the static correction of the ground load.
     pub residual: bool,
-    /// Interior DOFs with mass (the most fixed-interface modes there are).
-    pub massive_interior: usize,
+    /// The estimate's basis stopped short of [`ENRICHMENT`] times the first dropped frequency
+    /// (the cap on modes), so the estimate is a guess.
+    pub enrichment_cut_short: bool,
     mass: DMatrix<f64>,
     damping: DMatrix<f64>,
     stiffness: DMatrix<f64>,
@@ -217,6 +218,7 @@ impl Reduction {
             found = solve(count)?;
         }
         let m = found.omega.len();
+        let enrichment_cut_short = m > modes && m < massive && found.omega[m - 1] < ENRICHMENT * found.omega[modes];
 
         // The basis T, n × (|B| + m + 1).
         let nb = kept.len();
@@ -301,7 +303,7 @@ impl Reduction {
             modes,
             frequencies_hz: found.omega.iter().map(|w| w / (2.0 * std::f64::consts::PI)).collect(),
             residual,
-            massive_interior: massive,
+            enrichment_cut_short,
             mass: project(&mass),
             damping: project(&damping),
             stiffness: project(&stiffness),

@@ -124,7 +124,7 @@ pub fn estimate(def: &TestDefinition) -> Result<Option<ReductionSummary>> {
     let n = r.modes;
     let rich = r.computed_modes();
     let f = &r.frequencies_hz;
-    let cut_short = rich > n && f[rich - 1] < crate::model::REDUCTION_ENRICHMENT * f[n] && rich < r.massive_interior;
+    let cut_short = r.enrichment_cut_short;
     let error_estimate = if nb == 0 || rich == n {
         0.0 // every mode of the structure is in the basis: the reduction is exact
     } else {

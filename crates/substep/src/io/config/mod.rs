@@ -172,30 +172,6 @@ impl TestDefinition {
         })
     }
 
-    fn with_reduction(
-        mut self,
-        info: Option<(crate::model::Reduction, Option<String>, f64)>,
-        full: Option<(Model, Option<SubstructureDefinition>)>,
-    ) -> Self {
-        let Some((reduction, no_check, seconds)) = info else {
-            return self;
-        };
-        let full = full.map(|(model, substructure)| {
-            Box::new(TestDefinition {
-                model,
-                substructure,
-                ..self.clone()
-            })
-        });
-        self.reduction = Some(ReducedStructure {
-            reduction,
-            full,
-            no_check,
-            seconds,
-        });
-        self
-    }
-
     /// Step time `t_i = i·dt` \[s\].
     pub fn time(&self, step: usize) -> f64 {
         step as f64 * self.integrator.dt
@@ -342,7 +318,7 @@ impl RawConfig {
         let mut model = model;
         // The reduced model replaces the full one; the full one stays for the check.
         let mut full_parts = None;
-        let mut reduction_info = None;
+        let mut reduced_structure = None;
         if let Some(r) = &self.structure.reduction {
             if hysteresis.is_some() {
                 return Err(Error::invalid(
@@ -361,7 +337,9 @@ impl RawConfig {
                 .as_ref()
                 .map_or_else(Vec::new, |s| s.coupling_dofs.clone());
             let spec = r.spec(model.n_dofs(), &coupling)?;
-            let (reduction, seconds) = r.compute(&model, &spec, limits.max_memory)?;
+            let start = std::time::Instant::now();
+            let reduction = crate::model::Reduction::compute(&model, &spec, limits.max_memory)?;
+            let seconds = start.elapsed().as_secs_f64();
             let reduced: Model = reduction.model(reduction.modes)?.into();
             let in_lab = substructure
                 .as_ref()
@@ -385,7 +363,12 @@ impl RawConfig {
             if no_check.is_none() {
                 full_parts = Some((full_model, full_sub));
             }
-            reduction_info = Some((reduction, no_check, seconds));
+            reduced_structure = Some(ReducedStructure {
+                reduction,
+                full: None,
+                no_check,
+                seconds,
+            });
         }
         check_exact_range(&self.structure, &model, substructure.as_ref(), scheme, dt)?;
         if let Some(sub) = &substructure {
@@ -402,7 +385,7 @@ impl RawConfig {
                 ));
             }
         }
-        Ok(TestDefinition {
+        let mut def = TestDefinition {
             source: name.to_string(),
             model,
             hysteresis,
@@ -431,8 +414,18 @@ impl RawConfig {
             monitor: self.monitor.build()?,
             realtime: self.realtime.build()?,
             reduction: None,
+        };
+        if let Some(r) = reduced_structure.as_mut()
+            && let Some((model, substructure)) = full_parts
+        {
+            r.full = Some(Box::new(TestDefinition {
+                model,
+                substructure,
+                ..def.clone()
+            }));
         }
-        .with_reduction(reduction_info, full_parts))
+        def.reduction = reduced_structure;
+        Ok(def)
     }
 }
 

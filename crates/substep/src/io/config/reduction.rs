@@ -4,7 +4,7 @@
 use super::specimens::RawSpecimen;
 use super::substructure::RawSubstructure;
 use crate::error::{Error, Result};
-use crate::model::{ModeCount, Reduction, ReductionSpec};
+use crate::model::{ModeCount, ReductionSpec};
 use serde::Deserialize;
 
 /// `[structure.reduction]`.
@@ -69,17 +69,6 @@ impl RawReduction {
 
     pub(crate) fn check(&self) -> bool {
         self.check.unwrap_or(true)
-    }
-
-    pub(crate) fn compute(
-        &self,
-        model: &crate::model::Model,
-        spec: &ReductionSpec,
-        max_bytes: f64,
-    ) -> Result<(Reduction, f64)> {
-        let start = std::time::Instant::now();
-        let r = Reduction::compute(model, spec, max_bytes)?;
-        Ok((r, start.elapsed().as_secs_f64()))
     }
 }
 
