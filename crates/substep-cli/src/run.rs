@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use substep::format::percent;
 use substep::io::TestDefinition;
 use substep::io::results::Format;
+use substep::model::ReductionMethod;
 use substep::output::{FolderOptions, RunFolder};
 use substep::run::{Run, RunSummary, largest};
 use substep::session::live::{Live, LiveObserver, LiveOptions, StabilityChoice};
@@ -135,14 +136,22 @@ fn print_header(args: &RunArgs, def: &TestDefinition) {
     if let Some(red) = &def.reduction {
         let r = &red.reduction;
         println!(
-            "  reduced from {} DOFs by Craig–Bampton in {:.2} s: u1..u{} are DOFs {:?} of the full model, then {} \
-             fixed-interface modes (up to {:.3} Hz){}",
+            "  reduced from {} DOFs by {} in {:.2} s: u1..u{} are DOFs {:?} of the full model, then {} {} (up to \
+             {:.3} Hz){}",
             r.n_full,
+            match r.method {
+                ReductionMethod::CraigBampton => "Craig–Bampton",
+                ReductionMethod::Ritz => "load-dependent Ritz vectors",
+            },
             red.seconds,
             r.kept.len(),
             r.kept.iter().map(|d| d + 1).collect::<Vec<_>>(),
             r.modes,
-            r.frequencies_hz.get(r.modes.max(1) - 1).copied().unwrap_or(f64::NAN),
+            match r.method {
+                ReductionMethod::CraigBampton => "fixed-interface modes",
+                ReductionMethod::Ritz => "Ritz vectors",
+            },
+            r.basis_top_hz[0],
             if r.residual {
                 " and the static correction of the ground load"
             } else {

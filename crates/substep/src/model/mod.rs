@@ -12,7 +12,7 @@ mod hysteretic;
 mod modal;
 mod reduction;
 mod sparse;
-mod sparse_modes;
+pub mod sparse_modes;
 
 pub use builders::{
     ShearBuilding, TmdSystem, sdof, shear_building, shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
@@ -25,11 +25,13 @@ pub use frame::{
 pub use frame3d::{Frame3d, Frame3dDof, Section3d, frame_3d};
 pub use hysteretic::{Hysteresis, PDeltaSpec, SpringSpec, Springs};
 pub use modal::{Modes, modes};
-pub use reduction::{ENRICHMENT as REDUCTION_ENRICHMENT, MAX_MODES, ModeCount, Reduction, ReductionSpec};
+pub use reduction::{
+    ENRICHMENT as REDUCTION_ENRICHMENT, MAX_MODES, ModeCount, Reduction, ReductionMethod, ReductionSpec,
+};
 pub use sparse::{
     AUTO_SPARSE_MAX_DENSITY, AUTO_SPARSE_MIN_DOFS, DENSE_MAX_DOFS, Model, ModelRef, SparseModel, Storage,
 };
-pub use sparse_modes::{SparseModes, lowest_frequencies, lowest_modes};
+pub use sparse_modes::{ModeSolver, SparseModes, lowest_frequencies, lowest_modes};
 
 use crate::error::{Error, Result};
 use nalgebra::{DMatrix, DVector};

@@ -179,7 +179,7 @@ impl SparseModel {
     }
 
     /// Replace the damping matrix: an explicit matrix, Rayleigh `α M + β K`, or Rayleigh with
-    /// ratio `ζ` at two modes (the two frequencies by subspace iteration). Modal damping gives a
+    /// ratio `ζ` at two modes (the two frequencies by shift-invert Lanczos). Modal damping gives a
     /// dense `n × n` matrix and is refused here.
     pub fn with_damping(mut self, spec: &DampingSpec) -> Result<Self> {
         let n = self.n_dofs();

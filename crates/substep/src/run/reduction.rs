@@ -36,7 +36,8 @@ pub struct ReductionSummary {
     pub kept_dofs: Vec<usize>,
     pub modes: usize,
     pub static_correction: bool,
-    /// The highest kept and the lowest dropped fixed-interface frequency \[Hz\].
+    /// The highest kept and the lowest dropped fixed-interface frequency \[Hz\] (Ritz vectors:
+    /// the basis's largest Ritz frequency, and none).
     pub highest_kept_hz: f64,
     pub lowest_dropped_hz: Option<f64>,
     /// The estimated error: peak displacement error of a kept DOF relative to its peak.
@@ -123,7 +124,6 @@ pub fn estimate(def: &TestDefinition) -> Result<Option<ReductionSummary>> {
     let nb = r.kept.len();
     let n = r.modes;
     let rich = r.computed_modes();
-    let f = &r.frequencies_hz;
     let cut_short = r.enrichment_cut_short;
     let error_estimate = if nb == 0 || rich == n {
         0.0 // every mode of the structure is in the basis: the reduction is exact
@@ -137,17 +137,17 @@ pub fn estimate(def: &TestDefinition) -> Result<Option<ReductionSummary>> {
         d / (1.0 - q)
     };
     Ok(Some(ReductionSummary {
-        method: "craig_bampton",
+        method: r.method.name(),
         full_dofs: r.n_full,
         reduced_dofs: r.size(n),
         kept_dofs: r.kept.iter().map(|d| d + 1).collect(),
         modes: n,
         static_correction: r.residual,
-        highest_kept_hz: r.frequencies_hz.get(n.max(1) - 1).copied().unwrap_or(f64::NAN),
+        highest_kept_hz: r.basis_top_hz[0],
         lowest_dropped_hz: r.frequencies_hz.get(n).copied(),
         error_estimate,
         estimate_modes: rich,
-        estimate_highest_hz: f.last().copied().unwrap_or(f64::NAN),
+        estimate_highest_hz: r.basis_top_hz[1],
         estimate_unreliable: cut_short,
         seconds: red.seconds,
         check: None,

@@ -2,7 +2,7 @@
 //! ([`CscMatrix`]), a once-factorised symmetric positive definite solver with allocation-free
 //! solves ([`SymmetricFactor`]: banded Cholesky, or faer's supernodal Cholesky under an AMD or
 //! nested-dissection ordering with our streaming solve); the lowest natural frequencies of a sparse
-//! model use these factors (`model::lowest_frequencies`, subspace iteration).
+//! model use these factors (`model::lowest_frequencies`, shift-invert Lanczos).
 
 mod csc;
 mod factor;

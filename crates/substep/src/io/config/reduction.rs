@@ -4,14 +4,14 @@
 use super::specimens::RawSpecimen;
 use super::substructure::RawSubstructure;
 use crate::error::{Error, Result};
-use crate::model::{ModeCount, ReductionSpec};
+use crate::model::{ModeCount, ReductionMethod, ReductionSpec};
 use serde::Deserialize;
 
 /// `[structure.reduction]`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawReduction {
-    /// `"craig_bampton"` (the default and only method).
+    /// `"craig_bampton"` (the default) or `"ritz"`.
     pub(crate) method: Option<String>,
     pub(crate) modes: Option<usize>,
     /// Hz.
@@ -26,15 +26,16 @@ pub(crate) struct RawReduction {
 impl RawReduction {
     /// The spec for a model of `n` DOFs whose coupling DOFs (1-based, checked) are `coupling`.
     pub(crate) fn spec(&self, n: usize, coupling: &[usize]) -> Result<ReductionSpec> {
-        match self.method.as_deref() {
-            None | Some("craig_bampton") => {}
+        let method = match self.method.as_deref() {
+            None | Some("craig_bampton") => ReductionMethod::CraigBampton,
+            Some("ritz") => ReductionMethod::Ritz,
             Some(other) => {
                 return Err(Error::invalid(
                     "structure.reduction.method",
-                    format!("unknown method '{other}' (expected craig_bampton)"),
+                    format!("unknown method '{other}' (expected craig_bampton or ritz)"),
                 ));
             }
-        }
+        };
         let modes = match (self.modes, self.frequency_max) {
             (Some(m), None) => ModeCount::Modes(m),
             (None, Some(f)) => ModeCount::FrequencyMax(f),
@@ -47,7 +48,7 @@ impl RawReduction {
             (None, None) => {
                 return Err(Error::invalid(
                     "structure.reduction",
-                    "give modes (a number of fixed-interface modes) or frequency_max (Hz)",
+                    "give modes (a number of fixed-interface modes or Ritz vectors) or frequency_max (Hz)",
                 ));
             }
         };
@@ -64,7 +65,7 @@ impl RawReduction {
         kept.extend(coupling.iter().filter(|&&d| d >= 1 && d <= n).map(|d| d - 1));
         kept.sort_unstable();
         kept.dedup();
-        Ok(ReductionSpec { modes, kept })
+        Ok(ReductionSpec { method, modes, kept })
     }
 
     pub(crate) fn check(&self) -> bool {
