@@ -449,12 +449,48 @@ fn a_cr_test_with_a_lab_target_equals_the_virtual_lab() {
     assert_eq!(s["scheme"], "cr");
 }
 
+/// A reduced numerical substructure (issue 42: `[structure.reduction]`, here the space frame of
+/// examples/frame3d_reduced.toml scaled down to 2 × 2 bays and 4 storeys, 120 DOFs reduced to
+/// 2 + 12 Ritz vectors) against the emulator, offline and in real time, equals its virtual-lab
+/// run: the lab sees the reduced model's coupling DOF as the structure's own.
+#[test]
+fn a_reduced_structure_with_a_lab_target_equals_the_virtual_lab() {
+    let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
+    let text = std::fs::read_to_string(format!("{examples}/frame3d_reduced.toml")).unwrap();
+    let mut base = text.replace("\"records/", &format!("\"{examples}/records/"));
+    for (from, to) in [
+        ("bays = 30\n", "bays = 2\n"),
+        ("bays_y = 15\n", "bays_y = 2\n"),
+        ("stories = 68\n", "stories = 4\n"),
+        ("modes = 40\n", "modes = 12\n"),
+        // Floor 4's U_x with rigid floors: 3 · (3 + 3 · 9) + 1.
+        ("keep = [99898]", "keep = [91]"),
+        // The damper scaled with the first floor's mass (80 t instead of 9 000 t).
+        ("stiffness = 5.0e7 ", "stiffness = 5.0e5 "),
+        ("damping = 5.0e6 ", "damping = 5.0e4 "),
+        ("duration = 12.0\n", "duration = 7.0\n"),
+    ] {
+        assert!(
+            base.contains(from),
+            "frame3d_reduced.toml changed ({from:?}): adapt this test"
+        );
+        base = base.replace(from, to);
+    }
+    let s = lab_runs_equal(
+        "reduced",
+        &base,
+        7000,
+        &[("speedgoat", "udp", false), ("substep_udp", "udp", true)],
+    );
+    assert_eq!(s["reduction"]["method"], "ritz");
+    assert_eq!(s["reduction"]["reduced_dofs"], 14);
+}
+
 /// `examples/<example>.toml` shortened to 7 s, run locally (virtual lab), then against the
 /// emulator once per `(protocol, transport, realtime)` (real time with `--late-policy wait`):
 /// each run completes with one exchange per sub-step and its history (and, offline,
 /// substeps.csv) within 1e-9 of the local run's peaks. Returns the local run's summary.
 fn lab_runs_equal_the_virtual_lab(example: &str, cases: &[(&str, &str, bool)]) -> serde_json::Value {
-    let dir = temp_dir(example);
     let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
     let base = std::fs::read_to_string(format!("{examples}/{example}.toml"))
         .unwrap()
@@ -464,6 +500,13 @@ fn lab_runs_equal_the_virtual_lab(example: &str, cases: &[(&str, &str, bool)]) -
         base.contains("duration = 7.0"),
         "{example}.toml changed: adapt this test"
     );
+    lab_runs_equal(example, &base, 14000, cases)
+}
+
+/// [`lab_runs_equal_the_virtual_lab`] for the test definition `base` (`exchanges`: steps ×
+/// sub-steps).
+fn lab_runs_equal(tag: &str, base: &str, exchanges: u64, cases: &[(&str, &str, bool)]) -> serde_json::Value {
+    let (example, dir) = (tag, temp_dir(tag));
     let write =
         |name: &str, lab: &str| std::fs::write(dir.join(format!("{name}.toml")), format!("{base}\n{lab}\n")).unwrap();
     let summary = |name: &str| -> serde_json::Value {
@@ -488,7 +531,7 @@ fn lab_runs_equal_the_virtual_lab(example: &str, cases: &[(&str, &str, bool)]) -
         let s = summary(&name);
         assert_eq!(s["completed"], true, "{example} {name}");
         assert_eq!(
-            s["lab"]["exchanges"], 14000,
+            s["lab"]["exchanges"], exchanges,
             "{example} {name}: one exchange per sub-step"
         );
         let files: &[&str] = if realtime {

@@ -221,3 +221,22 @@ fn bad_reduction_settings_are_refused_in_one_line() {
     );
     assert!(m.contains("structure.reduction: reduces linear structures only"), "{m}");
 }
+
+/// A reduced model's DOFs past the kept ones are mass-normalised coordinates (`√kg · m`), not
+/// metres: a heavy building's exceed the 1 000 m runaway bound while it moves centimetres, and
+/// the run must not call that a divergence (it did: "runaway response on DOF 3").
+#[test]
+fn modal_coordinates_of_a_heavy_building_are_not_a_runaway() {
+    let structure = "[structure.shear_building]\nstories = 20\nstory_mass = 2.0e9\nfirst_period = 1.5\n";
+    let (_, full) = run(&definition(structure, None));
+    let (s, reduced) = run(&definition(structure, Some(("ritz", 8, 20))));
+    let coordinate = reduced.history.column("u3").unwrap();
+    let largest = coordinate.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+    assert!(largest > 1.0e3, "the case must exercise the bound: {largest}");
+    let roof = full.history.column("u20").unwrap();
+    let peak = roof.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+    assert!(peak < 1.0, "the building moves {peak} m");
+    let m = measured(&reduced, &full, 20);
+    assert!(m[0].max(m[1]) < 1e-2, "{m:?}");
+    assert!(s.completed);
+}

@@ -440,12 +440,26 @@ pub fn exceeds(value: f64, bound: f64) -> bool {
     !(value <= bound)
 }
 
-/// Why `u` is a runaway response, if it is.
-fn runaway(u: &[f64]) -> Option<String> {
-    let (k, v) = u
-        .iter()
+/// The first DOF of `u` (and its value) that is a runaway response: beyond
+/// [`RUNAWAY_DISPLACEMENT`] among the first `physical` DOFs, not finite anywhere. A reduced
+/// model's DOFs past its kept ones are mass-normalised modal coordinates, not metres
+/// (`√(kg)·m`: a 6·10⁸ kg building moving 0.1 m has coordinates of 2 400).
+pub fn runaway_dof(u: &[f64], physical: usize) -> Option<(usize, f64)> {
+    u.iter()
         .enumerate()
-        .find(|(_, v)| exceeds(v.abs(), RUNAWAY_DISPLACEMENT))?;
+        .find(|&(k, v)| {
+            if k < physical {
+                exceeds(v.abs(), RUNAWAY_DISPLACEMENT)
+            } else {
+                !v.is_finite()
+            }
+        })
+        .map(|(k, &v)| (k, v))
+}
+
+/// Why `u` is a runaway response, if it is (`physical` as in [`runaway_dof`]).
+fn runaway(u: &[f64], physical: usize) -> Option<String> {
+    let (k, v) = runaway_dof(u, physical)?;
     Some(format!(
         "runaway response: |u| = {} m on DOF {} exceeded {RUNAWAY_DISPLACEMENT} m at the step before",
         crate::format::sig(v.abs(), 4),
@@ -635,7 +649,7 @@ impl<'d> Run<'d> {
             if let (Some(same), Some(r)) = (same_integrator.as_mut(), reference.as_ref()) {
                 same.record(s.u.as_slice(), r.u());
             }
-            if !diverging && let Some(reason) = runaway(s.u.as_slice()) {
+            if !diverging && let Some(reason) = runaway(s.u.as_slice(), def.physical_dofs()) {
                 // A runaway response: ramp the actuators down where the run can, else end here.
                 diverging = true;
                 if stop_sent || !sim.request_stop(&format!("diverged: {reason}")) {

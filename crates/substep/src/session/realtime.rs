@@ -136,6 +136,7 @@ pub fn run_realtime(
     let mut def = def.clone();
     let mut live = Live::start(&args.live, &mut def, config_name, true)?;
     let def = &def;
+    let physical_dofs = def.physical_dofs();
     let sub = def.substructure.as_ref().expect("checked above");
     let accel = def.ground_motion.accel.clone();
     let load0 = -def.model.effective_mass_vector() * accel[0];
@@ -261,10 +262,7 @@ pub fn run_realtime(
         }
         // A runaway response stops the test with the controlled ramp-down (as offline).
         if runaway.is_none()
-            && let Some((k, x)) =
-                r.u.iter()
-                    .enumerate()
-                    .find(|(_, x)| crate::run::exceeds(x.abs(), crate::run::RUNAWAY_DISPLACEMENT))
+            && let Some((k, x)) = crate::run::runaway_dof(r.u.as_slice(), physical_dofs)
         {
             let reason = format!(
                 "diverged: runaway response: |u| = {} m on DOF {} exceeded {} m at step {}",
@@ -276,7 +274,7 @@ pub fn run_realtime(
             stop.request(reason.clone());
             runaway = Some(reason);
         }
-        for (k, &x) in r.u.iter().enumerate() {
+        for (k, &x) in r.u.iter().take(physical_dofs).enumerate() {
             if x.abs() > peak_u.0 {
                 peak_u = (x.abs(), k, r.time);
             }

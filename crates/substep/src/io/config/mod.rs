@@ -117,6 +117,14 @@ pub struct ReducedStructure {
 }
 
 impl TestDefinition {
+    /// DOFs of the model that are displacements \[m\]: all of them, or a reduced model's kept
+    /// ones (the rest are modal coordinates).
+    pub fn physical_dofs(&self) -> usize {
+        self.reduction
+            .as_ref()
+            .map_or(self.model.n_dofs(), |r| r.reduction.kept.len())
+    }
+
     /// Read and validate a config file; relative paths in it resolve against its directory.
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
@@ -271,6 +279,20 @@ impl RawConfig {
         let sparse_capable = matches!(scheme, Scheme::Newmark { beta, .. } if beta > 0.0);
         // Limits first, from the config alone: nothing big is built, read or run before this.
         let shape = self.structure.shape(sparse_capable, &limits)?;
+        // A reduced run steps and writes the reduced model (building the full one is checked
+        // above); its memory stays the full model's.
+        let shape = match (shape, &self.structure.reduction) {
+            (Some(m), Some(r)) => {
+                let n_coupling = self.substructure.as_ref().map_or(0, |s| s.coupling_dofs.len());
+                let n = r.reduced_dofs_bound(n_coupling, m.n);
+                Some(ModelShape {
+                    n,
+                    bytes: m.bytes,
+                    step_seconds: RunShape::dense_step_seconds(n),
+                })
+            }
+            (shape, _) => shape,
+        };
         if let Some(length) = self.ground_motion.length_hint(duration) {
             check_samples(&limits, length, dt)?;
             if let Some(m) = shape {

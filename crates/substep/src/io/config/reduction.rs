@@ -68,6 +68,13 @@ impl RawReduction {
         Ok(ReductionSpec { method, modes, kept })
     }
 
+    /// At most this many DOFs in the reduced model of a full one of `n_full` (before it is
+    /// computed: `frequency_max` counts as the cap on modes).
+    pub(crate) fn reduced_dofs_bound(&self, n_coupling: usize, n_full: f64) -> f64 {
+        let modes = self.modes.unwrap_or(crate::model::MAX_MODES);
+        ((self.keep.len() + n_coupling + modes + 1) as f64).min(n_full)
+    }
+
     pub(crate) fn check(&self) -> bool {
         self.check.unwrap_or(true)
     }
