@@ -213,6 +213,21 @@ fn bad_reduction_settings_are_refused_in_one_line() {
         let m = refused(frame, reduction);
         assert!(m.contains(expected), "{reduction}: {m}");
     }
+    // A structure that is not held once the kept DOFs are (a singular K_II) cannot be solved.
+    let matrices = |masses: &str, stiffness: &str| {
+        format!("[structure]\nmass = [[{masses}]]\nstiffness = {stiffness}\n")
+    };
+    let m = refused(
+        &matrices(
+            "1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0",
+            "[[2.0, -1.0, 0.0], [-1.0, 1.0, 0.0], [0.0, 0.0, 0.0]]",
+        ),
+        "modes = 1",
+    );
+    assert!(
+        m.contains("structure.reduction (the structure with its kept DOFs held): is not positive definite"),
+        "{m}"
+    );
     // A yielding structure is not reduced (its springs act on the full model's drifts).
     let m = refused(
         "[structure.storeys]\nmasses = [1.0e5, 1.0e5, 1.0e5]\nstiffness = [1.0e8, 1.0e8, 1.0e8]\n\
