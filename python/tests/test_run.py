@@ -326,3 +326,39 @@ def test_a_nonlinear_test_from_python_equals_the_cli_and_has_its_newton_referenc
     monkeypatch.chdir(tmp_path)
     with pytest.raises(substep.RunError, match="did not converge"):
         substep.run("newton.toml")
+
+
+def test_a_reduced_structure_runs_from_python_as_from_the_cli(cli, root, tmp_path, monkeypatch):
+    """`[structure.reduction]` (issue 42) through `substep.run`: examples/frame3d_reduced.toml
+    scaled down to 120 DOFs gives the CLI's summary, reduction and check included, bit for bit."""
+    text = (root / "examples" / "frame3d_reduced.toml").read_text()
+    for old, new in [
+        ("bays = 30\n", "bays = 2\n"),
+        ("bays_y = 15\n", "bays_y = 2\n"),
+        ("stories = 68\n", "stories = 4\n"),
+        ("modes = 40\n", "modes = 12\n"),
+        ("keep = [99898]", "keep = [91]"),
+        ("stiffness = 5.0e7 ", "stiffness = 5.0e5 "),
+        ("damping = 5.0e6 ", "damping = 5.0e4 "),
+        ('"records/', f'"{root}/examples/records/'),
+    ]:
+        assert old in text, f"frame3d_reduced.toml changed ({old!r}): adapt this test"
+        text = text.replace(old, new)
+    (tmp_path / "reduced.toml").write_text(text)
+    monkeypatch.chdir(tmp_path)
+    p = run_cli(cli, "run", "reduced.toml", "--out", "cli", "--quiet", "--no-plots", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    cli_summary = json.loads((tmp_path / "cli" / "summary.json").read_text())
+    result = substep.run("reduced.toml")
+
+    def untimed(reduction: dict) -> dict:
+        r = {k: v for k, v in reduction.items() if k != "seconds"}
+        r["check"] = {k: v for k, v in r["check"].items() if k != "full_run_seconds"}
+        return r
+
+    red = result.summary["reduction"]
+    assert untimed(red) == untimed(cli_summary["reduction"])
+    assert red["method"] == "ritz" and red["reduced_dofs"] == 14 and red["full_dofs"] == 120
+    assert red["check"]["max_error"] <= red["error_estimate"] < 1e-2
+    df = result.to_pandas()
+    assert "u14" in df.columns and "u15" not in df.columns

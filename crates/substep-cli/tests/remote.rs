@@ -783,3 +783,55 @@ fn a_yielding_structure_with_a_remote_site_equals_the_local_run() {
         assert!(site.wait().unwrap().success());
     }
 }
+
+/// A reduced numerical substructure (issue 42, `[structure.reduction]`: a 12-storey shear
+/// building reduced to its two coupling DOFs and 4 Ritz vectors) with a remote site equals
+/// the local run, per step and per sub-step; the remote run says why it has no check against
+/// the full model (the site is never driven twice).
+#[test]
+fn a_reduced_structure_with_a_remote_site_equals_the_local_run() {
+    let dir = temp_dir("reduced");
+    let config = |remote: Option<(&str, &str)>| {
+        let linear = client_config(3.0, remote, "");
+        let start = linear.find("[ground_motion]").unwrap();
+        format!(
+            "[structure.shear_building]\nstories = 12\nstory_mass = 2000.0\nfirst_period = 0.8\n\
+             [structure.rayleigh]\nzeta = 0.02\nmodes = [1, 2]\n\
+             [structure.reduction]\nmethod = \"ritz\"\nmodes = 4\n\n{}",
+            &linear[start..]
+        )
+    };
+    std::fs::write(dir.join("local.toml"), config(None)).unwrap();
+    let out = run(&dir, "local.toml", "local");
+    assert!(out.status.success(), "local: {}", text(&out.stderr));
+    let summary = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(name).join("summary.json")).unwrap()).unwrap()
+    };
+    let local = summary("local");
+    assert_eq!(local["reduction"]["reduced_dofs"], 6);
+    assert!(local["reduction"]["check"]["max_error"].as_f64().unwrap() < 0.05);
+    let local_history = std::fs::read_to_string(dir.join("local/history.csv")).unwrap();
+    let local_substeps = std::fs::read_to_string(dir.join("local/substeps.csv")).unwrap();
+    for mode in ["per_step", "per_substep"] {
+        let (mut site, addr) = serve(&dir);
+        let cfg = format!("reduced_{mode}.toml");
+        std::fs::write(dir.join(&cfg), config(Some((&addr, mode)))).unwrap();
+        let out = run(&dir, &cfg, mode);
+        assert!(out.status.success(), "{mode}: {}", text(&out.stderr));
+        let history = std::fs::read_to_string(dir.join(mode).join("history.csv")).unwrap();
+        let substeps = std::fs::read_to_string(dir.join(mode).join("substeps.csv")).unwrap();
+        assert!(
+            without_fei(&history) == without_fei(&local_history),
+            "{mode}: history differs"
+        );
+        assert!(substeps == local_substeps, "{mode}: substeps differ from the local run");
+        let s = summary(mode);
+        assert!(s["reduction"]["check"].is_null());
+        assert!(
+            s["reduction"]["no_check"].as_str().unwrap().contains("remote site"),
+            "{}",
+            s["reduction"]["no_check"]
+        );
+        assert!(site.wait().unwrap().success());
+    }
+}

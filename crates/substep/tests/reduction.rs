@@ -214,9 +214,8 @@ fn bad_reduction_settings_are_refused_in_one_line() {
         assert!(m.contains(expected), "{reduction}: {m}");
     }
     // A structure that is not held once the kept DOFs are (a singular K_II) cannot be solved.
-    let matrices = |masses: &str, stiffness: &str| {
-        format!("[structure]\nmass = [[{masses}]]\nstiffness = {stiffness}\n")
-    };
+    let matrices =
+        |masses: &str, stiffness: &str| format!("[structure]\nmass = [[{masses}]]\nstiffness = {stiffness}\n");
     let m = refused(
         &matrices(
             "1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0",
