@@ -302,7 +302,7 @@ impl<'a> ModeSolver<'a> {
         // Largest θ first (ascending order from faer).
         let wanted: Vec<usize> = (0..count).map(|c| m - 1 - c).collect();
         for &c in &wanted {
-            if !(theta[c] > 0.0) {
+            if theta[c].is_nan() || theta[c] <= 0.0 {
                 return Err(Error::numerical(
                     "modal analysis (Lanczos)",
                     "the structure has a mode without stiffness or mass (check supports and masses)",
