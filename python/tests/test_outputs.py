@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import substep
-from conftest import ROOT, run_cli
+from conftest import ROOT, run_cli, scaled_frame3d
 
 EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))
 #: Summary keys measured on the wall clock (they differ between any two runs).
@@ -28,6 +28,11 @@ def _summary(d: Path):
     for k in TIMINGS:
         assert isinstance(s.pop(k), float), k
     s["outputs"] = [Path(p).name for p in s["outputs"]]
+    if s.get("reduction"):
+        # the reduction's own timings
+        assert isinstance(s["reduction"].pop("seconds"), float)
+        if s["reduction"].get("check"):
+            assert isinstance(s["reduction"]["check"].pop("full_run_seconds"), float)
     return s
 
 
@@ -41,6 +46,8 @@ def test_every_shipped_example_is_covered():
 @pytest.mark.parametrize("example", EXAMPLES, ids=lambda p: p.stem)
 def test_python_writes_the_same_output_folder_as_the_cli(example, cli, tmp_path):
     d_cli, d_py = tmp_path / "cli", tmp_path / "py"
+    if example.stem == "frame3d_reduced":
+        example = scaled_frame3d(tmp_path)
     proc = run_cli(cli, "run", str(example), "--out", str(d_cli), "--quiet")
     assert proc.returncode == 0, proc.stderr
     result = substep.run(example, out_dir=d_py)
