@@ -779,7 +779,7 @@ impl<'d> Run<'d> {
                 }
             }
             if let Some(c) = &r.check
-                && c.max_error > r.error_estimate
+                && c.max_error > r.error_estimate.max(reduction::CHECK_FLOOR)
             {
                 warnings.push(format!(
                     "the reduced model's error against the full model ({}) exceeds its estimate ({})",
