@@ -8,7 +8,8 @@
 #      DOF and the roof relative to the full run's peak (goal: <= 1e-3), beside the estimate;
 #   2. reduced, `--realtime` (dt = 10 ms, k_sub = 10: wall-clock sub-steps of 1 ms): missed
 #      deadlines (goal: < 1 %) and the numerical step's time; its history must equal run 1's
-#      (the virtual specimen is deterministic), so run 1's check measures it too.
+#      (the virtual specimen is deterministic), so run 1's check measures it too; then again
+#      with --fifo-priority 80 --lock-memory (root or CAP_SYS_NICE / CAP_IPC_LOCK).
 # (`substep run` of the file without the table writes a history.csv of about 7 GB, one column
 # per DOF: the check measures the same run without writing it.)
 #
@@ -33,6 +34,7 @@ run() { # name config flags...
 }
 run offline "$W/reduced.toml"
 run realtime "$W/reduced.toml" --realtime
+run realtime_fifo "$W/reduced.toml" --realtime --fifo-priority 80 --lock-memory
 python3 - "$W" <<'PY'
 import csv, json, sys
 w = sys.argv[1]
@@ -49,7 +51,7 @@ def columns(name, wanted):
             for k, i in enumerate(idx):
                 out[k].append(float(row[i]))
     return out
-for name in ["offline", "realtime"]:
+for name in ["offline", "realtime", "realtime_fifo"]:
     rc = open(f"{w}/{name}.rc").read().strip()
     if rc != "0":
         print(f"{name}: FAILED (exit {rc}): {open(f'{w}/{name}.log').read().strip().splitlines()[-1]}")
@@ -58,7 +60,9 @@ off, rt = summary("offline"), summary("realtime")
 red = off["reduction"]
 check = red["check"]
 r = json.load(open(f"{w}/realtime/realtime.json"))
+rf = json.load(open(f"{w}/realtime_fifo/realtime.json"))
 slots = r["substeps"] + r["hold_substeps"]
+slots_f = rf["substeps"] + rf["hold_substeps"]
 # The real-time history equals the offline one: the check's error is the real-time run's.
 a, b = columns("realtime", ["u1", "u2"]), columns("offline", ["u1", "u2"])
 same = max(max(abs(x - y) for x, y in zip(p, q)) / max(abs(y) for y in q) for p, q in zip(a, b))
@@ -74,6 +78,7 @@ print(f"| error estimate / measured against the full run (offline) | {red['error
 print(f"| coupling DOF / roof: peak error over the full run's peak | {errs[0]:.2e} / {errs[1]:.2e} |")
 print(f"| real-time run: missed deadlines | {r['missed_deadlines']} of {slots} ({100 * r['missed_deadlines'] / slots:.2f} %) |")
 print(f"| real-time run: numerical step p50 / p99 / max [µs] | {stat('numerical_step')} |")
+print(f"| real-time run, SCHED_FIFO {rf['fifo']} + mlockall {rf['memory_lock']}: missed deadlines | {rf['missed_deadlines']} of {slots_f} ({100 * rf['missed_deadlines'] / slots_f:.2f} %) |")
 print(f"| real-time vs offline reduced history (peak difference over peak) | {same:.1e} |")
 print(f"| time per step [ms]: reduced (offline) / full (the check's run) | {off['us_per_step'] / 1e3:.4f} / {check['full_run_seconds'] * 1e3 / steps:.1f} (ratio {check['full_run_seconds'] * 1e6 / steps / off['us_per_step']:.0f}) |")
 print(f"| wall time [s]: reduced offline with check / real time | {open(f'{w}/offline.wall').read().strip()} / {open(f'{w}/realtime.wall').read().strip()} |")
