@@ -41,8 +41,8 @@ def read_csv_exact(path) -> "pandas.DataFrame":
     return pd.DataFrame([[float(x) for x in r] for r in body], columns=header, dtype=float)
 
 
-#: examples/frame3d_reduced.toml (101 388 DOFs, 13 s to reduce, 2 min with its check) scaled
-#: down to 120 DOFs for the tests; benches/frame3d_reduced.sh runs the real one.
+#: examples/frame3d_reduced.toml (101 388 DOFs, 13 s to reduce, 2 min with its check) scaled (the list of
+#: crates/substep/tests/common/frame3d_scaled.rs) down to 120 DOFs; benches/frame3d_reduced.sh runs the real one.
 FRAME3D_SCALING = [
     ("bays = 30\n", "bays = 2\n"),
     ("bays_y = 15\n", "bays_y = 2\n"),

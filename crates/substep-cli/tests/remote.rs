@@ -752,7 +752,6 @@ fn a_yielding_structure_with_a_remote_site_equals_the_local_run() {
         assert!(out.status.success(), "{name}: {}", text(&out.stderr));
     }
     let local_history = std::fs::read_to_string(dir.join("local/history.csv")).unwrap();
-    let local_substeps = std::fs::read_to_string(dir.join("local/substeps.csv")).unwrap();
     let u1 = |h: &str| -> Vec<f64> {
         h.lines()
             .skip(1)
@@ -767,21 +766,41 @@ fn a_yielding_structure_with_a_remote_site_equals_the_local_run() {
         .zip(&elastic)
         .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
     assert!(diff > 0.01 * peak, "the storeys do not yield: {diff} of a peak {peak}");
+    remote_runs_equal_local(&dir, "yielding", |remote| config(yielding, remote));
+}
+
+/// Run `config(Some((site address, mode)))` against a fresh site per mode (`per_step`,
+/// `per_substep`): its history (but `fei`) and `substeps.csv` equal those of the local run in
+/// `dir/local`. Returns the remote runs' summaries.
+fn remote_runs_equal_local(
+    dir: &Path,
+    tag: &str,
+    config: impl Fn(Option<(&str, &str)>) -> String,
+) -> Vec<serde_json::Value> {
+    let local_history = std::fs::read_to_string(dir.join("local/history.csv")).unwrap();
+    let local_substeps = std::fs::read_to_string(dir.join("local/substeps.csv")).unwrap();
+    let mut summaries = Vec::new();
     for mode in ["per_step", "per_substep"] {
-        let (mut site, addr) = serve(&dir);
-        let cfg = format!("yielding_{mode}.toml");
-        std::fs::write(dir.join(&cfg), config(yielding, Some((&addr, mode)))).unwrap();
-        let out = run(&dir, &cfg, mode);
-        assert!(out.status.success(), "{mode}: {}", text(&out.stderr));
+        let (mut site, addr) = serve(dir);
+        let cfg = format!("{tag}_{mode}.toml");
+        std::fs::write(dir.join(&cfg), config(Some((&addr, mode)))).unwrap();
+        let out = run(dir, &cfg, mode);
+        assert!(out.status.success(), "{tag} {mode}: {}", text(&out.stderr));
         let history = std::fs::read_to_string(dir.join(mode).join("history.csv")).unwrap();
         let substeps = std::fs::read_to_string(dir.join(mode).join("substeps.csv")).unwrap();
         assert!(
             without_fei(&history) == without_fei(&local_history),
-            "{mode}: history differs"
+            "{tag} {mode}: history differs"
         );
-        assert!(substeps == local_substeps, "{mode}: substeps differ from the local run");
+        assert!(
+            substeps == local_substeps,
+            "{tag} {mode}: substeps differ from the local run"
+        );
         assert!(site.wait().unwrap().success());
+        let summary = std::fs::read_to_string(dir.join(mode).join("summary.json")).unwrap();
+        summaries.push(serde_json::from_str(&summary).unwrap());
     }
+    summaries
 }
 
 /// A reduced numerical substructure (issue 42, `[structure.reduction]`: a 12-storey shear
@@ -810,28 +829,12 @@ fn a_reduced_structure_with_a_remote_site_equals_the_local_run() {
     let local = summary("local");
     assert_eq!(local["reduction"]["reduced_dofs"], 6);
     assert!(local["reduction"]["check"]["max_error"].as_f64().unwrap() < 0.05);
-    let local_history = std::fs::read_to_string(dir.join("local/history.csv")).unwrap();
-    let local_substeps = std::fs::read_to_string(dir.join("local/substeps.csv")).unwrap();
-    for mode in ["per_step", "per_substep"] {
-        let (mut site, addr) = serve(&dir);
-        let cfg = format!("reduced_{mode}.toml");
-        std::fs::write(dir.join(&cfg), config(Some((&addr, mode)))).unwrap();
-        let out = run(&dir, &cfg, mode);
-        assert!(out.status.success(), "{mode}: {}", text(&out.stderr));
-        let history = std::fs::read_to_string(dir.join(mode).join("history.csv")).unwrap();
-        let substeps = std::fs::read_to_string(dir.join(mode).join("substeps.csv")).unwrap();
-        assert!(
-            without_fei(&history) == without_fei(&local_history),
-            "{mode}: history differs"
-        );
-        assert!(substeps == local_substeps, "{mode}: substeps differ from the local run");
-        let s = summary(mode);
+    for s in remote_runs_equal_local(&dir, "reduced", config) {
         assert!(s["reduction"]["check"].is_null());
         assert!(
             s["reduction"]["no_check"].as_str().unwrap().contains("remote site"),
             "{}",
             s["reduction"]["no_check"]
         );
-        assert!(site.wait().unwrap().success());
     }
 }

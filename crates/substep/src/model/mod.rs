@@ -12,7 +12,7 @@ mod hysteretic;
 mod modal;
 mod reduction;
 mod sparse;
-pub mod sparse_modes;
+mod sparse_modes;
 
 pub use builders::{
     ShearBuilding, TmdSystem, sdof, shear_building, shear_building_sparse, storey_building, storey_springs, tmd_two_dof,
